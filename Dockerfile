@@ -1,0 +1,24 @@
+# One image for the whole stack: the API (`isolab serve`), the Dask scheduler and the Dask workers.
+# It holds the same install as `make serve` (the isolab package and its runtime dependencies).
+FROM python:3.11-slim
+
+ENV PYTHONDONTWRITEBYTECODE=1 \
+    PYTHONUNBUFFERED=1 \
+    PIP_NO_CACHE_DIR=1 \
+    PIP_DISABLE_PIP_VERSION_CHECK=1 \
+    ISOLAB_DATA_DIR=/data
+
+RUN useradd --create-home --uid 1000 isolab \
+    && mkdir -p /data \
+    && chown isolab:isolab /data
+
+WORKDIR /app
+COPY . /app
+RUN pip install . && rm -rf /app/build
+
+USER isolab
+WORKDIR /home/isolab
+VOLUME ["/data"]
+EXPOSE 8000
+
+CMD ["isolab", "serve", "--host", "0.0.0.0", "--port", "8000", "--workers", "2", "--data", "/data"]

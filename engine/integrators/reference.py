@@ -1,0 +1,79 @@
+"""Adaptive reference: scipy ``solve_ivp`` (DOP853) at tight tolerance, restarted at every breakpoint.
+
+Slow, and meant for tests and benchmarks: it tells how much the fixed-step integrators lose. Between
+breakpoints of the stage profiles (and samples of a recorded floor motion) the right-hand side is smooth,
+so restarting there keeps the adaptive method at its full accuracy.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from engine.dynamics import NONLINEAR, advance_pieces, derivative
+from engine.peaks import observe
+
+ORDER = None
+LEVELS = ("lti", "ltv", "nonlinear")
+RTOL = 1e-10
+ATOL = 1e-13
+
+
+def run(P, level, dt, n_steps, O, W, status, rtol: float = RTOL, atol: float = ATOL, messages=None):
+    """Integrate every case, sampling the outputs every ``dt[c]`` s; set ``status[c]``."""
+    C = dt.shape[0]
+    m = P.sm.shape[1]
+    nx = 13 if level == NONLINEAR else 12
+    for c in range(C):
+        if status[c] != 0:
+            continue
+        h = float(dt[c])
+        N = int(n_steps[c])
+        T = N * h
+        x = np.zeros(nx)
+        if level == NONLINEAR:
+            x[3] = 1.0
+        idx = np.zeros(m, dtype=np.int64)
+        bps = np.concatenate([P.pt[c].ravel(), P.ft])
+        bps = np.unique(np.concatenate([[0.0, T], bps[(bps > 0) & (bps < T)]]))
+        grid = np.arange(N + 1) * h
+        observe(P, c, level, 0.0, x, W, O, 0)
+        dx = np.zeros(nx)
+        k_next = 1
+        failed = False
+        for a, b in zip(bps[:-1], bps[1:], strict=True):
+            if b - a <= 1e-12 * max(T, 1.0):
+                continue
+            idx_a = idx.copy()
+            advance_pieces(P, c, a, idx_a, 1e-9 * h)
+
+            def rhs(t, y, idx_a=idx_a, c=c, dx=dx):
+                derivative(P, c, level, t, y, idx_a, W, dx)
+                return dx.copy()
+
+            sel = grid[(grid > a + 1e-12) & (grid <= b + 1e-12)]
+            ends_on_grid = sel.size and abs(sel[-1] - b) <= 1e-12
+            t_eval = sel if ends_on_grid else np.append(sel, b)
+            sol = solve_ivp(rhs, (a, b), x, method="DOP853", rtol=rtol, atol=atol, t_eval=t_eval)
+            if not sol.success:
+                status[c] = 3
+                if messages is not None:
+                    messages[c] = f"reference integration failed at t = {sol.t[-1]:.6g} s: {sol.message}"
+                failed = True
+                break
+            for j in range(sel.size):
+                y = sol.y[:, j].copy()
+                if level == NONLINEAR:
+                    y[3:7] /= np.linalg.norm(y[3:7])
+                if not observe(P, c, level, sel[j], y, W, O, k_next):
+                    status[c] = 1
+                    failed = True
+                    break
+                k_next += 1
+            if failed:
+                break
+            x = sol.y[:, -1].copy()
+            if level == NONLINEAR:
+                x[3:7] /= np.linalg.norm(x[3:7])
+            idx = idx_a
+

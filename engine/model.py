@@ -1,0 +1,185 @@
+"""From a scene batch to the matrices of the linearised model and the kernels' parameter arrays.
+
+All functions are vectorised over the case dimension. Generalised coordinates ``q = [u, theta]``: c.g.
+displacement (m) and small rotation about X, Y, Z (rad). Matrices are (C, 6, 6) in SI.
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numpy as np
+
+from engine.dynamics import Params
+from engine.scene import SceneBatch
+
+Work = namedtuple("Work", ["rho", "vr", "ar", "jr", "xf", "vf", "acc", "f", "M", "R", "F", "x1", "k1", "k2"])
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrices ``[v]x`` (..., 3, 3) of vectors ``v`` (..., 3): ``[v]x w = v x w``."""
+    v = np.asarray(v, dtype=float)
+    S = np.zeros(v.shape + (3,))
+    S[..., 0, 1], S[..., 0, 2] = -v[..., 2], v[..., 1]
+    S[..., 1, 0], S[..., 1, 2] = v[..., 2], -v[..., 0]
+    S[..., 2, 0], S[..., 2, 1] = -v[..., 1], v[..., 0]
+    return S
+
+
+def relative_geometry(b: SceneBatch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Isolator lever arms ``d`` (C, n, 3), stage homes ``rho_h`` (C, m, 3) and points (C, p, 3), all
+    relative to the machine c.g., m."""
+    cg = b.cg[:, None, :]
+    return b.iso_pos - cg, b.stage_home - cg, b.points - cg
+
+
+def preload(b: SceneBatch) -> np.ndarray:
+    """Vertical static load of each isolator at the reference state (C, n), N.
+
+    The rigid base on vertical springs: ``f_j = kz_j (a + b x_j + c y_j)`` with ``a, b, c`` from the three
+    statics equations (total weight of machine and stages, and its moments about X and Y with the stages
+    at home). Mounts without vertical stiffness share the load as if they were equal.
+    """
+    d, rho_h, _ = relative_geometry(b)
+    w = b.iso_k[..., 2].copy()
+    none = ~(w > 0).all(axis=1)
+    w[none] = 1.0
+    basis = np.stack([np.ones_like(d[..., 0]), d[..., 0], d[..., 1]], axis=-1)  # (C, n, 3)
+    A = np.einsum("cn,cni,cnj->cij", w, basis, basis)
+    g = b.g
+    total = (b.mass + b.stage_mass.sum(axis=1)) * g
+    mx = g * np.einsum("cm,cm->c", b.stage_mass, rho_h[..., 0])
+    my = g * np.einsum("cm,cm->c", b.stage_mass, rho_h[..., 1])
+    rhs = np.stack([total, mx, my], axis=-1)
+    coef = np.linalg.solve(A, rhs[..., None])[..., 0]
+    return w * np.einsum("cni,ci->cn", basis, coef)
+
+
+def mass_matrix(b: SceneBatch, rho: np.ndarray | None = None) -> np.ndarray:
+    """Mass matrix (C, 6, 6) of base plus stages at positions ``rho`` (C, m, 3) (default: home), kg, kg m."""
+    _, rho_h, _ = relative_geometry(b)
+    rho = rho_h if rho is None else rho
+    C = b.n_cases
+    M = np.zeros((C, 6, 6))
+    mt = b.mass + b.stage_mass.sum(axis=1)
+    M[:, 0, 0] = M[:, 1, 1] = M[:, 2, 2] = mt
+    S = skew(rho)  # (C, m, 3, 3)
+    coup = np.einsum("cm,cmij->cij", b.stage_mass, S)
+    M[:, :3, 3:] = -coup
+    M[:, 3:, :3] = coup
+    M[:, 3:, 3:] = b.inertia + np.einsum("cm,cmki,cmkj->cij", b.stage_mass, S, S)
+    return M
+
+
+def _isolator_matrix(d: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """``sum_j T_j^T diag(k_j) T_j`` with ``T_j = [I, -[d_j]x]`` (C, 6, 6)."""
+    C, n, _ = d.shape
+    T = np.zeros((C, n, 3, 6))
+    T[..., :, :3] = np.eye(3)
+    T[..., :, 3:] = -skew(d)
+    return np.einsum("cnki,cnk,cnkj->cij", T, k, T)
+
+
+def stiffness_matrix(b: SceneBatch, rho: np.ndarray | None = None) -> np.ndarray:
+    """Effective stiffness (C, 6, 6), N/m, N, N m/rad: isolators minus the gravity rocking term.
+
+    The gravity term (when ``b.gravity_stiffness``) is the moment of the vertical preloads and of the stage
+    weights that tilt with the base: about ``-(weight x height of the c.g. above the mounts)`` in pitch
+    and roll. ``rho`` (C, m, 3) places the stages (default: home).
+    """
+    d, rho_h, _ = relative_geometry(b)
+    rho = rho_h if rho is None else rho
+    K = _isolator_matrix(d, b.iso_k)
+    if b.gravity_stiffness:
+        f0 = preload(b)
+        F0 = np.zeros(d.shape)
+        F0[..., 2] = f0
+        G = np.einsum("cnik,cnkj->cij", skew(d), skew(F0))
+        gz = np.array([0.0, 0.0, b.g])
+        G -= np.einsum("cm,cmik,kj->cij", b.stage_mass, skew(rho), skew(gz))
+        K[:, 3:, 3:] -= G
+    return K
+
+
+def damping_matrix(b: SceneBatch) -> np.ndarray:
+    """Isolator damping matrix (C, 6, 6), N s/m, N s, N m s/rad."""
+    d, _, _ = relative_geometry(b)
+    return _isolator_matrix(d, b.iso_c)
+
+
+def final_positions(b: SceneBatch) -> np.ndarray:
+    """Stage positions relative to the c.g. once every move is over (C, m, 3), m."""
+    _, rho_h, _ = relative_geometry(b)
+    s_end = b.prof_s[..., -1]
+    rho = rho_h.copy()
+    for i in range(b.n_stages):
+        rho[:, i] += s_end[:, i, None] * b.stage_axis[:, i]
+        p = int(b.stage_parent[i])
+        if p >= 0:
+            rho[:, i] += rho[:, p] - rho_h[:, p]
+    return rho
+
+
+def static_offset(b: SceneBatch, fidelity: str) -> np.ndarray:
+    """Static c.g. displacement and rotation (C, 6), m and rad, with the stages parked at their final
+    positions: ``K q = (change of the weights' moment)``; the LTI level keeps its stiffness at home."""
+    _, rho_h, _ = relative_geometry(b)
+    rho_f = final_positions(b)
+    K = stiffness_matrix(b, None if fidelity == "lti" else rho_f)
+    ds = rho_f - rho_h
+    f = np.zeros((b.n_cases, 6))
+    f[:, 3] = -b.g * np.einsum("cm,cm->c", b.stage_mass, ds[..., 1])
+    f[:, 4] = b.g * np.einsum("cm,cm->c", b.stage_mass, ds[..., 0])
+    q = np.einsum("cij,cj->ci", np.linalg.pinv(K, hermitian=True), f)
+    return q
+
+
+def params(b: SceneBatch) -> Params:
+    """The kernels' parameter arrays for a batch (see ``engine.dynamics.Params``)."""
+    d, rho_h, pts = relative_geometry(b)
+    M = mass_matrix(b)
+    K = stiffness_matrix(b)
+    Cm = damping_matrix(b)
+    minv = np.linalg.inv(M)
+    f64 = np.ascontiguousarray
+    return Params(
+        mass=f64(b.mass, dtype=float),
+        mtot=f64(b.mass + b.stage_mass.sum(axis=1), dtype=float),
+        inertia=f64(b.inertia, dtype=float),
+        d=f64(d),
+        k=f64(b.iso_k, dtype=float),
+        cd=f64(b.iso_c, dtype=float),
+        sky=f64(b.iso_skyhook, dtype=float),
+        f0=f64(preload(b)),
+        sm=f64(b.stage_mass, dtype=float),
+        rho_h=f64(rho_h),
+        e=f64(b.stage_axis / np.linalg.norm(b.stage_axis, axis=-1, keepdims=True)) if b.n_stages else f64(
+            b.stage_axis, dtype=float),
+        parent=f64(b.stage_parent, dtype=np.int64),
+        pt=f64(b.prof_t, dtype=float),
+        ps=f64(b.prof_s, dtype=float),
+        pv=f64(b.prof_v, dtype=float),
+        pa=f64(b.prof_a, dtype=float),
+        pj=f64(b.prof_j, dtype=float),
+        pts=f64(pts),
+        famp=f64(b.floor_amp, dtype=float),
+        fomega=f64(2 * np.pi * np.asarray(b.floor_freq, dtype=float)),
+        fphase=f64(b.floor_phase, dtype=float),
+        ft=f64(b.floor_t, dtype=float),
+        fd=f64(b.floor_disp, dtype=float),
+        a21=f64(-minv @ K),
+        a22=f64(-minv @ Cm),
+        minv=f64(minv),
+        g=float(b.g),
+        gstiff=bool(b.gravity_stiffness),
+    )
+
+
+def work(b: SceneBatch) -> Work:
+    """Scratch arrays for one case at a time."""
+    m, n = b.n_stages, b.n_isolators
+    return Work(
+        rho=np.zeros((m, 3)), vr=np.zeros((m, 3)), ar=np.zeros((m, 3)), jr=np.zeros((m, 3)),
+        xf=np.zeros(3), vf=np.zeros(3), acc=np.zeros(6), f=np.zeros(6), M=np.zeros((6, 6)),
+        R=np.eye(3), F=np.zeros((n, 3)), x1=np.zeros(13), k1=np.zeros((4, 13)), k2=np.zeros(13),
+    )

@@ -1,0 +1,150 @@
+"""A batch of cases of one scene shape, as plain numpy arrays.
+
+Every array has the case dimension first (``C`` cases). The scene *shape* (number of isolators ``n``,
+stages ``m``, points of interest ``p``, motion-profile pieces ``K`` and floor samples ``F``) is shared by
+all cases of a batch; the values may differ per case. All quantities are SI and expressed in the floor
+frame XYZ (Z up) at the reference state: static equilibrium with every stage at home.
+
+Motion profiles are piecewise polynomials in time, stored per stage as ``K`` pieces. Piece ``k`` starts at
+``prof_t[..., k]`` with position ``prof_s``, velocity ``prof_v``, acceleration ``prof_a`` and constant jerk
+``prof_j``; it holds until the next piece starts, the last piece forever. Start times are
+non-decreasing; zero-length pieces are allowed (a triangular move keeps an empty cruise piece), so the
+piece start times are the exact breakpoints an integrator may land steps on.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, replace
+
+import numpy as np
+
+GRAVITY = 9.80665
+"""Standard gravity, m/s^2."""
+
+
+class SceneError(ValueError):
+    """Input that cannot describe a physical scene. ``field`` names the offending input."""
+
+    def __init__(self, field: str, reason: str):
+        super().__init__(f"{field}: {reason}")
+        self.field = field
+        self.reason = reason
+
+
+@dataclass
+class SceneBatch:
+    """``C`` cases of one scene shape. See the module docstring for conventions.
+
+    Attributes (shapes; units):
+        mass: (C,) machine base mass without the stages, kg.
+        inertia: (C, 3, 3) machine inertia tensor about its own c.g., floor axes, kg m^2.
+        cg: (C, 3) machine c.g. position, m.
+        iso_pos: (C, n, 3) isolator points of action, m.
+        iso_k: (C, n, 3) isolator stiffness along floor X, Y, Z, N/m.
+        iso_c: (C, n, 3) isolator viscous damping along floor X, Y, Z, N s/m.
+        iso_skyhook: (C, n) True where the damping acts on the absolute velocity (active, sky-hook).
+        stage_mass: (C, m) moving mass of each stage, kg.
+        stage_home: (C, m, 3) stage c.g. at home, m.
+        stage_axis: (C, m, 3) unit travel direction, fixed in the machine.
+        stage_parent: (m,) index of the stage this one rides on, -1 for the machine; parents come first.
+        prof_t, prof_s, prof_v, prof_a, prof_j: (C, m, K) piece start time s, position m, velocity m/s,
+            acceleration m/s^2, jerk m/s^3 of each stage's travel along its axis.
+        points: (C, p, 3) points of interest (material points of the machine), m.
+        floor_amp: (C, 3) amplitude of a sinusoidal floor displacement per axis, m.
+        floor_freq: (C, 3) its frequency, Hz.
+        floor_phase: (C, 3) its phase, rad: x_f = amp sin(2 pi f t + phase).
+        floor_t: (F,) sample times of a recorded floor displacement, s (F = 0: none).
+        floor_disp: (C, 3, F) recorded floor displacement per axis, m, linearly interpolated,
+            held at its last value after the last sample, zero before the first.
+        duration: (C,) simulated time, s.
+        settle_tol: (C,) settling tolerance on c.g. and point displacement, m.
+        gravity_stiffness: include the rocking stiffness of preload and weights that tilt with the base.
+        g: gravitational acceleration, m/s^2.
+    """
+
+    mass: np.ndarray
+    inertia: np.ndarray
+    cg: np.ndarray
+    iso_pos: np.ndarray
+    iso_k: np.ndarray
+    iso_c: np.ndarray
+    iso_skyhook: np.ndarray
+    stage_mass: np.ndarray
+    stage_home: np.ndarray
+    stage_axis: np.ndarray
+    stage_parent: np.ndarray
+    prof_t: np.ndarray
+    prof_s: np.ndarray
+    prof_v: np.ndarray
+    prof_a: np.ndarray
+    prof_j: np.ndarray
+    points: np.ndarray
+    floor_amp: np.ndarray
+    floor_freq: np.ndarray
+    floor_phase: np.ndarray
+    floor_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    floor_disp: np.ndarray | None = None
+    duration: np.ndarray | None = None
+    settle_tol: np.ndarray | None = None
+    gravity_stiffness: bool = True
+    g: float = GRAVITY
+
+    def __post_init__(self) -> None:
+        c = np.shape(self.mass)[0] if np.ndim(self.mass) else 1
+        if self.floor_disp is None:
+            self.floor_disp = np.zeros((c, 3, len(self.floor_t)))
+        if self.duration is None:
+            self.duration = np.full(c, 5.0)
+        if self.settle_tol is None:
+            self.settle_tol = np.full(c, 10e-6)
+
+    @property
+    def n_cases(self) -> int:
+        return int(self.mass.shape[0])
+
+    @property
+    def n_isolators(self) -> int:
+        return int(self.iso_pos.shape[1])
+
+    @property
+    def n_stages(self) -> int:
+        return int(self.stage_mass.shape[1])
+
+    @property
+    def n_points(self) -> int:
+        return int(self.points.shape[1])
+
+    @property
+    def has_floor_motion(self) -> bool:
+        return bool(np.any(self.floor_amp != 0.0) or (len(self.floor_t) and np.any(self.floor_disp != 0.0)))
+
+    def take(self, index: np.ndarray | slice | list[int]) -> SceneBatch:
+        """The cases at ``index`` as a new batch (scene-level fields are shared)."""
+        shared = {"stage_parent", "floor_t", "gravity_stiffness", "g"}
+        kw = {}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            kw[f.name] = v if f.name in shared else np.asarray(v)[index]
+        return replace(self, **kw)
+
+    def last_move_end(self) -> np.ndarray:
+        """(C,) time at which every stage has come to rest for good, s."""
+        t = self.prof_t
+        moving = (self.prof_v != 0.0) | (self.prof_a != 0.0) | (self.prof_j != 0.0)
+        # a piece that moves ends where the next piece starts
+        ends = np.concatenate([t[..., 1:], t[..., -1:]], axis=-1)
+        last = np.where(moving, ends, 0.0).max(axis=-1) if t.shape[-1] else np.zeros(t.shape[:2])
+        return last.max(axis=-1) if last.shape[-1] else np.zeros(self.n_cases)
+
+
+def concat(batches: list[SceneBatch]) -> SceneBatch:
+    """Join batches of the same scene shape along the case dimension."""
+    first = batches[0]
+    shared = {"stage_parent", "floor_t", "gravity_stiffness", "g"}
+    kw = {}
+    for f in fields(first):
+        if f.name in shared:
+            kw[f.name] = getattr(first, f.name)
+        else:
+            kw[f.name] = np.concatenate([np.asarray(getattr(b, f.name)) for b in batches], axis=0)
+    return replace(first, **kw)

@@ -1,0 +1,168 @@
+"""Simulate a batch of cases: pick the level and integrator, guard stability, collect the outputs."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from engine import modal, model, peaks, stability
+from engine.dynamics import FIDELITIES
+from engine.integrators import INTEGRATORS
+from engine.results import FAILED, OK, TIPPING, UNSTABLE, SimulationResult
+from engine.scene import SceneBatch, SceneError
+from engine.validation import validate
+
+MAX_STEPS = 20_000_000
+"""Largest number of steps one case may take (a guard against a step far too small for its duration)."""
+
+
+def check_choice(fidelity: str, integrator: str) -> None:
+    """Refuse an unknown level or integrator, or a pair that does not exist, naming the field."""
+    if fidelity not in FIDELITIES:
+        raise SceneError("fidelity", f"must be one of {sorted(FIDELITIES)}, got {fidelity!r}")
+    if integrator not in INTEGRATORS:
+        raise SceneError("integrator", f"must be one of {sorted(INTEGRATORS)}, got {integrator!r}")
+    levels = INTEGRATORS[integrator].LEVELS
+    if fidelity not in levels:
+        raise SceneError("integrator", f"{integrator!r} integrates only the {', '.join(levels)} level, "
+                                       f"not {fidelity!r}")
+
+
+def simulate(batch: SceneBatch, fidelity: str = "ltv", integrator: str = "rk4", dt: float = 1e-3,
+             auto_step: bool = True, record: list[int] | None = None) -> SimulationResult:
+    """Simulate every case of ``batch``.
+
+    Args:
+        batch: the cases (see ``engine.scene``).
+        fidelity: "lti", "ltv" or "nonlinear" (see PHYSICS.md).
+        integrator: "euler" (semi-implicit), "rk4", "exact" (LTI only) or "reference" (adaptive).
+        dt: output step, s; also the integration step of the fixed-step methods.
+        auto_step: when ``dt`` is past the integrator's stability limit for a case, divide it into as
+            many sub-steps as needed; when False such a case comes back ``unstable``.
+        record: indices of cases whose time histories to keep (``result.history``).
+
+    Returns:
+        A ``SimulationResult``; cases that went or would go numerically unstable, tip over or fail
+        carry that status and a message, and NaN instead of numbers.
+    """
+    check_choice(fidelity, integrator)
+    if not (np.isfinite(dt) and dt > 0):
+        raise SceneError("dt", f"must be a positive, finite step in s, got {dt!r}")
+    validate(batch)
+    C = batch.n_cases
+    if record:
+        bad = [r for r in record if not 0 <= r < C]
+        if bad:
+            raise SceneError("record", f"case indices {bad} outside 0..{C - 1}")
+    level = FIDELITIES[fidelity]
+    P = model.params(batch)
+    M0 = model.mass_matrix(batch)
+    K0 = model.stiffness_matrix(batch)
+    C0 = model.damping_matrix(batch)
+    md = modal.modes(M0, K0, C0)
+    status = np.zeros(C, dtype=np.int8)
+    message = [""] * C
+    for c in np.flatnonzero(md.tipping):
+        status[c] = TIPPING
+        message[c] = ("statically unstable: the rocking stiffness of the weights above the mounts "
+                      "exceeds the mounts' own; widen the layout, lower the c.g. or stiffen the mounts")
+
+    # stability guard (fixed-step integrators)
+    steps = np.full(C, float(dt))
+    n_div = np.ones(C, dtype=np.int64)
+    if integrator in ("euler", "rk4"):
+        A = modal.state_matrix(M0, K0, C0)
+        n_div = stability.subdivisions(A, dt, integrator)
+        fastest = md.frequency.max(axis=1)
+        for c in range(C):
+            if status[c] != OK or n_div[c] == 1:
+                continue
+            if n_div[c] == 0 or not auto_step:
+                status[c] = UNSTABLE
+                need = "more than 4096 sub-steps" if n_div[c] == 0 else f"{n_div[c]} sub-steps"
+                message[c] = (f"dt = {dt:.4g} s is past the {integrator} stability limit of the fastest mode "
+                              f"({fastest[c]:.4g} Hz, needs {need}); "
+                              + ("use a smaller dt or the exact integrator" if n_div[c] else
+                                 "use the exact integrator"))
+                n_div[c] = 1
+        steps = dt / n_div
+    duration = np.asarray(batch.duration, dtype=float)
+    n_steps = np.rint(duration / steps).astype(np.int64)
+    n_steps = np.maximum(n_steps, 1)
+    too_many = n_steps > MAX_STEPS
+    for c in np.flatnonzero(too_many & (status == OK)):
+        status[c] = FAILED
+        message[c] = f"{n_steps[c]} steps of {steps[c]:.3g} s exceed the limit of {MAX_STEPS} per case"
+    n_steps[too_many] = 1
+
+    target = model.static_offset(batch, fidelity)
+    O = peaks.allocate(C, batch.n_points, batch.n_isolators, target, batch.last_move_end(),
+                       batch.settle_tol, record, int(n_steps[list(record)].max()) if record else 0)
+    W = model.work(batch)
+    run_status = status.copy()
+    mod = INTEGRATORS[integrator]
+    if integrator == "reference":
+        mod.run(P, level, steps, n_steps, O, W, run_status, messages=message)
+    else:
+        mod.run(P, level, steps, n_steps, O, W, run_status)
+    for c in range(C):
+        if status[c] != OK:
+            continue
+        if run_status[c] == 1:
+            status[c] = UNSTABLE
+            message[c] = (f"diverged at t = {O.diverged[c]:.4g} s (step {steps[c]:.3g} s, {integrator}); "
+                          "use a smaller dt or another integrator")
+        elif run_status[c] == 3:
+            status[c] = FAILED
+            message[c] = message[c] or "the mass matrix lost positive definiteness"
+
+    t_end = n_steps * steps
+    t_last = batch.last_move_end()
+    settled = O.last_viol < t_end - 0.5 * steps
+    settling = np.where(np.isfinite(O.last_viol), np.maximum(O.last_viol - t_last, 0.0), 0.0)
+    settling = np.where(settled, settling, np.maximum(t_end - t_last, 0.0))
+
+    if batch.has_floor_motion and np.any(batch.floor_amp != 0):
+        d, _, _ = model.relative_geometry(batch)
+        c_rel = batch.iso_c * (1.0 - batch.iso_skyhook[..., None])
+        T = modal.transmissibility(M0, K0, C0, d, batch.iso_k, c_rel,
+                                   np.where(batch.floor_amp != 0, batch.floor_freq, 0.0))
+    else:
+        T = np.zeros((C, 3))
+
+    bad = status != OK
+    nan = np.nan
+
+    def per_case(a: np.ndarray) -> np.ndarray:
+        a = np.array(a, dtype=float)
+        a[bad] = nan
+        return a
+
+    rms = np.sqrt(O.sumsq / np.maximum(O.nobs, 1)[:, None])
+    history = None
+    if record:
+        history = {
+            "time": O.h_t, "displacement": O.h_u, "rotation": O.h_th,
+            "point_displacement": O.h_poi, "isolator_force": O.h_force,
+            "n_samples": n_steps[list(record)] + 1,
+        }
+    return SimulationResult(
+        status=status,
+        message=message,
+        dt=np.asarray(steps, dtype=float),
+        peak_displacement=per_case(O.u),
+        peak_rotation=per_case(O.th),
+        peak_point_displacement=per_case(O.poi),
+        peak_isolator_force=per_case(O.force),
+        static_isolator_load=np.array(P.f0),
+        min_isolator_load=per_case(O.min_load),
+        rms_displacement=per_case(rms),
+        final_displacement=per_case(target),
+        settling_time=per_case(settling),
+        settled=np.where(bad, False, settled),
+        natural_frequency=np.array(md.frequency),
+        damping_ratio=np.array(md.damping_ratio),
+        mode_energy=np.array(md.energy),
+        mechanism=np.array(md.mechanism),
+        transmissibility=per_case(T),
+        history=history,
+    )

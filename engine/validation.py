@@ -1,0 +1,94 @@
+"""Refuse input that cannot describe a physical scene, naming the field and the reason."""
+
+from __future__ import annotations
+
+from dataclasses import fields
+
+import numpy as np
+
+from engine.scene import SceneBatch, SceneError
+
+MAX_LENGTH = 100.0
+"""Largest coordinate (m) any machine this tool models may have."""
+
+
+def _case(a: np.ndarray) -> str:
+    bad = np.argwhere(a)
+    return f" (case {int(bad[0][0])})" if bad.size and a.ndim else ""
+
+
+def validate(b: SceneBatch) -> None:
+    """Raise ``SceneError`` for the first field of ``b`` that is not finite, has the wrong shape or is
+    physically impossible."""
+    C = b.n_cases
+    if C < 1:
+        raise SceneError("cases", "a batch needs at least one case")
+    for f in fields(b):
+        v = getattr(b, f.name)
+        if isinstance(v, np.ndarray) and v.dtype.kind == "f":
+            bad = ~np.isfinite(v)
+            if bad.any():
+                raise SceneError(f.name, "must be finite (got NaN or infinity)" + _case(bad))
+    n, m = b.n_isolators, b.n_stages
+    shapes = {
+        "inertia": (C, 3, 3), "cg": (C, 3), "iso_pos": (C, n, 3), "iso_k": (C, n, 3), "iso_c": (C, n, 3),
+        "iso_skyhook": (C, n), "stage_mass": (C, m), "stage_home": (C, m, 3), "stage_axis": (C, m, 3),
+        "stage_parent": (m,), "points": (C, b.n_points, 3), "floor_amp": (C, 3), "floor_freq": (C, 3),
+        "floor_phase": (C, 3), "duration": (C,), "settle_tol": (C,),
+    }
+    for name, shape in shapes.items():
+        if np.shape(getattr(b, name)) != shape:
+            raise SceneError(name, f"shape {np.shape(getattr(b, name))}, expected {shape}")
+    K = b.prof_t.shape[-1] if b.prof_t.ndim == 3 else 0
+    for name in ("prof_t", "prof_s", "prof_v", "prof_a", "prof_j"):
+        if np.shape(getattr(b, name)) != (C, m, K):
+            raise SceneError(name, f"shape {np.shape(getattr(b, name))}, expected {(C, m, K)}")
+    if not np.isfinite(b.g) or b.g < 0:
+        raise SceneError("g", f"must be a finite, non-negative acceleration, got {b.g}")
+    if (b.mass <= 0).any():
+        raise SceneError("mass", "must be positive" + _case(b.mass <= 0))
+    I = np.asarray(b.inertia)
+    if not np.allclose(I, np.swapaxes(I, -1, -2), rtol=1e-9, atol=1e-12 * np.abs(I).max()):
+        raise SceneError("inertia", "must be symmetric")
+    if (np.linalg.eigvalsh(I).min(axis=-1) <= 0).any():
+        raise SceneError("inertia", "must be positive definite")
+    if n < 3:
+        raise SceneError("iso_pos", f"a base needs at least 3 isolators, got {n}")
+    if (b.iso_k < 0).any():
+        raise SceneError("iso_k", "stiffness must not be negative" + _case((b.iso_k < 0).any(axis=(1, 2))))
+    if (b.iso_c < 0).any():
+        raise SceneError("iso_c", "damping must not be negative" + _case((b.iso_c < 0).any(axis=(1, 2))))
+    for name in ("iso_pos", "stage_home", "points", "cg"):
+        v = np.asarray(getattr(b, name))
+        if v.size and (np.abs(v) > MAX_LENGTH).any():
+            raise SceneError(name, f"coordinates beyond {MAX_LENGTH} m")
+    xy = b.iso_pos[..., :2] - b.iso_pos[..., :1, :2]
+    # not all on one line: the xy spread must span a plane
+    sv = np.linalg.svd(xy, compute_uv=False)
+    span = np.abs(b.iso_pos[..., :2]).max(axis=(1, 2)) + 1.0
+    if (sv[:, 1] <= 1e-9 * span).any():
+        raise SceneError("iso_pos", "isolators all on one line (in plan view): the base would topple")
+    if (b.stage_mass < 0).any():
+        raise SceneError("stage_mass", "must not be negative")
+    if m:
+        norm = np.linalg.norm(b.stage_axis, axis=-1)
+        if (norm < 1e-12).any():
+            raise SceneError("stage_axis", "must not be the zero vector")
+        parent = np.asarray(b.stage_parent)
+        for i, p in enumerate(parent):
+            if not -1 <= p < i:
+                raise SceneError("stage_parent",
+                                 f"stage {i} rides on {p}: a parent must come before its child")
+        if (np.diff(b.prof_t, axis=-1) < 0).any():
+            raise SceneError("prof_t", "piece start times must not decrease")
+    if (b.duration <= 0).any():
+        raise SceneError("duration", "must be positive")
+    if (b.settle_tol <= 0).any():
+        raise SceneError("settle_tol", "must be positive")
+    if (b.floor_freq < 0).any():
+        raise SceneError("floor_freq", "must not be negative")
+    if len(b.floor_t):
+        if b.floor_disp.shape != (C, 3, len(b.floor_t)):
+            raise SceneError("floor_disp", f"shape {b.floor_disp.shape}, expected {(C, 3, len(b.floor_t))}")
+        if (np.diff(b.floor_t) <= 0).any():
+            raise SceneError("floor_t", "sample times must increase")

@@ -1,0 +1,72 @@
+"""``isolab`` command-line interface (a Typer app, installed as the ``isolab`` console script).
+
+Commands live as plain functions; each is registered on :data:`app` with ``app.command(name)(function)``
+at the bottom of this module, so a new command is one import and one registration line.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from service.settings import SettingsError, load_settings
+
+app = typer.Typer(
+    name="isolab",
+    help="Batch design-of-experiments service for machines on vibration isolators.",
+    no_args_is_help=True,
+    add_completion=False,
+)
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        from service.app import service_version
+
+        typer.echo(f"isolab {service_version()}")
+        raise typer.Exit()
+
+
+@app.callback()
+def main(
+    version: Annotated[
+        bool,
+        typer.Option("--version", callback=_print_version, is_eager=True, help="Print the version and exit."),
+    ] = False,
+) -> None:
+    """Batch design-of-experiments service for machines on vibration isolators."""
+
+
+def serve(
+    host: Annotated[str, typer.Option(help="Interface the HTTP server binds to.")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(min=1, max=65535, help="TCP port of the HTTP server.")] = 8000,
+    workers: Annotated[
+        int | None,
+        typer.Option(min=1, help="Dask LocalCluster worker processes (env ISOLAB_WORKERS, default 2)."),
+    ] = None,
+    data: Annotated[
+        Path | None,
+        typer.Option(help="Study store directory (env ISOLAB_DATA_DIR, default ./data)."),
+    ] = None,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(help="Join this Dask scheduler instead of a LocalCluster (env DASK_SCHEDULER_ADDRESS)."),
+    ] = None,
+) -> None:
+    """Run the HTTP API (one uvicorn process holding one Dask client)."""
+    import uvicorn
+
+    from service.app import create_app
+
+    overrides = {"workers": workers, "data_dir": data, "scheduler_address": scheduler}
+    try:
+        settings = load_settings(**{key: value for key, value in overrides.items() if value is not None})
+    except SettingsError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(code=2) from None
+    uvicorn.run(create_app(settings), host=host, port=port, log_level="info")
+
+
+app.command("serve")(serve)

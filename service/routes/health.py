@@ -1,0 +1,102 @@
+"""``GET /health``: is the service able to take work (store writable, Dask workers present)?"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+from typing import Literal
+
+from distributed import Client
+from fastapi import APIRouter, Depends, Request, Response
+from pydantic import BaseModel, Field
+
+from service.routes import app_settings
+from service.settings import Settings
+
+#: Longest wait for the Dask scheduler to answer the health probe, in seconds.
+SCHEDULER_TIMEOUT_S = 5.0
+
+router = APIRouter(tags=["health"])
+
+
+class ServiceInfo(BaseModel):
+    version: str
+
+
+class StoreHealth(BaseModel):
+    path: str = Field(description="absolute path of the study store directory")
+    writable: bool = Field(description="a file could be created and removed in the store directory")
+    error: str | None = None
+
+
+class WorkerInfo(BaseModel):
+    address: str
+    nthreads: int
+    memory_limit: int | None = Field(description="worker memory limit in bytes; null when unlimited")
+
+
+class DaskHealth(BaseModel):
+    scheduler: str | None = Field(description="address of the Dask scheduler")
+    workers: list[WorkerInfo]
+    n_workers: int
+    error: str | None = None
+
+
+class HealthReport(BaseModel):
+    status: Literal["ok", "degraded"]
+    service: ServiceInfo
+    store: StoreHealth
+    dask: DaskHealth
+
+
+def probe_store(path: Path) -> StoreHealth:
+    """Check that the store directory exists and accepts a new file."""
+    resolved = path.resolve()
+    try:
+        with tempfile.NamedTemporaryFile(dir=resolved, prefix=".health-"):
+            pass
+    except OSError as exc:
+        return StoreHealth(path=str(resolved), writable=False, error=f"{type(exc).__name__}: {exc}")
+    return StoreHealth(path=str(resolved), writable=True)
+
+
+def probe_dask(client: Client | None, timeout_s: float = SCHEDULER_TIMEOUT_S) -> DaskHealth:
+    """Ask the scheduler for its current workers, waiting at most ``timeout_s`` seconds."""
+    if client is None:
+        return DaskHealth(scheduler=None, workers=[], n_workers=0, error="no Dask client")
+    try:
+        identity = client.sync(client.scheduler.identity, n_workers=-1, callback_timeout=timeout_s)
+    except Exception as exc:  # any failure to reach the scheduler makes the service degraded
+        address = getattr(client.scheduler, "address", None)
+        return DaskHealth(scheduler=address, workers=[], n_workers=0, error=f"{type(exc).__name__}: {exc}")
+    workers = [
+        WorkerInfo(
+            address=address, nthreads=info.get("nthreads", 0), memory_limit=info.get("memory_limit") or None
+        )
+        for address, info in sorted(identity.get("workers", {}).items())
+    ]
+    return DaskHealth(scheduler=identity.get("address"), workers=workers, n_workers=len(workers))
+
+
+@router.get(
+    "/health",
+    response_model=HealthReport,
+    responses={503: {"model": HealthReport, "description": "no Dask worker or the store is not writable"}},
+)
+def health(
+    request: Request,
+    response: Response,
+    settings: Settings = Depends(app_settings),
+) -> HealthReport:
+    """Report the service version, the store and the Dask cluster; 503 when the service cannot work."""
+    store = probe_store(settings.data_dir)
+    dask = probe_dask(getattr(request.app.state, "dask", None))
+    healthy = store.writable and dask.n_workers > 0
+    if not healthy:
+        response.status_code = 503
+    return HealthReport(
+        status="ok" if healthy else "degraded",
+        service=ServiceInfo(version=request.app.version),
+        store=store,
+        dask=dask,
+    )

@@ -1,0 +1,429 @@
+"""Study results as a labelled, CF-described xarray dataset.
+
+A study's cases come back from the engine as one :class:`~engine.results.SimulationResult` (case
+dimension first). :func:`to_dataset` lays them out along the study's design: a grid gets one dimension per
+varied parameter with its levels as the coordinate (``ds.sel(isolator_type="air", stage_y_mass=1000)``); a
+sampled design gets a ``case`` dimension with each parameter as a coordinate along it. The per-case
+outputs add the dimensions ``axis`` (x, y, z), ``rotation`` (rx, ry, rz: about X pitch, Y roll, Z yaw),
+``isolator``, ``point``, ``mode`` (1..6) and ``dof``.
+
+Every variable and coordinate carries CF ``units`` and ``long_name`` (``"1"`` for dimensionless quantities
+and labels). A case whose ``status`` is not OK has missing values (NaN; ``_FillValue`` on disk) in every
+numeric output, never numbers; ``status`` (CF ``flag_values``/``flag_meanings``) and ``message`` say why.
+Yes/no outputs (``liftoff``, ``settled``, ``mechanism``) are float32 in memory (1.0 yes, 0.0 no, NaN
+missing) and int8 with ``_FillValue`` -1 on disk, so they too can be missing.
+
+Results that arrive in chunks (see :mod:`studies.fanout`) travel as plain dicts of numpy arrays
+(:func:`result_arrays`) and are put back together in case order by :func:`from_chunks`.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from engine.results import DOF_NAMES, FAILED, OK, STATUS_NAMES, SimulationResult
+from studies.designs import Design
+
+AXES = ("x", "y", "z")
+ROTATIONS = ("rx", "ry", "rz")
+N_MODES = 6
+CONVENTIONS = "CF-1.10"
+
+# Per-case fields of SimulationResult, as carried in a chunk: name -> (trailing shape as a function of
+# (n_isolators, n_points), "f" float | "b" bool).
+_RESULT_FIELDS: dict[str, tuple[Any, str]] = {
+    "dt": (lambda n, p: (), "f"),
+    "peak_displacement": (lambda n, p: (3,), "f"),
+    "peak_rotation": (lambda n, p: (3,), "f"),
+    "peak_point_displacement": (lambda n, p: (p, 3), "f"),
+    "peak_isolator_force": (lambda n, p: (n, 3), "f"),
+    "static_isolator_load": (lambda n, p: (n,), "f"),
+    "min_isolator_load": (lambda n, p: (n,), "f"),
+    "rms_displacement": (lambda n, p: (3,), "f"),
+    "final_displacement": (lambda n, p: (6,), "f"),
+    "settling_time": (lambda n, p: (), "f"),
+    "settled": (lambda n, p: (), "b"),
+    "natural_frequency": (lambda n, p: (N_MODES,), "f"),
+    "damping_ratio": (lambda n, p: (N_MODES,), "f"),
+    "mode_energy": (lambda n, p: (N_MODES, 6), "f"),
+    "mechanism": (lambda n, p: (N_MODES,), "b"),
+    "transmissibility": (lambda n, p: (3,), "f"),
+}
+
+# Dataset variables: name -> (per-case dims, units, long_name, "f" float | "b" yes/no).
+_VARIABLES: dict[str, tuple[tuple[str, ...], str, str, str]] = {
+    "peak_displacement": (("axis",), "m", "peak absolute displacement of the machine c.g.", "f"),
+    "peak_rotation": (("rotation",), "rad", "peak absolute rotation of the machine base", "f"),
+    "peak_point_displacement": (("point", "axis"), "m", "peak absolute displacement of a point of interest",
+                                "f"),
+    "peak_isolator_force": (("isolator", "axis"), "N", "peak absolute dynamic isolator force", "f"),
+    "static_isolator_load": (("isolator",), "N", "vertical isolator preload at the reference state", "f"),
+    "min_isolator_load": (("isolator",), "N", "smallest total vertical isolator load", "f"),
+    "liftoff": (("isolator",), "1", "isolator lifts off (smallest total vertical load below zero)", "b"),
+    "rms_displacement": (("axis",), "m", "RMS displacement of the machine c.g.", "f"),
+    "final_displacement": (("axis",), "m", "static c.g. displacement with the stages parked at the end", "f"),
+    "final_rotation": (("rotation",), "rad", "static base rotation with the stages parked at the end", "f"),
+    "settling_time": ((), "s", "settling time after the last stage move (lower bound if not settled)", "f"),
+    "settled": ((), "1", "motion settled within the tolerance before the end of the simulation", "b"),
+    "natural_frequency": (("mode",), "Hz", "undamped natural frequency (0 for a mechanism)", "f"),
+    "damping_ratio": (("mode",), "1", "modal damping ratio", "f"),
+    "mode_energy": (("mode", "dof"), "1", "kinetic-energy share of a degree of freedom in a mode", "f"),
+    "mechanism": (("mode",), "1", "zero-stiffness (rigid-body) mode", "b"),
+    "transmissibility": (("axis",), "1", "floor-to-c.g. displacement transmissibility at the floor frequency",
+                         "f"),
+    "dt": ((), "s", "integration time step used", "f"),
+}
+
+_BOOL_ENCODING = {"dtype": "int8", "_FillValue": np.int8(-1)}
+_BOOL_FLAGS = {"flag_values": np.array([0, 1], dtype=np.int8), "flag_meanings": "false true"}
+
+
+# --------------------------------------------------------------------------------------------- chunks
+def result_arrays(result: SimulationResult) -> dict[str, np.ndarray]:
+    """The per-case outputs of ``result`` as a dict of plain numpy arrays (no pickled objects).
+
+    Keys: ``status`` (int8), ``message`` (unicode array) and every field of ``_RESULT_FIELDS``.
+    Time histories are not carried.
+    """
+    out: dict[str, np.ndarray] = {
+        "status": np.asarray(result.status, dtype=np.int8),
+        "message": np.asarray([str(m) for m in result.message], dtype=np.str_).reshape(-1),
+    }
+    for name, (_, kind) in _RESULT_FIELDS.items():
+        out[name] = np.asarray(getattr(result, name), dtype=bool if kind == "b" else np.float64)
+    return out
+
+
+def failed_arrays(n_cases: int, message: str) -> dict[str, np.ndarray]:
+    """Arrays of ``n_cases`` FAILED cases that all carry ``message`` (the outputs are left out: missing)."""
+    return {
+        "status": np.full(n_cases, FAILED, dtype=np.int8),
+        "message": np.array([str(message)] * int(n_cases), dtype=np.str_).reshape(-1),
+    }
+
+
+def from_chunks(
+    parts: Mapping[int, Mapping[str, np.ndarray]],
+    chunks: Sequence[np.ndarray],
+    *,
+    n_isolators: int,
+    n_points: int,
+) -> SimulationResult:
+    """Assemble the full result, in case order, from per-chunk arrays.
+
+    Args:
+        parts: chunk index ``k`` -> arrays of the cases ``chunks[k]`` (as from :func:`result_arrays`);
+            an output a chunk lacks (a chunk whose task failed carries only ``status`` and ``message``)
+            is missing for its cases.
+        chunks: the case indices of each chunk; together they must cover ``0..N-1`` exactly once.
+        n_isolators, n_points: scene shape, to size outputs no chunk carries.
+
+    Raises:
+        ValueError: a chunk is missing from ``parts``, the chunks do not partition the cases, or a chunk's
+            arrays do not match its size.
+    """
+    missing = [k for k in range(len(chunks)) if k not in parts]
+    if missing:
+        raise ValueError(f"parts: chunks {missing} have no results")
+    n = int(sum(len(c) for c in chunks))
+    all_idx = np.concatenate([np.asarray(c, dtype=np.int64) for c in chunks]) if chunks else np.zeros(0, int)
+    if not np.array_equal(np.sort(all_idx), np.arange(n)):
+        raise ValueError("chunks: the chunks must cover the cases 0..N-1 exactly once")
+
+    status = np.full(n, FAILED, dtype=np.int8)
+    message = [""] * n
+    fields: dict[str, np.ndarray] = {}
+    for name, (shape, kind) in _RESULT_FIELDS.items():
+        trail = shape(n_isolators, n_points)
+        fields[name] = np.zeros((n, *trail), dtype=bool) if kind == "b" else np.full((n, *trail), np.nan)
+
+    for k, idx in enumerate(chunks):
+        idx = np.asarray(idx, dtype=np.int64)
+        arrays = parts[k]
+        st = np.asarray(arrays["status"], dtype=np.int8)
+        if st.shape != (len(idx),):
+            raise ValueError(f"parts[{k}]: status has {st.shape[0] if st.ndim else 0} cases, "
+                             f"the chunk has {len(idx)}")
+        if "indices" in arrays and not np.array_equal(np.asarray(arrays["indices"]), idx):
+            raise ValueError(f"parts[{k}]: computed for other cases than chunk {k} holds")
+        status[idx] = st
+        for i, m in zip(idx, np.asarray(arrays["message"]).reshape(-1).tolist(), strict=True):
+            message[int(i)] = str(m)
+        for name, (shape, _) in _RESULT_FIELDS.items():
+            if name in arrays:
+                v = np.asarray(arrays[name])
+                want = (len(idx), *shape(n_isolators, n_points))
+                if v.shape != want:
+                    raise ValueError(f"parts[{k}]: {name} has shape {v.shape}, expected {want}")
+                fields[name][idx] = v
+    return SimulationResult(status=status, message=message, **fields)
+
+
+# -------------------------------------------------------------------------------------------- dataset
+def design_summary(design: Design) -> dict[str, Any]:
+    """JSON-able description of a design: kind, names, paths, units, shape and (grid) levels."""
+    out: dict[str, Any] = {
+        "kind": design.kind,
+        "names": list(design.names),
+        "paths": {n: design.paths.get(n, "") for n in design.names},
+        "units": {n: design.units.get(n, "") for n in design.names},
+        "n_cases": design.n_cases,
+    }
+    if design.kind == "grid":
+        out["levels"] = {n: np.asarray(design.levels[n]).tolist() for n in design.names}
+    return out
+
+
+def to_dataset(
+    result: SimulationResult,
+    design: Design,
+    *,
+    isolator_names: Sequence[str],
+    point_names: Sequence[str],
+    attrs: Mapping[str, Any] | None = None,
+) -> xr.Dataset:
+    """Lay the per-case outputs of ``result`` out along ``design`` as a CF-described dataset.
+
+    Args:
+        result: outputs of ``design.n_cases`` cases, in the design's case order.
+        design: the study's design (grid: one dimension per parameter; sampled: a ``case`` dimension).
+        isolator_names: labels of the ``isolator`` dimension (one per isolator of the scene).
+        point_names: labels of the ``point`` dimension (one per point of interest).
+        attrs: dataset attributes, passed through (dicts and lists become JSON strings, booleans 0/1,
+            None is left out). ``design`` given as a dict is merged into the design summary (e.g. the
+            seed of a sampled design). Expected: title, study (the definition), engine_version, fidelity,
+            integrator, dt. ``Conventions``, ``created`` (ISO 8601 UTC) and ``history`` are filled in
+            unless given.
+
+    Raises:
+        ValueError: sizes disagree, a grid cell is missing or repeated, or a parameter name clashes with
+            a dimension or variable name.
+    """
+    n = result.n_cases
+    if design.n_cases != n:
+        raise ValueError(f"result: {n} cases, but the design has {design.n_cases}")
+    n_iso, n_pts = len(isolator_names), len(point_names)
+    if np.shape(result.static_isolator_load)[1:] != (n_iso,):
+        raise ValueError(f"isolator_names: {n_iso} names for {np.shape(result.static_isolator_load)[1:]} "
+                         "isolators in the result")
+    if np.shape(result.peak_point_displacement)[1:2] != (n_pts,):
+        raise ValueError(f"point_names: {n_pts} names for {np.shape(result.peak_point_displacement)[1]} "
+                         "points in the result")
+    reserved = set(_VARIABLES) | {"status", "message", "axis", "rotation", "isolator", "point", "mode", "dof",
+                                  "case"}
+    for name in design.names:
+        if name in reserved:
+            raise ValueError(f"design.names: parameter {name!r} clashes with a dataset dimension or variable")
+
+    case_dims, case_coords, order = _case_layout(design)
+    case_shape = tuple(len(case_coords[d][1]) for d in case_dims) if design.kind == "grid" else (n,)
+
+    def lay_out(a: np.ndarray) -> np.ndarray:
+        a = np.asarray(a)
+        return a[order].reshape(case_shape + a.shape[1:])
+
+    bad = ~np.asarray(result.status == OK)
+
+    def masked(a: np.ndarray, kind: str) -> np.ndarray:
+        a = np.asarray(a)
+        if kind == "b":
+            out = a.astype(np.float32)
+        else:
+            out = a.astype(np.float64, copy=True)
+        out[bad] = np.nan
+        return out
+
+    fd = np.asarray(result.final_displacement, dtype=np.float64)
+    raw = {
+        name: getattr(result, name)
+        for name in _VARIABLES
+        if name not in ("liftoff", "final_displacement", "final_rotation")
+    }
+    raw["liftoff"] = np.asarray(result.min_isolator_load) < 0.0
+    raw["final_displacement"] = fd[:, :3]
+    raw["final_rotation"] = fd[:, 3:]
+
+    data_vars: dict[str, xr.Variable] = {}
+    for name, (dims, units, long_name, kind) in _VARIABLES.items():
+        values = lay_out(masked(raw[name], kind))
+        var_attrs: dict[str, Any] = {"units": units, "long_name": long_name}
+        if kind == "b":
+            var_attrs.update(_BOOL_FLAGS)
+        var = xr.Variable(case_dims + dims, values, attrs=var_attrs)
+        if kind == "b":
+            var.encoding = dict(_BOOL_ENCODING)
+        data_vars[name] = var
+
+    data_vars["status"] = xr.Variable(
+        case_dims,
+        lay_out(np.asarray(result.status, dtype=np.int8)),
+        attrs={
+            "units": "1",
+            "long_name": "outcome of the case",
+            "flag_values": np.arange(len(STATUS_NAMES), dtype=np.int8),
+            "flag_meanings": " ".join(STATUS_NAMES),
+        },
+    )
+    data_vars["message"] = xr.Variable(
+        case_dims,
+        lay_out(np.asarray([str(m) for m in result.message], dtype=np.str_).reshape(-1)),
+        attrs={"units": "1", "long_name": "why the case is not ok (empty when ok)"},
+    )
+
+    coords: dict[str, xr.Variable] = {
+        name: xr.Variable(dims, values, attrs=a) for name, (dims, values, a) in case_coords.items()
+    }
+    coords["axis"] = xr.Variable("axis", np.array(AXES), {"units": "1", "long_name": "floor axis (Z up)"})
+    coords["rotation"] = xr.Variable(
+        "rotation",
+        np.array(ROTATIONS),
+        {"units": "1", "long_name": "rotation axis: rx about X (pitch), ry about Y (roll), rz about Z (yaw)"},
+    )
+    coords["isolator"] = xr.Variable(
+        "isolator", np.array([str(s) for s in isolator_names], dtype=np.str_).reshape(-1),
+        {"units": "1", "long_name": "isolator"},
+    )
+    coords["point"] = xr.Variable(
+        "point", np.array([str(s) for s in point_names], dtype=np.str_).reshape(-1),
+        {"units": "1", "long_name": "point of interest"},
+    )
+    coords["mode"] = xr.Variable(
+        "mode", np.arange(1, N_MODES + 1, dtype=np.int32),
+        {"units": "1", "long_name": "vibration mode number, by ascending natural frequency"},
+    )
+    coords["dof"] = xr.Variable(
+        "dof", np.array(DOF_NAMES),
+        {"units": "1",
+         "long_name": "degree of freedom of the base: c.g. translation x, y, z; rotation rx, ry, rz"},
+    )
+    ds = xr.Dataset(data_vars, coords=coords)
+    ds.attrs = _dataset_attrs(design, attrs or {})
+    return ds
+
+
+def _case_layout(design: Design):
+    """Dimensions, coordinates and case order of the design.
+
+    Returns (case_dims, coords, order): ``coords`` maps a coordinate name to (dims, values, attrs);
+    ``order[j]`` is the case stored at flat position ``j`` of the case dimensions.
+    """
+    n = design.n_cases
+    coords: dict[str, tuple[tuple[str, ...], np.ndarray, dict]] = {}
+
+    def param_attrs(name: str, values: np.ndarray) -> dict:
+        unit = design.units.get(name, "") or "1"
+        path = design.paths.get(name, "")
+        long_name = f"study parameter {name}" + (f" (sets {path})" if path else "")
+        return {"units": "1" if values.dtype.kind in "USO" else unit, "long_name": long_name}
+
+    if design.kind == "grid":
+        dims = tuple(design.names)
+        shape = design.shape
+        if not dims:
+            return (), coords, np.zeros(1, dtype=np.int64)
+        index = []
+        for name in design.names:
+            levels = _labels(np.asarray(design.levels[name]))
+            values = _labels(np.asarray(design.values[name]))
+            lookup = {v: i for i, v in enumerate(levels.tolist())}
+            if len(lookup) != len(levels):
+                raise ValueError(f"design.levels[{name!r}]: levels repeat")
+            try:
+                index.append(np.array([lookup[v] for v in values.tolist()], dtype=np.int64))
+            except KeyError as err:
+                raise ValueError(
+                    f"design.values[{name!r}]: value {err.args[0]!r} is not one of its levels"
+                ) from None
+            coords[name] = ((name,), levels, param_attrs(name, levels))
+        flat = np.ravel_multi_index(tuple(index), shape)
+        cells = int(np.prod(shape))
+        if n != cells or len(np.unique(flat)) != n:
+            raise ValueError(f"design: {n} cases do not fill the {shape} grid once each")
+        order = np.empty(n, dtype=np.int64)
+        order[flat] = np.arange(n)
+        return dims, coords, order
+    if design.kind == "sampled":
+        coords["case"] = (("case",), np.arange(n, dtype=np.int64), {"units": "1", "long_name": "case number"})
+        for name in design.names:
+            values = _labels(np.asarray(design.values[name]))
+            coords[name] = (("case",), values, param_attrs(name, values))
+        return ("case",), coords, np.arange(n, dtype=np.int64)
+    raise ValueError(f"design.kind: {design.kind!r} is neither 'grid' nor 'sampled'")
+
+
+def _labels(values: np.ndarray) -> np.ndarray:
+    """Categorical values as a unicode array; numbers as float64 (int64 if all integral ints)."""
+    if values.dtype.kind in "USO":
+        return values.astype(np.str_)
+    if values.dtype.kind in "iu":
+        return values.astype(np.int64)
+    if values.dtype.kind == "b":
+        return values.astype(np.int8)
+    return values.astype(np.float64)
+
+
+def _dataset_attrs(design: Design, attrs: Mapping[str, Any]) -> dict[str, Any]:
+    created = _dt.datetime.now(_dt.UTC).replace(microsecond=0).isoformat().replace("+00:00", "Z")
+    summary = design_summary(design)
+    given = dict(attrs)
+    extra_design = given.pop("design", None)
+    if isinstance(extra_design, Mapping):
+        summary.update(extra_design)
+    elif isinstance(extra_design, str):
+        summary.update(json.loads(extra_design))
+    created = str(given.get("created", created))
+    out: dict[str, Any] = {
+        "Conventions": CONVENTIONS,
+        "title": "isolab study",
+        "history": f"{created} created by isolab",
+        "created": created,
+        "design": summary,
+    }
+    out.update(given)
+    return {k: v for k, v in ((k, netcdf_attr(v)) for k, v in out.items()) if v is not None}
+
+
+def netcdf_attr(value: Any) -> Any:
+    """A value netCDF can hold as an attribute: dicts/lists as JSON, booleans as 0/1, datetimes ISO 8601."""
+    if value is None:
+        return None
+    if isinstance(value, bool | np.bool_):
+        return int(value)
+    if isinstance(value, _dt.datetime):
+        return value.isoformat()
+    if isinstance(value, Mapping | list | tuple):
+        return json.dumps(value, default=_json_default, sort_keys=True)
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.ndarray | np.generic):
+        return value.tolist()
+    if isinstance(value, _dt.datetime):
+        return value.isoformat()
+    return str(value)
+
+
+def netcdf_encoding(ds: xr.Dataset) -> dict[str, dict[str, Any]]:
+    """Per-variable netCDF encoding: NaN ``_FillValue`` on floats, int8/-1 for yes/no, zlib for numbers."""
+    enc: dict[str, dict[str, Any]] = {}
+    for name, var in ds.variables.items():
+        e: dict[str, Any] = {}
+        if var.dtype.kind in "fiub" and var.ndim > 0:
+            e.update(zlib=True, complevel=4)
+        if var.encoding.get("dtype") == "int8" and "_FillValue" in var.encoding:
+            e.update(dtype="int8", _FillValue=np.int8(var.encoding["_FillValue"]))
+        elif var.dtype.kind == "f" and name not in ds.dims:
+            e["_FillValue"] = np.nan
+        elif name in ds.dims or var.dtype.kind in "iuUSO":
+            e["_FillValue"] = None
+        enc[str(name)] = e
+    return enc

@@ -1,0 +1,243 @@
+"""Running a study end to end: plan the chunks, fan them out over Dask, build the dataset, store it.
+
+:func:`run_study` is what the service calls for each submitted study; :func:`run_local` runs a study
+file on a private LocalCluster (the CLI and notebooks); :func:`make_client` is the default Dask client.
+
+A run saves every chunk as it arrives (``<id>.chunks/<k>.npz``, see :class:`studies.store.Store`), so
+calling :func:`run_study` again with the same ``study_id`` after an interruption (cancel, crash, restart)
+computes only the chunks that are not saved yet. The chunk split itself is saved with the first chunk, so a
+resumed run splits the cases the same way even on a cluster of another size.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import tempfile
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from studies.dataset import from_chunks, to_dataset
+from studies.fanout import choose_chunk_size, plan_chunks, run_chunks
+from studies.store import Store, copy_atomic, utc_now
+
+log = logging.getLogger(__name__)
+
+Progress = Callable[[int, int], None]
+
+# Engine cost model for the chunk size: seconds per case = fixed cost + steps x cost per step.
+_CASE_OVERHEAD_S = 2e-3
+_STEP_COST_S = {"lti": 0.5e-6, "ltv": 2e-6, "nonlinear": 3e-6}
+_INTEGRATOR_FACTOR = {"euler": 0.3, "rk4": 1.0, "exact": 0.5, "reference": 3.0}
+
+
+def estimate_seconds_per_case(study: Any) -> float:
+    """Rough engine time per case, s: a fixed cost plus (duration / dt) steps at a per-step cost that
+    depends on the fidelity and integrator. Only used to size chunks, so a factor of a few is fine."""
+    sim = study.simulation
+    duration = _duration(study)
+    steps = max(1.0, duration / float(sim.dt))
+    per_step = _STEP_COST_S.get(sim.fidelity, 3e-6) * _INTEGRATOR_FACTOR.get(sim.integrator, 1.0)
+    return _CASE_OVERHEAD_S + steps * per_step
+
+
+def _duration(study: Any) -> float:
+    d = study.simulation.duration
+    if isinstance(d, int | float):
+        return float(d)
+    for name in ("duration", "simulated_duration"):
+        value = getattr(study, name, None)
+        if isinstance(value, int | float):
+            return float(value)
+    return 10.0
+
+
+def _worker_count(client: Any) -> int:
+    try:
+        info = client.scheduler_info()
+        threads = sum(int(w.get("nthreads", 1)) for w in info.get("workers", {}).values())
+        return max(1, threads)
+    except Exception:  # a client without a live scheduler: size for one worker
+        return 1
+
+
+def study_labels(study: Any) -> tuple[list[str], list[str]]:
+    """(isolator names, point names) of a study's scene, for the dataset's ``isolator``/``point`` labels."""
+    return list(study.isolator_names), list(study.point_names)
+
+
+def isolator_types(study: Any) -> list[str]:
+    """Isolator types a study involves: the levels of a varied isolator type, else the scene's own."""
+    return sorted({str(t) for t in study.isolator_types})
+
+
+def run_study(
+    study: Any,
+    store: Store,
+    client: Any,
+    study_id: str | None = None,
+    progress: Progress | None = None,
+    cancel: threading.Event | None = None,
+    *,
+    chunk_size: int | None = None,
+) -> str:
+    """Run every case of ``study`` on ``client`` and store the dataset; returns the study id.
+
+    Args:
+        study: a :class:`studies.study.Study`.
+        store: where the catalog row, chunks and dataset go.
+        client: a ``dask.distributed.Client``.
+        study_id: an existing catalog row to run (or resume); None creates one.
+        progress: called as ``progress(done_cases, total_cases)``.
+        cancel: set it to stop: outstanding chunks are cancelled, finished ones stay saved, the study is
+            marked ``cancelled`` and can be resumed by calling again with its id.
+        chunk_size: cases per chunk (default: :func:`studies.fanout.choose_chunk_size`); ignored when
+            resuming a run whose split is saved.
+
+    The catalog row goes ``running`` (with ``started``), then ``done``/``cancelled``/``failed`` (with
+    ``finished``; ``error`` says why it failed); ``n_done`` and ``n_failed`` follow the chunks as they arrive.
+
+    Raises:
+        Whatever stopped the run (the row is marked ``failed`` first), e.g. FanoutError when every chunk
+        failed.
+    """
+    from engine import __version__ as engine_version
+
+    definition = study.model_dump(mode="json")
+    definition_json = json.dumps(definition, sort_keys=True)
+    design = study.design()
+    n_cases = int(study.n_cases)
+    sim = study.simulation
+    if study_id is None:
+        study_id = store.create(
+            definition, name=study.name, n_cases=n_cases, parameters=list(design.names),
+            isolator_types=isolator_types(study), fidelity=sim.fidelity, integrator=sim.integrator,
+        )
+    else:
+        store.get(study_id)  # exists, and the id is valid
+    store.update(study_id, status="running", started=utc_now(), finished=None, error=None)
+    try:
+        chunks = store.load_chunk_plan(study_id)
+        if chunks is None or int(sum(len(c) for c in chunks)) != n_cases:
+            store.clear_chunks(study_id)
+            size = chunk_size or choose_chunk_size(n_cases, _worker_count(client),
+                                                   estimate_seconds_per_case(study))
+            chunks = plan_chunks(n_cases, size)
+            store.save_chunk_plan(study_id, chunks)
+        saved = store.load_chunks(study_id)
+        skip = {k for k, arrays in saved.items()
+                if k < len(chunks) and np.array_equal(arrays.get("indices", chunks[k]), chunks[k])}
+        counts = {k: _counts(saved[k]) for k in skip}
+
+        def on_chunk(k: int, arrays: dict[str, np.ndarray]) -> None:
+            store.save_chunk(study_id, k, arrays)
+            counts[k] = _counts(arrays)
+            store.update(study_id, n_done=sum(c[0] for c in counts.values()),
+                         n_failed=sum(c[1] for c in counts.values()))
+
+        store.update(study_id, n_done=sum(c[0] for c in counts.values()),
+                     n_failed=sum(c[1] for c in counts.values()))
+        if skip:
+            log.info("study %s: resuming, %d of %d chunks already done", study_id, len(skip), len(chunks))
+        report = run_chunks(client, definition_json, chunks, skip=skip, on_chunk=on_chunk,
+                            progress=progress, cancel=cancel, key_prefix=f"isolab-{study_id}")
+        if report.cancelled:
+            store.update(study_id, status="cancelled", finished=utc_now())
+            return study_id
+
+        iso_names, point_names = study_labels(study)
+        result = from_chunks(store.load_chunks(study_id), chunks, n_isolators=len(iso_names),
+                             n_points=len(point_names))
+        attrs = {
+            "title": f"isolab study {study.name}",
+            "study": definition_json,
+            "study_id": study_id,
+            "design": _design_extra(study),
+            "engine_version": engine_version,
+            "fidelity": sim.fidelity,
+            "integrator": sim.integrator,
+            "dt": float(sim.dt),
+            "auto_step": bool(sim.auto_step),
+        }
+        ds = to_dataset(result, design, isolator_names=iso_names, point_names=point_names, attrs=attrs)
+        store.write_dataset(study_id, ds)
+        store.clear_chunks(study_id)
+        n_failed = int(np.count_nonzero(result.status != 0))
+        store.update(study_id, status="done", finished=utc_now(), n_done=n_cases, n_failed=n_failed)
+        return study_id
+    except BaseException as err:
+        text = f"{type(err).__name__}: {err}"
+        try:
+            store.update(study_id, status="failed", finished=utc_now(), error=text)
+        except Exception:  # the catalog itself failed: report the original error
+            log.exception("study %s: could not mark the study failed", study_id)
+        raise
+
+
+def _counts(arrays: dict[str, np.ndarray]) -> tuple[int, int]:
+    status = np.asarray(arrays["status"])
+    return int(status.size), int(np.count_nonzero(status != 0))
+
+
+def _design_extra(study: Any) -> dict[str, Any]:
+    """What the design summary should add from the study's definition (type, seed, samples)."""
+    spec = getattr(study, "design_spec", None) or getattr(study, "design_settings", None)
+    if spec is None:
+        return {}
+    dump = spec.model_dump(mode="json") if hasattr(spec, "model_dump") else dict(spec)
+    return {k: v for k, v in dump.items() if k in ("type", "seed", "samples")}
+
+
+def make_client(scheduler_address: str | None = None, workers: int = 2, *,
+                dashboard_address: str | None = None):
+    """A Dask client: to ``scheduler_address``, else ``DASK_SCHEDULER_ADDRESS`` / dask's
+    ``scheduler-address`` config, else a new LocalCluster of ``workers`` processes with one thread each
+    (closed with the client)."""
+    import dask
+    from dask.distributed import Client
+
+    address = (
+        scheduler_address
+        or os.environ.get("DASK_SCHEDULER_ADDRESS")
+        or dask.config.get("scheduler-address", None)
+        or dask.config.get("distributed.scheduler-address", None)
+    )
+    if address:
+        return Client(address)
+    if int(workers) < 1:
+        raise ValueError(f"workers: {workers} must be at least 1")
+    return Client(n_workers=int(workers), threads_per_worker=1, processes=True,
+                  dashboard_address=dashboard_address)
+
+
+def run_local(
+    source: str | Path | dict,
+    out_path: str | Path,
+    workers: int = 2,
+    progress: Progress | None = None,
+    store: Store | None = None,
+) -> xr.Dataset:
+    """Run a study (YAML/JSON file, text or dict, as :func:`studies.study.load_study` takes) on a private
+    LocalCluster of ``workers`` processes (one thread each) and write its dataset to ``out_path``
+    atomically. Uses ``store`` if given (the study stays in its catalog), else a temporary one.
+    Returns the dataset (loaded in memory)."""
+    from dask.distributed import Client, LocalCluster
+
+    from studies.study import load_study
+
+    if int(workers) < 1:
+        raise ValueError(f"workers: {workers} must be at least 1")
+    study = load_study(source)
+    with tempfile.TemporaryDirectory(prefix="isolab-") as tmp:
+        own = store if store is not None else Store(Path(tmp))
+        with LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
+                          dashboard_address=None) as cluster, Client(cluster) as client:
+            study_id = run_study(study, own, client, progress=progress)
+        copy_atomic(own.path(study_id), out_path)
+        return own.open_dataset(study_id)

@@ -1,0 +1,612 @@
+"""The scene and study inputs as pydantic models: what a user writes in YAML/JSON, checked and in SI.
+
+Every model forbids unknown keys (a typo is an error, not a silently ignored input). Quantities accept a
+number in SI or a string with units (see :mod:`studies.units`). Positions are in the floor frame XYZ
+(Z up, Y the machine's long axis), with the origin at the bottom-left corner of the machine base unless the
+user places it elsewhere. Errors carry the path of the offending input in their ``loc``; checks that
+involve several inputs name the field in their message (``stages[1].parent: ...``).
+
+A study (parameters and design on top of a scene) is :class:`studies.study.Study`.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Discriminator,
+    Field,
+    StrictFloat,
+    StrictInt,
+    StrictStr,
+    Tag,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
+
+from studies.isolators import PRESETS, CollinearIsolatorsError, load_share
+from studies.units import (
+    STANDARD_GRAVITY,
+    Acceleration,
+    Angle,
+    Damping,
+    Density,
+    Dimensionless,
+    Frequency,
+    Inertia,
+    Jerk,
+    Length,
+    Mass,
+    Stiffness,
+    Time,
+    Velocity,
+)
+
+MAX_TRAVEL = 20.0
+"""Largest stage travel accepted when the machine's size is not known, m."""
+AUTO_DURATION_MARGIN = 3.0
+"""``duration: auto`` simulates this long after the last stage move ends, s."""
+AUTO_DURATION_CAP = 60.0
+"""Longest ``duration: auto``, s."""
+
+PresetName = Literal["active", "air", "elastomer"]
+Name = Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", max_length=64)]
+"""Names of stages and points: a letter, then letters, digits or underscores (they appear in parameter
+paths and dataset coordinates)."""
+
+PositiveLength = Annotated[Length, Field(gt=0)]
+PositiveMass = Annotated[Mass, Field(gt=0)]
+PositiveTime = Annotated[Time, Field(gt=0)]
+NonNegativeTime = Annotated[Time, Field(ge=0)]
+PositiveVelocity = Annotated[Velocity, Field(gt=0)]
+PositiveAcceleration = Annotated[Acceleration, Field(gt=0)]
+PositiveJerk = Annotated[Jerk, Field(gt=0)]
+PositiveFrequency = Annotated[Frequency, Field(gt=0)]
+NonNegativeFrequency = Annotated[Frequency, Field(ge=0)]
+NonNegativeStiffness = Annotated[Stiffness, Field(ge=0)]
+NonNegativeDamping = Annotated[Damping, Field(ge=0)]
+PositiveDensity = Annotated[Density, Field(gt=0)]
+PositiveInertia = Annotated[Inertia, Field(gt=0)]
+DampingRatio = Annotated[Dimensionless, Field(ge=0)]
+Vec3 = tuple[Length, Length, Length]
+"""A position or displacement [x, y, z], m."""
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# machine
+
+
+def _check_principal_moments(moments: np.ndarray, field: str) -> None:
+    """Each principal moment of a rigid body is at most the sum of the other two."""
+    a, b, c = sorted(float(x) for x in moments)
+    if c > (a + b) * (1.0 + 1e-9):
+        raise ValueError(
+            f"{field}: principal moments {a:.6g}, {b:.6g}, {c:.6g} kg m^2 break the triangle inequality "
+            f"({c:.6g} > {a:.6g} + {b:.6g}): no rigid body has them"
+        )
+
+
+class Block(_Model):
+    """A solid rectangular block (the granite base): mass and inertia computed from size and density."""
+
+    size: tuple[PositiveLength, PositiveLength, PositiveLength] = Field(description="[lx, ly, lz], m")
+    density: PositiveDensity = Field(description="kg/m^3 (granite: about 2700)")
+    corner: Vec3 = Field((0.0, 0.0, 0.0), description="position of the block's minimum corner, m")
+
+    def properties(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """Mass (kg), inertia about the c.g. (3, 3) kg m^2 and c.g. (3,) m of the block."""
+        lx, ly, lz = self.size
+        m = self.density * lx * ly * lz
+        inertia = np.diag([m * (ly**2 + lz**2), m * (lx**2 + lz**2), m * (lx**2 + ly**2)]) / 12.0
+        return m, inertia, np.asarray(self.corner, dtype=float) + np.asarray(self.size, dtype=float) / 2.0
+
+
+class Machine(_Model):
+    """The rigid machine base, without its stages.
+
+    Either ``mass``, ``cg`` and one of ``inertia`` (full 3x3 tensor about the c.g., floor axes, products
+    allowed) or ``inertia_diagonal``; or a ``block`` (size, density, corner) from which all three follow.
+    """
+
+    mass: PositiveMass | None = Field(None, description="kg")
+    inertia: list[list[Inertia]] | None = Field(None, description="3x3 tensor about the c.g., kg m^2")
+    inertia_diagonal: tuple[PositiveInertia, PositiveInertia, PositiveInertia] | None = Field(
+        None, description="[Ixx, Iyy, Izz] about the c.g., kg m^2"
+    )
+    cg: Vec3 | None = Field(None, description="c.g. position, m")
+    block: Block | None = None
+
+    @field_validator("inertia")
+    @classmethod
+    def _inertia_tensor(cls, value: list[list[float]] | None) -> list[list[float]] | None:
+        if value is None:
+            return value
+        tensor = np.asarray(value, dtype=float) if all(len(r) == 3 for r in value) else None
+        if tensor is None or tensor.shape != (3, 3):
+            raise ValueError("machine.inertia: must be a 3x3 list of lists")
+        scale = float(np.max(np.abs(tensor)))
+        if not np.allclose(tensor, tensor.T, rtol=0.0, atol=1e-9 * scale):
+            raise ValueError("machine.inertia: must be symmetric (I[i][j] == I[j][i])")
+        eig = np.linalg.eigvalsh(tensor)
+        if not eig[0] > 1e-12 * scale:
+            raise ValueError(
+                f"machine.inertia: must be positive definite, principal moments are "
+                f"{', '.join(f'{e:.6g}' for e in eig)} kg m^2"
+            )
+        _check_principal_moments(eig, "machine.inertia")
+        return value
+
+    @field_validator("inertia_diagonal")
+    @classmethod
+    def _inertia_moments(cls, value: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
+        if value is not None:
+            _check_principal_moments(np.asarray(value), "machine.inertia_diagonal")
+        return value
+
+    @model_validator(mode="after")
+    def _one_description(self) -> Machine:
+        direct = {k for k in ("mass", "inertia", "inertia_diagonal", "cg") if getattr(self, k) is not None}
+        if self.block is not None:
+            if direct:
+                raise ValueError(
+                    f"machine: give either block or mass/inertia/cg, not both (got block and {sorted(direct)})"
+                )
+            return self
+        missing = [k for k in ("mass", "cg") if getattr(self, k) is None]
+        if self.inertia is None and self.inertia_diagonal is None:
+            missing.append("inertia (or inertia_diagonal)")
+        if missing:
+            raise ValueError(f"machine: missing {', '.join(missing)} (or describe the base as a block)")
+        if self.inertia is not None and self.inertia_diagonal is not None:
+            raise ValueError("machine: give inertia or inertia_diagonal, not both")
+        return self
+
+    def properties(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """Mass (kg), inertia tensor about the c.g. (3, 3) kg m^2 and c.g. (3,) m."""
+        if self.block is not None:
+            return self.block.properties()
+        inertia = (
+            np.asarray(self.inertia, dtype=float)
+            if self.inertia is not None
+            else np.diag(np.asarray(self.inertia_diagonal, dtype=float))
+        )
+        return float(self.mass), inertia, np.asarray(self.cg, dtype=float)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# isolators
+
+
+def _axis_aliases(value: Any) -> Any:
+    """Accept ``horizontal`` (X and Y) and ``vertical`` (Z) for per-axis isolator values."""
+    if not isinstance(value, dict):
+        return value
+    out = {k: v for k, v in value.items() if k not in ("horizontal", "vertical")}
+    for alias, axes in (("horizontal", ("x", "y")), ("vertical", ("z",))):
+        if alias in value:
+            clash = [a for a in axes if a in out]
+            if clash:
+                raise ValueError(f"give {alias} or {'/'.join(clash)}, not both")
+            out.update({a: value[alias] for a in axes})
+    return out
+
+
+class AxisStiffness(_Model):
+    """Explicit stiffness per floor axis for every mount, N/m (``horizontal`` sets x and y, ``vertical`` z)."""
+
+    x: NonNegativeStiffness | None = None
+    y: NonNegativeStiffness | None = None
+    z: NonNegativeStiffness | None = None
+
+    _aliases = model_validator(mode="before")(classmethod(lambda cls, v: _axis_aliases(v)))
+
+
+class AxisDamping(_Model):
+    """Explicit damping per floor axis for every mount, N s/m (``horizontal`` sets x and y, ``vertical`` z)."""
+
+    x: NonNegativeDamping | None = None
+    y: NonNegativeDamping | None = None
+    z: NonNegativeDamping | None = None
+
+    _aliases = model_validator(mode="before")(classmethod(lambda cls, v: _axis_aliases(v)))
+
+
+class Layout(_Model):
+    """Four mounts at (cg_x +- span_x/2, cg_y +- span_y/2, cg_z - height) around the machine's c.g."""
+
+    span_x: PositiveLength = Field(description="distance between the mounts along X, m")
+    span_y: PositiveLength = Field(description="distance between the mounts along Y, m")
+    height: Length = Field(description="how far the machine's c.g. sits above the mounts, m")
+
+    def positions(self, cg: np.ndarray) -> np.ndarray:
+        """(4, 3) mount positions, m, for a machine c.g. at ``cg`` (m)."""
+        sx = np.array([-1.0, 1.0, 1.0, -1.0]) * self.span_x / 2.0
+        sy = np.array([-1.0, -1.0, 1.0, 1.0]) * self.span_y / 2.0
+        return np.stack([cg[0] + sx, cg[1] + sy, np.full(4, cg[2] - self.height)], axis=-1)
+
+
+LAYOUT_ORDER = "(-x,-y), (+x,-y), (+x,+y), (-x,+y)"
+"""Order of the four mounts of a layout around the c.g."""
+
+
+class Mount(_Model):
+    """One isolator of an explicit list. Its own values win over the group's: explicit ``k``/``c`` first,
+    then its overrides, then its own ``preset``; without a preset of its own it takes the group's
+    overrides and preset."""
+
+    position: Vec3 = Field(description="point of action, m")
+    preset: PresetName | None = None
+    f_vertical: PositiveFrequency | None = None
+    f_horizontal: PositiveFrequency | None = None
+    zeta: DampingRatio | None = None
+    skyhook: bool | None = None
+    k: tuple[NonNegativeStiffness, NonNegativeStiffness, NonNegativeStiffness] | None = Field(
+        None, description="[kx, ky, kz], N/m"
+    )
+    c: tuple[NonNegativeDamping, NonNegativeDamping, NonNegativeDamping] | None = Field(
+        None, description="[cx, cy, cz], N s/m"
+    )
+
+
+class Isolators(_Model):
+    """The isolators: a type (``preset``) with optional overrides, placed by a ``layout`` or a ``list``.
+
+    Stiffness and damping of a mount along each floor axis come, in order of precedence, from the mount's
+    explicit ``k``/``c``, the group's ``k``/``c`` for that axis, or the preset frequency (X, Y from
+    ``f_horizontal``, Z from ``f_vertical``) and ``zeta`` applied to the static load the mount carries.
+    """
+
+    preset: PresetName = "air"
+    f_vertical: PositiveFrequency | None = None
+    f_horizontal: PositiveFrequency | None = None
+    zeta: DampingRatio | None = None
+    skyhook: bool | None = None
+    k: AxisStiffness | None = None
+    c: AxisDamping | None = None
+    layout: Layout | None = None
+    mounts: list[Mount] | None = Field(None, alias="list")
+
+    @model_validator(mode="after")
+    def _placement(self) -> Isolators:
+        if (self.layout is None) == (self.mounts is None):
+            raise ValueError("isolators: give either layout (four mounts around the c.g.) or list, not both")
+        if self.mounts is not None:
+            if len(self.mounts) < 3:
+                raise ValueError(f"isolators: at least 3 are needed to carry a rigid base, got {len(self.mounts)}")
+            xy = np.array([m.position[:2] for m in self.mounts])
+            try:
+                load_share(xy, xy.mean(axis=0), 1.0)
+            except CollinearIsolatorsError as err:
+                raise ValueError(str(err)) from None
+        return self
+
+    @property
+    def count(self) -> int:
+        return 4 if self.mounts is None else len(self.mounts)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# stages and their motion
+
+
+class TrapezoidProfile(_Model):
+    """One trapezoidal move by ``travel`` from home (triangular when too short to reach the velocity)."""
+
+    type: Literal["trapezoid"]
+    travel: Length = Field(description="signed distance along the stage axis, m")
+    velocity: PositiveVelocity
+    acceleration: PositiveAcceleration
+    start: NonNegativeTime = 0.0
+
+
+class SCurveProfile(_Model):
+    """One jerk-limited (S-curve) move by ``travel`` from home."""
+
+    type: Literal["scurve"]
+    travel: Length
+    velocity: PositiveVelocity
+    acceleration: PositiveAcceleration
+    jerk: PositiveJerk
+    start: NonNegativeTime = 0.0
+
+
+class ScanProfile(_Model):
+    """Out by ``travel``, dwell, back home, dwell; ``repeats`` times (S-curves when ``jerk`` is given)."""
+
+    type: Literal["scan"]
+    travel: Length
+    velocity: PositiveVelocity
+    acceleration: PositiveAcceleration
+    jerk: PositiveJerk | None = None
+    dwell: NonNegativeTime = 0.0
+    repeats: int = Field(1, ge=1, le=1000)
+    start: NonNegativeTime = 0.0
+
+
+class MoveSegment(_Model):
+    move: Length = Field(description="signed distance, m")
+    velocity: PositiveVelocity
+    acceleration: PositiveAcceleration
+    jerk: PositiveJerk | None = None
+
+
+class DwellSegment(_Model):
+    dwell: NonNegativeTime
+
+
+def _segment_kind(value: Any) -> str:
+    if isinstance(value, dict):
+        return "dwell" if "dwell" in value and "move" not in value else "move"
+    return "dwell" if isinstance(value, DwellSegment) else "move"
+
+
+Segment = Annotated[
+    Annotated[MoveSegment, Tag("move")] | Annotated[DwellSegment, Tag("dwell")], Discriminator(_segment_kind)
+]
+
+
+class SequenceProfile(_Model):
+    """Moves and dwells one after the other, from home."""
+
+    type: Literal["sequence"]
+    segments: list[Segment] = Field(min_length=1)
+    start: NonNegativeTime = 0.0
+
+
+Profile = Annotated[TrapezoidProfile | SCurveProfile | ScanProfile | SequenceProfile, Field(discriminator="type")]
+
+
+def profile_excursion(profile: Any) -> float:
+    """Largest distance from home the profile takes its stage to, m."""
+    if isinstance(profile, SequenceProfile):
+        pos, far = 0.0, 0.0
+        for seg in profile.segments:
+            if isinstance(seg, MoveSegment):
+                pos += seg.move
+                far = max(far, abs(pos))
+        return far
+    return abs(profile.travel)
+
+
+class Stage(_Model):
+    """A moving mass that travels along a unit axis fixed in the machine (or in its parent stage)."""
+
+    name: Name
+    mass: PositiveMass = Field(description="moving mass, kg")
+    home: Vec3 = Field(description="the stage's c.g. at home, floor frame, m")
+    axis: tuple[Dimensionless, Dimensionless, Dimensionless] = Field(description="travel direction")
+    parent: Name | None = Field(None, description="the stage this one rides on (listed earlier)")
+    profile: Profile
+
+    @field_validator("axis")
+    @classmethod
+    def _unit_axis(cls, value: tuple[float, float, float]) -> tuple[float, float, float]:
+        norm = float(np.linalg.norm(value))
+        if not norm > 0.0:
+            raise ValueError("axis: the zero vector has no direction")
+        return tuple(float(x) / norm for x in value)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# floor motion
+
+
+class SineFloor(_Model):
+    """Floor displacement amplitude_i sin(2 pi frequency_i t + phase_i) along each floor axis."""
+
+    amplitude: Vec3 = Field(description="m")
+    frequency: tuple[NonNegativeFrequency, NonNegativeFrequency, NonNegativeFrequency] = Field(
+        description="Hz"
+    )
+    phase: tuple[Angle, Angle, Angle] = Field((0.0, 0.0, 0.0), description="rad")
+
+
+class RecordedDisplacement(_Model):
+    """Sampled floor displacement per axis, m (an axis left out does not move)."""
+
+    x: list[Length] | None = None
+    y: list[Length] | None = None
+    z: list[Length] | None = None
+
+    @model_validator(mode="after")
+    def _equal_lengths(self) -> RecordedDisplacement:
+        lengths = {a: len(getattr(self, a)) for a in "xyz" if getattr(self, a) is not None}
+        if not lengths:
+            raise ValueError("floor.recorded.displacement: give at least one of x, y, z")
+        if len(set(lengths.values())) != 1:
+            raise ValueError(f"floor.recorded.displacement: x, y, z must have equal lengths, got {lengths}")
+        if next(iter(lengths.values())) < 2:
+            raise ValueError("floor.recorded.displacement: needs at least 2 samples")
+        return self
+
+    def samples(self) -> np.ndarray:
+        """(3, F) displacement, m."""
+        n = next(len(getattr(self, a)) for a in "xyz" if getattr(self, a) is not None)
+        return np.array([getattr(self, a) if getattr(self, a) is not None else np.zeros(n) for a in "xyz"])
+
+
+class RecordedFloor(_Model):
+    dt: PositiveTime = Field(description="sample interval, s")
+    displacement: RecordedDisplacement
+
+
+class Floor(_Model):
+    """Motion of the floor under the isolators: a sine per axis, or a recorded displacement."""
+
+    sine: SineFloor | None = None
+    recorded: RecordedFloor | None = None
+
+    @model_validator(mode="after")
+    def _one_kind(self) -> Floor:
+        if (self.sine is None) == (self.recorded is None):
+            raise ValueError("floor: give either sine or recorded")
+        return self
+
+
+# ---------------------------------------------------------------------------------------------------------
+# simulation
+
+
+class Simulation(_Model):
+    """How to simulate: model fidelity, integrator, step, duration and settling tolerance."""
+
+    fidelity: Literal["lti", "ltv", "nonlinear"] = "ltv"
+    integrator: Literal["euler", "rk4", "exact", "reference"] = "rk4"
+    dt: PositiveTime = Field(1e-3, description="time step, s")
+    auto_step: bool = Field(True, description="shorten the step where the integrator would be unstable")
+    duration: Literal["auto"] | Annotated[Time, Field(gt=0, le=3600)] = Field(
+        "auto", description=f"s, or auto: last stage move end + {AUTO_DURATION_MARGIN:g} s "
+        f"(at most {AUTO_DURATION_CAP:g} s)"
+    )
+    settle_tolerance: PositiveLength = Field(10e-6, description="m")
+    gravity_stiffness: bool = Field(
+        True, description="include the rocking stiffness of preload and weights that tilt with the base"
+    )
+
+    @field_validator("integrator")
+    @classmethod
+    def _integrator_fits(cls, value: str, info: ValidationInfo) -> str:
+        fidelity = info.data.get("fidelity")
+        if value == "exact" and fidelity not in (None, "lti"):
+            raise ValueError(
+                f"simulation.integrator: 'exact' discretisation needs a time-invariant model "
+                f"(fidelity lti), got fidelity {fidelity!r}"
+            )
+        return value
+
+
+# ---------------------------------------------------------------------------------------------------------
+# scene
+
+
+class Scene(_Model):
+    """A machine base on isolators with its stages, points of interest, floor motion and simulation."""
+
+    machine: Machine
+    isolators: Isolators
+    stages: list[Stage] = Field(default_factory=list)
+    points: dict[Name, Vec3] = Field(default_factory=dict, description="material points of the machine, m")
+    floor: Floor | None = None
+    simulation: Simulation = Field(default_factory=Simulation)
+
+    @field_validator("stages")
+    @classmethod
+    def _stage_tree_and_travel(cls, stages: list[Stage], info: ValidationInfo) -> list[Stage]:
+        names = [s.name for s in stages]
+        index = {}
+        for i, s in enumerate(stages):
+            if s.name in index:
+                raise ValueError(f"stages[{i}].name: {s.name!r} is already the name of stages[{index[s.name]}]")
+            index[s.name] = i
+        for i, s in enumerate(stages):
+            if s.parent is None:
+                continue
+            if s.parent == s.name:
+                raise ValueError(f"stages[{i}].parent: stage {s.name!r} cannot ride on itself")
+            if s.parent not in index:
+                raise ValueError(f"stages[{i}].parent: no stage named {s.parent!r} (stages: {', '.join(names)})")
+            if index[s.parent] > i:
+                chain, cur = [s.name], s.parent
+                while cur is not None and cur not in chain:
+                    chain.append(cur)
+                    cur = stages[index[cur]].parent
+                if cur is not None:
+                    raise ValueError(f"stages[{i}].parent: cycle {' -> '.join([*chain, cur])}")
+                raise ValueError(
+                    f"stages[{i}].parent: {s.parent!r} must be listed before {s.name!r} (parents come first)"
+                )
+        machine = info.data.get("machine")
+        block = machine.block if machine is not None else None
+        for i, s in enumerate(stages):
+            if block is not None:
+                bound = float(np.dot(np.abs(s.axis), block.size))
+                where = f"the base's {bound:.6g} m extent along the stage axis"
+            else:
+                bound, where = MAX_TRAVEL, f"{MAX_TRAVEL:g} m"
+            far = profile_excursion(s.profile)
+            if far > bound * (1.0 + 1e-12):
+                raise ValueError(
+                    f"stages[{i}].profile.travel: the stage would travel {far:.6g} m from home, more than {where}"
+                )
+        return stages
+
+    @model_validator(mode="after")
+    def _mounts_carry_the_weight(self) -> Scene:
+        from studies.scenes import isolator_loads, needs_load
+
+        if needs_load(self):
+            loads = isolator_loads(self)
+            bad = np.flatnonzero(~(loads > 0.0))
+            if bad.size:
+                j = int(bad[0])
+                raise ValueError(
+                    f"isolators: mount {j} would carry a static load of {loads[j]:.6g} N (not positive): the "
+                    "weight of machine and stages lies too far from the mounts' centre for preset (load-based) "
+                    "stiffness; move the mounts or give explicit k"
+                )
+        return self
+
+    def total_mass(self) -> float:
+        """Machine plus all stages, kg."""
+        return float(self.machine.properties()[0] + sum(s.mass for s in self.stages))
+
+
+# ---------------------------------------------------------------------------------------------------------
+# study inputs (the Study model itself is in studies.study)
+
+Value = StrictFloat | StrictInt | StrictStr
+
+
+class RangeSpec(_Model):
+    """A continuous range; ``num`` levels for a grid (sampled designs draw from it)."""
+
+    start: Value
+    stop: Value
+    num: int | None = Field(None, ge=1, le=100_000)
+    scale: Literal["linear", "log"] = "linear"
+
+
+class ParameterSpec(_Model):
+    """One varied input: a path into the scene and its ``values`` or ``range`` (units allowed)."""
+
+    name: Name | None = None
+    path: str = Field(min_length=1, max_length=200)
+    values: list[Value] | None = Field(None, min_length=1)
+    range: RangeSpec | None = None
+
+    @model_validator(mode="after")
+    def _values_or_range(self) -> ParameterSpec:
+        if self.values is not None and self.range is not None:
+            raise ValueError("give values or range, not both")
+        return self
+
+
+class DesignSpec(_Model):
+    """How cases are drawn: full factorial ``grid``, ``lhs``, ``sobol``, ``random`` or an explicit ``list``."""
+
+    type: Literal["grid", "lhs", "sobol", "random", "list"] = "grid"
+    samples: int | None = Field(None, ge=1, le=10_000_000)
+    seed: int = Field(0, ge=0)
+    cases: list[dict[str, Value]] | None = None
+
+
+def error_messages(err: ValidationError) -> list[str]:
+    """One line per error: ``dotted.loc: reason`` (pydantic's "Value error, " prefix dropped)."""
+    out = []
+    for e in err.errors():
+        loc = ".".join(str(x) for x in e["loc"])
+        msg = e["msg"].removeprefix("Value error, ")
+        out.append(f"{loc}: {msg}" if loc else msg)
+    return out
+
+
+GRAVITY = STANDARD_GRAVITY

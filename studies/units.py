@@ -1,0 +1,176 @@
+"""Numbers as engineers write them: ``"2 g"``, ``"3.5 Hz"``, ``"1.2e6 N/m"``, ``"800 mm"``, ``"5 %"``.
+
+Every quantity of a study is stored in SI (m, kg, s, N, rad). A value may be given as a plain number (taken
+as SI as is) or as a string with units, parsed by one shared :mod:`pint` registry and converted to the SI
+unit of the dimension the field expects. Where an acceleration (or a jerk) is expected, ``g`` and ``gn``
+mean standard gravity, 9.80665 m/s^2 (to pint, ``g`` is the gram). Frequencies are cycles per second:
+an angular frequency (``"20 rad/s"``) is converted to Hz by dividing by 2 pi. A damping ratio or any
+dimensionless number accepts percent (``"5 %"`` is 0.05).
+
+The ``Annotated`` types at the end (``Length``, ``Mass``, ...) let pydantic fields accept both forms.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import Annotated, Any
+
+import numpy as np
+import pint
+from pydantic import BeforeValidator, ValidationInfo, WithJsonSchema
+
+UREG = pint.UnitRegistry()
+"""The one unit registry of the product (creating a registry is slow, and quantities of two registries do
+not mix)."""
+
+STANDARD_GRAVITY = 9.80665
+"""Standard gravity, m/s^2."""
+
+# dimension -> (SI unit written for people, pint dimensionality, example)
+DIMENSIONS: dict[str, tuple[str, str, str]] = {
+    "length": ("m", "[length]", "800 mm"),
+    "mass": ("kg", "[mass]", "1000 kg"),
+    "time": ("s", "[time]", "200 ms"),
+    "velocity": ("m/s", "[length]/[time]", "2 m/s"),
+    "acceleration": ("m/s^2", "[length]/[time]**2", "2 g"),
+    "jerk": ("m/s^3", "[length]/[time]**3", "200 m/s^3"),
+    "frequency": ("Hz", "1/[time]", "3.5 Hz"),
+    "stiffness": ("N/m", "[mass]/[time]**2", "1.2e6 N/m"),
+    "damping": ("N s/m", "[mass]/[time]", "2e4 N s/m"),
+    "density": ("kg/m^3", "[mass]/[length]**3", "2700 kg/m^3"),
+    "inertia": ("kg m^2", "[mass]*[length]**2", "1e4 kg m^2"),
+    "angle": ("rad", "", "3 mrad"),
+    "dimensionless": ("", "", "5 %"),
+}
+
+_PINT_DIMENSIONALITY = {name: UREG.get_dimensionality(spec[1]) for name, spec in DIMENSIONS.items()}
+_GRAVITY_TOKEN = re.compile(r"(?<![A-Za-z_])(gn|g)(?![A-Za-z_0-9])")
+
+
+def si_unit(dimension: str) -> str:
+    """The SI unit string of ``dimension`` ("" for dimensionless)."""
+    _check_dimension(dimension)
+    return DIMENSIONS[dimension][0]
+
+
+def _check_dimension(dimension: str) -> None:
+    if dimension not in DIMENSIONS:
+        raise ValueError(f"unknown dimension {dimension!r}; known: {', '.join(DIMENSIONS)}")
+
+
+def _finite(x: float, field: str, value: Any) -> float:
+    if not math.isfinite(x):
+        raise ValueError(f"{field}: must be a finite number, got {value!r}")
+    return x
+
+
+def _describe(dimension: str) -> str:
+    unit, _, example = DIMENSIONS[dimension]
+    what = "a dimensionless number" if dimension == "dimensionless" else dimension
+    if what == dimension:
+        what = ("an " if dimension[0] in "aeiou" else "a ") + dimension
+    return what + (f" in {unit}" if unit else "") + f" (a number in SI or a string such as {example!r})"
+
+
+def to_si(value: Any, dimension: str, field: str) -> float:
+    """``value`` in the SI unit of ``dimension``, as a float.
+
+    Args:
+        value: a number (SI as is), a numeric string, a string with units (``"2 g"``) or a pint quantity.
+        dimension: one of :data:`DIMENSIONS` (length, mass, time, velocity, acceleration, jerk, frequency,
+            stiffness, damping, density, inertia, angle, dimensionless).
+        field: the name of the input, used in error messages.
+
+    Raises:
+        ValueError: naming ``field`` and the reason, for a wrong dimension, text that is not a quantity,
+            NaN or infinity, or a value of another type (booleans included).
+    """
+    _check_dimension(dimension)
+    if isinstance(value, bool | np.bool_):
+        raise ValueError(f"{field}: expected {_describe(dimension)}, got the boolean {value!r}")
+    if isinstance(value, int | float | np.integer | np.floating):
+        return _finite(float(value), field, value)
+    if isinstance(value, str):
+        text = value.strip()
+        if not text:
+            raise ValueError(f"{field}: expected {_describe(dimension)}, got an empty string")
+        try:
+            plain = float(text)
+        except ValueError:
+            plain = None
+        if plain is not None:
+            return _finite(plain, field, value)
+        if dimension in ("acceleration", "jerk"):
+            text = _GRAVITY_TOKEN.sub("standard_gravity", text)
+        try:
+            q = UREG.Quantity(text)
+        except Exception as err:  # pint raises many kinds of errors on text it cannot read
+            raise ValueError(f"{field}: cannot read {value!r} as {_describe(dimension)}: {err}") from None
+    elif isinstance(value, pint.Quantity):
+        q = value
+    else:
+        raise ValueError(f"{field}: expected {_describe(dimension)}, got {type(value).__name__} {value!r}")
+    if not isinstance(q, pint.Quantity):  # a bare number such as "2*3"
+        return _finite(float(q), field, value)
+    try:
+        magnitude = float(np.asarray(q.magnitude, dtype=float))
+    except (TypeError, ValueError):
+        raise ValueError(f"{field}: {value!r} is not a single number") from None
+    _finite(magnitude, field, value)
+    base = q.to_base_units()
+    angle_power = dict(base.unit_items()).get("radian", 0)
+    expected = _PINT_DIMENSIONALITY[dimension]
+    if q.dimensionality != expected:
+        raise ValueError(
+            f"{field}: expected {_describe(dimension)}, got {value!r} which is "
+            f"{q.dimensionality or 'dimensionless'}"
+        )
+    x = float(base.magnitude)
+    if dimension == "angle":
+        if angle_power not in (0, 1):
+            raise ValueError(f"{field}: expected {_describe(dimension)}, got {value!r}")
+    elif dimension == "frequency" and angle_power == 1:
+        x /= 2.0 * math.pi  # angular frequency (rad/s, rpm) to cycles per second
+    elif angle_power != 0:
+        raise ValueError(f"{field}: expected {_describe(dimension)}, got the angle-bearing {value!r}")
+    return _finite(x, field, value)
+
+
+def _validator(dimension: str):
+    def parse(value: Any, info: ValidationInfo) -> Any:
+        if value is None:
+            return value  # optional fields: pydantic decides whether None is allowed
+        return to_si(value, dimension, info.field_name or dimension)
+
+    return BeforeValidator(parse)
+
+
+def _json_schema(dimension: str) -> WithJsonSchema:
+    unit, _, example = DIMENSIONS[dimension]
+    return WithJsonSchema(
+        {
+            "anyOf": [{"type": "number"}, {"type": "string"}],
+            "description": f"{dimension}: a number in SI ({unit or 'dimensionless'}) or a string with units, "
+            f"e.g. {example!r}",
+        }
+    )
+
+
+def _quantity(dimension: str):
+    return Annotated[float, _validator(dimension), _json_schema(dimension)]
+
+
+Length = _quantity("length")
+Mass = _quantity("mass")
+Time = _quantity("time")
+Velocity = _quantity("velocity")
+Acceleration = _quantity("acceleration")
+Jerk = _quantity("jerk")
+Frequency = _quantity("frequency")
+Stiffness = _quantity("stiffness")
+Damping = _quantity("damping")
+Density = _quantity("density")
+Inertia = _quantity("inertia")
+Angle = _quantity("angle")
+Dimensionless = _quantity("dimensionless")
