@@ -179,9 +179,17 @@ def recorded_floor(P, c, t, xf, vf):
 
     Linear interpolation between samples; zero before the first sample, held after the last.
     """
-    nf = P.ft.shape[0]
-    if nf > 0 and t >= P.ft[0]:
-        i = np.searchsorted(P.ft, t, side="right") - 1
+    ft = P.ft
+    nf = ft.shape[0]
+    if nf > 0 and t >= ft[0]:
+        lo, hi = 0, nf  # last sample at or before t: ft[lo] <= t < ft[hi]
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if ft[mid] <= t:
+                lo = mid
+            else:
+                hi = mid
+        i = lo
         if i >= nf - 1:
             for dd in range(3):
                 xf[dd] += P.fd[c, dd, nf - 1]

@@ -70,3 +70,8 @@ def serve(
 
 
 app.command("serve")(serve)
+
+from service.local_commands import run_study_command, simulate  # noqa: E402
+
+app.command("simulate")(simulate)
+app.command("run")(run_study_command)

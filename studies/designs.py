@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import qmc
 
 
 @dataclass
@@ -42,3 +44,187 @@ class Design:
         if self.kind == "grid":
             return tuple(len(self.levels[n]) for n in self.names)
         return (self.n_cases,)
+
+
+GRID_LIMIT = 10_000_000
+"""Most cases a design may hold."""
+
+
+@dataclass(frozen=True)
+class Factor:
+    """One varied parameter as a design sees it, in SI.
+
+    Either ``levels`` (explicit values: floats, or strings for a categorical parameter) or a continuous
+    range ``low`` .. ``high`` on a ``linear`` or ``log`` scale, with ``num`` levels when used in a grid.
+
+    Attributes:
+        name: the parameter's name (a dataset dimension or coordinate).
+        path: the path into the scene it sets.
+        unit: its SI unit ("" for categorical / dimensionless).
+        levels: explicit values, or None for a range.
+        low, high: range ends (SI), ``high`` may be below ``low``.
+        scale: "linear" or "log" (log needs both ends of one sign and non-zero).
+        num: number of grid levels spanning the range (ends included).
+    """
+
+    name: str
+    path: str
+    unit: str = ""
+    levels: np.ndarray | None = None
+    low: float | None = None
+    high: float | None = None
+    scale: str = "linear"
+    num: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.levels is not None:
+            lv = np.asarray(self.levels)
+            if lv.ndim != 1 or lv.size == 0:
+                raise ValueError(f"{self.name}: levels must be a non-empty list")
+            if lv.dtype.kind not in "US":
+                lv = lv.astype(np.float64)
+                if not np.all(np.isfinite(lv)):
+                    raise ValueError(f"{self.name}: levels must be finite")
+            object.__setattr__(self, "levels", lv)
+            return
+        if self.low is None or self.high is None:
+            raise ValueError(f"{self.name}: give levels or a range (low, high)")
+        if not (np.isfinite(self.low) and np.isfinite(self.high)):
+            raise ValueError(f"{self.name}: range ends must be finite")
+        if self.scale not in ("linear", "log"):
+            raise ValueError(f"{self.name}: scale must be linear or log, got {self.scale!r}")
+        if self.scale == "log" and not (self.low * self.high > 0.0):
+            raise ValueError(f"{self.name}: a log range needs both ends non-zero and of one sign")
+        if self.num is not None and (self.num < 1 or (self.num == 1 and self.low != self.high)):
+            raise ValueError(f"{self.name}: a range needs num >= 2 levels (or low == high)")
+
+    @property
+    def categorical(self) -> bool:
+        return self.levels is not None and self.levels.dtype.kind in "US"
+
+    def grid_levels(self) -> np.ndarray:
+        """The levels a full-factorial grid takes (explicit levels, or ``num`` points over the range)."""
+        if self.levels is not None:
+            return self.levels
+        if self.num is None:
+            raise ValueError(f"{self.name}: a grid needs values or a range with num")
+        if self.num == 1:
+            return np.array([float(self.low)])
+        if self.scale == "log":
+            return np.geomspace(self.low, self.high, self.num)
+        return np.linspace(self.low, self.high, self.num)
+
+    def from_unit(self, u: np.ndarray) -> np.ndarray:
+        """Map samples ``u`` in [0, 1) to values: through the range (log space for a log scale), or to
+        the level of index ``floor(u * n_levels)`` for explicit levels."""
+        u = np.asarray(u, dtype=np.float64)
+        if self.levels is not None:
+            n = len(self.levels)
+            return self.levels[np.clip(np.floor(u * n).astype(np.intp), 0, n - 1)]
+        if self.scale == "log":
+            sign = np.sign(self.low)
+            lo, hi = np.log(abs(self.low)), np.log(abs(self.high))
+            return sign * np.exp(lo + u * (hi - lo))
+        return self.low + u * (self.high - self.low)
+
+
+def _meta(factors: list[Factor]) -> tuple[list[str], dict[str, str], dict[str, str]]:
+    names = [f.name for f in factors]
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise ValueError(f"parameters: names repeat: {', '.join(dup)}")
+    return names, {f.name: f.path for f in factors}, {f.name: f.unit for f in factors}
+
+
+def grid(factors: list[Factor]) -> Design:
+    """Full factorial design: every combination of levels; the last factor varies fastest."""
+    names, paths, units = _meta(factors)
+    levels = {f.name: f.grid_levels() for f in factors}
+    for name, lv in levels.items():
+        if len(np.unique(lv)) != len(lv):
+            raise ValueError(f"{name}: grid levels repeat: {lv.tolist()}")
+    shape = tuple(len(levels[n]) for n in names)
+    n_cases = int(np.prod(shape, dtype=np.int64)) if shape else 1
+    if n_cases > GRID_LIMIT:
+        raise ValueError(f"design: the grid {shape} has {n_cases} cases, more than {GRID_LIMIT}")
+    index = np.indices(shape).reshape(len(shape), -1) if shape else np.zeros((0, 1), dtype=np.intp)
+    values = {n: levels[n][index[i]] for i, n in enumerate(names)}
+    return Design("grid", names, values, levels, paths, units)
+
+
+def _sampled(factors: list[Factor], u: np.ndarray) -> Design:
+    names, paths, units = _meta(factors)
+    values = {f.name: f.from_unit(u[:, i]) for i, f in enumerate(factors)}
+    return Design("sampled", names, values, {}, paths, units)
+
+
+def _check_n(n: int) -> int:
+    if isinstance(n, bool) or int(n) != n or not 1 <= n <= GRID_LIMIT:
+        raise ValueError(f"design.samples: must be an integer from 1 to {GRID_LIMIT}, got {n!r}")
+    return int(n)
+
+
+def latin_hypercube(factors: list[Factor], n: int, seed: int = 0) -> Design:
+    """Latin hypercube sample of ``n`` cases: each factor's [0, 1) is cut into ``n`` strata and each
+    stratum is hit exactly once (random position within it). Same ``seed``, same cases."""
+    n = _check_n(n)
+    if not factors:
+        return _sampled(factors, np.zeros((n, 0)))
+    u = qmc.LatinHypercube(d=len(factors), rng=np.random.default_rng(seed)).random(n)
+    return _sampled(factors, u)
+
+
+def sobol(factors: list[Factor], n: int, seed: int = 0) -> Design:
+    """Scrambled Sobol' sequence of ``n`` cases (best balanced when ``n`` is a power of 2)."""
+    n = _check_n(n)
+    if not factors:
+        return _sampled(factors, np.zeros((n, 0)))
+    engine = qmc.Sobol(d=len(factors), scramble=True, rng=np.random.default_rng(seed))
+    if n & (n - 1) == 0:
+        u = engine.random_base2(int(np.log2(n)))
+    else:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=".*balance properties of Sobol.*", category=UserWarning)
+            u = engine.random(n)
+    return _sampled(factors, u)
+
+
+def random(factors: list[Factor], n: int, seed: int = 0) -> Design:
+    """Independent uniform samples of ``n`` cases."""
+    n = _check_n(n)
+    return _sampled(factors, np.random.default_rng(seed).random((n, len(factors))))
+
+
+def explicit(factors: list[Factor], cases: list[dict[str, object]]) -> Design:
+    """The cases listed one by one: each a mapping of every factor's name to its value (SI, or a level
+    name for a categorical factor)."""
+    names, paths, units = _meta(factors)
+    if not cases:
+        raise ValueError("design.cases: give at least one case")
+    for i, case in enumerate(cases):
+        missing = [n for n in names if n not in case]
+        extra = [k for k in case if k not in paths]
+        if missing or extra:
+            problems = [f"missing {', '.join(missing)}"] if missing else []
+            if extra:
+                problems.append(f"unknown {', '.join(map(str, extra))} (parameters: {', '.join(names)})")
+            raise ValueError(f"design.cases[{i}]: " + "; ".join(problems))
+    values = {}
+    for f in factors:
+        col = [case[f.name] for case in cases]
+        if f.categorical:
+            bad = [i for i, v in enumerate(col) if v not in set(f.levels.tolist())]
+            if bad:
+                raise ValueError(
+                    f"design.cases[{bad[0]}].{f.name}: {col[bad[0]]!r} is not one of {f.levels.tolist()}"
+                )
+            values[f.name] = np.asarray(col)
+        else:
+            try:
+                arr = np.asarray(col, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise ValueError(f"design.cases: {f.name} must be numbers, got {col!r}") from None
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"design.cases: {f.name} must be finite")
+            values[f.name] = arr
+    return Design("sampled", names, values, {}, paths, units)

@@ -82,7 +82,9 @@ def load_share(iso_xy: ArrayLike, weight_point_xy: ArrayLike, total_weight: Arra
     det = scatter[..., 0, 0] * scatter[..., 1, 1] - scatter[..., 0, 1] * scatter[..., 1, 0]
     trace = scatter[..., 0, 0] + scatter[..., 1, 1]
     if np.any(~(det > 1e-12 * trace * trace)):
-        raise CollinearIsolatorsError("isolators: all on one line (a rigid base needs mounts spanning an area)")
+        raise CollinearIsolatorsError(
+            "isolators: all on one line (a rigid base needs mounts spanning an area)"
+        )
     lam = np.linalg.solve(scatter, (w[..., None] * (c - mean))[..., None])[..., 0]
     return w[..., None] / n + np.einsum("...ni,...i->...n", d, lam)
 
@@ -93,7 +95,9 @@ def stiffness_from_frequency(load: ArrayLike, f: ArrayLike, g: float = STANDARD_
     return m * (2.0 * np.pi * np.asarray(f, dtype=np.float64)) ** 2
 
 
-def damping_from_ratio(k: ArrayLike, load: ArrayLike, zeta: ArrayLike, g: float = STANDARD_GRAVITY) -> np.ndarray:
+def damping_from_ratio(
+    k: ArrayLike, load: ArrayLike, zeta: ArrayLike, g: float = STANDARD_GRAVITY
+) -> np.ndarray:
     """Viscous damping ``2 zeta sqrt(k m)``, m = load / g, N s/m (k in N/m, load in N, zeta in 1)."""
     m = np.asarray(load, dtype=np.float64) / g
     return 2.0 * np.asarray(zeta, dtype=np.float64) * np.sqrt(np.asarray(k, dtype=np.float64) * m)

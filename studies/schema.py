@@ -29,9 +29,9 @@ from pydantic import (
     model_validator,
 )
 
-from studies.isolators import PRESETS, CollinearIsolatorsError, load_share
+from engine.scene import SceneError
+from studies.isolators import CollinearIsolatorsError, load_share
 from studies.units import (
-    STANDARD_GRAVITY,
     Acceleration,
     Angle,
     Damping,
@@ -158,7 +158,8 @@ class Machine(_Model):
         if self.block is not None:
             if direct:
                 raise ValueError(
-                    f"machine: give either block or mass/inertia/cg, not both (got block and {sorted(direct)})"
+                    "machine: give either block or mass/inertia/cg, not both "
+                    f"(got block and {sorted(direct)})"
                 )
             return self
         missing = [k for k in ("mass", "cg") if getattr(self, k) is None]
@@ -201,23 +202,33 @@ def _axis_aliases(value: Any) -> Any:
 
 
 class AxisStiffness(_Model):
-    """Explicit stiffness per floor axis for every mount, N/m (``horizontal`` sets x and y, ``vertical`` z)."""
+    """Explicit stiffness per floor axis for every mount, N/m.
+
+    ``horizontal`` sets x and y, ``vertical`` sets z."""
 
     x: NonNegativeStiffness | None = None
     y: NonNegativeStiffness | None = None
     z: NonNegativeStiffness | None = None
 
-    _aliases = model_validator(mode="before")(classmethod(lambda cls, v: _axis_aliases(v)))
+    @model_validator(mode="before")
+    @classmethod
+    def _aliases(cls, value: Any) -> Any:
+        return _axis_aliases(value)
 
 
 class AxisDamping(_Model):
-    """Explicit damping per floor axis for every mount, N s/m (``horizontal`` sets x and y, ``vertical`` z)."""
+    """Explicit damping per floor axis for every mount, N s/m.
+
+    ``horizontal`` sets x and y, ``vertical`` sets z."""
 
     x: NonNegativeDamping | None = None
     y: NonNegativeDamping | None = None
     z: NonNegativeDamping | None = None
 
-    _aliases = model_validator(mode="before")(classmethod(lambda cls, v: _axis_aliases(v)))
+    @model_validator(mode="before")
+    @classmethod
+    def _aliases(cls, value: Any) -> Any:
+        return _axis_aliases(value)
 
 
 class Layout(_Model):
@@ -281,7 +292,9 @@ class Isolators(_Model):
             raise ValueError("isolators: give either layout (four mounts around the c.g.) or list, not both")
         if self.mounts is not None:
             if len(self.mounts) < 3:
-                raise ValueError(f"isolators: at least 3 are needed to carry a rigid base, got {len(self.mounts)}")
+                raise ValueError(
+                    f"isolators: at least 3 are needed to carry a rigid base, got {len(self.mounts)}"
+                )
             xy = np.array([m.position[:2] for m in self.mounts])
             try:
                 load_share(xy, xy.mean(axis=0), 1.0)
@@ -362,7 +375,9 @@ class SequenceProfile(_Model):
     start: NonNegativeTime = 0.0
 
 
-Profile = Annotated[TrapezoidProfile | SCurveProfile | ScanProfile | SequenceProfile, Field(discriminator="type")]
+Profile = Annotated[
+    TrapezoidProfile | SCurveProfile | ScanProfile | SequenceProfile, Field(discriminator="type")
+]
 
 
 def profile_excursion(profile: Any) -> float:
@@ -464,8 +479,9 @@ class Simulation(_Model):
     dt: PositiveTime = Field(1e-3, description="time step, s")
     auto_step: bool = Field(True, description="shorten the step where the integrator would be unstable")
     duration: Literal["auto"] | Annotated[Time, Field(gt=0, le=3600)] = Field(
-        "auto", description=f"s, or auto: last stage move end + {AUTO_DURATION_MARGIN:g} s "
-        f"(at most {AUTO_DURATION_CAP:g} s)"
+        "auto",
+        description=f"s, or auto: last stage move end + {AUTO_DURATION_MARGIN:g} s "
+        f"(at most {AUTO_DURATION_CAP:g} s)",
     )
     settle_tolerance: PositiveLength = Field(10e-6, description="m")
     gravity_stiffness: bool = Field(
@@ -505,7 +521,9 @@ class Scene(_Model):
         index = {}
         for i, s in enumerate(stages):
             if s.name in index:
-                raise ValueError(f"stages[{i}].name: {s.name!r} is already the name of stages[{index[s.name]}]")
+                raise ValueError(
+                    f"stages[{i}].name: {s.name!r} is already the name of stages[{index[s.name]}]"
+                )
             index[s.name] = i
         for i, s in enumerate(stages):
             if s.parent is None:
@@ -513,7 +531,9 @@ class Scene(_Model):
             if s.parent == s.name:
                 raise ValueError(f"stages[{i}].parent: stage {s.name!r} cannot ride on itself")
             if s.parent not in index:
-                raise ValueError(f"stages[{i}].parent: no stage named {s.parent!r} (stages: {', '.join(names)})")
+                raise ValueError(
+                    f"stages[{i}].parent: no stage named {s.parent!r} (stages: {', '.join(names)})"
+                )
             if index[s.parent] > i:
                 chain, cur = [s.name], s.parent
                 while cur is not None and cur not in chain:
@@ -535,24 +555,20 @@ class Scene(_Model):
             far = profile_excursion(s.profile)
             if far > bound * (1.0 + 1e-12):
                 raise ValueError(
-                    f"stages[{i}].profile.travel: the stage would travel {far:.6g} m from home, more than {where}"
+                    f"stages[{i}].profile.travel: the stage would travel {far:.6g} m from home, "
+                    f"more than {where}"
                 )
         return stages
 
     @model_validator(mode="after")
-    def _mounts_carry_the_weight(self) -> Scene:
-        from studies.scenes import isolator_loads, needs_load
+    def _physical(self) -> Scene:
+        """What only the assembled scene shows: mounts that cannot carry the weight, moves off the base."""
+        from studies.scenes import build_batch
 
-        if needs_load(self):
-            loads = isolator_loads(self)
-            bad = np.flatnonzero(~(loads > 0.0))
-            if bad.size:
-                j = int(bad[0])
-                raise ValueError(
-                    f"isolators: mount {j} would carry a static load of {loads[j]:.6g} N (not positive): the "
-                    "weight of machine and stages lies too far from the mounts' centre for preset (load-based) "
-                    "stiffness; move the mounts or give explicit k"
-                )
+        try:
+            build_batch([self])
+        except SceneError as err:
+            raise ValueError(str(err)) from None
         return self
 
     def total_mass(self) -> float:
@@ -591,7 +607,7 @@ class ParameterSpec(_Model):
 
 
 class DesignSpec(_Model):
-    """How cases are drawn: full factorial ``grid``, ``lhs``, ``sobol``, ``random`` or an explicit ``list``."""
+    """How cases are drawn: full factorial ``grid``, ``lhs``, ``sobol``, ``random`` or explicit ``list``."""
 
     type: Literal["grid", "lhs", "sobol", "random", "list"] = "grid"
     samples: int | None = Field(None, ge=1, le=10_000_000)
@@ -600,13 +616,20 @@ class DesignSpec(_Model):
 
 
 def error_messages(err: ValidationError) -> list[str]:
-    """One line per error: ``dotted.loc: reason`` (pydantic's "Value error, " prefix dropped)."""
+    """One line per error, ``dotted.path: reason``, e.g. ``scene.machine.inertia: must be symmetric``.
+
+    Pydantic's "Value error, " prefix is dropped, and a message that already names its field
+    (``stages[1].parent: ...`` under ``stages``) is not prefixed twice."""
     out = []
     for e in err.errors():
-        loc = ".".join(str(x) for x in e["loc"])
+        parts = [str(x) for x in e["loc"]]
+        loc = ".".join(parts)
         msg = e["msg"].removeprefix("Value error, ")
+        head, sep, rest = msg.partition(": ")
+        if sep and " " not in head and parts:
+            if loc.endswith(head) or head in parts:
+                msg = rest
+            elif head.startswith(parts[-1]):
+                loc, msg = ".".join([*parts[:-1], head]), rest
         out.append(f"{loc}: {msg}" if loc else msg)
     return out
-
-
-GRAVITY = STANDARD_GRAVITY

@@ -89,3 +89,25 @@ def y_stage(mass: float = 1000.0, travel: float = 3.0, v: float = 2.0, a: float 
     """A stage along +Y doing one trapezoidal move."""
     pieces = trapezoid_pieces(travel, v, a, start)
     return {"mass": mass, "home": home, "axis": (0.0, 1.0, 0.0), "pieces": pieces}
+
+
+def mount(load: float, freq: float, zeta: float) -> tuple[float, float]:
+    """Stiffness (N/m) and damping (N s/m) of a mount of natural frequency ``freq`` (Hz) and damping
+    ratio ``zeta`` (1) under ``load`` (kg): ``k = m (2 pi f)^2``, ``c = 2 zeta sqrt(k m)``."""
+    k = load * (2 * np.pi * freq) ** 2
+    return k, 2 * zeta * np.sqrt(k * load)
+
+
+def vertical_stage(mass: float, accel: float, home=(0.0, 0.0, 0.0)) -> dict:
+    """A stage along +Z accelerating at a constant ``accel`` (m/s^2) from rest at t = 0 (one piece).
+
+    At the c.g. its only effect on the base is the constant vertical force ``-mass * accel`` (N): its weight
+    stays on the vertical through the c.g., so the moment of the weight does not change.
+    """
+    pieces = np.array([[0.0], [0.0], [0.0], [accel], [0.0]])
+    return {"mass": mass, "home": home, "axis": (0.0, 0.0, 1.0), "pieces": pieces}
+
+
+def pieces_array(p) -> np.ndarray:
+    """The first case of an ``engine.profiles.Pieces`` as the (5, K) array ``scene`` takes."""
+    return np.stack([np.asarray(x, dtype=float)[0] for x in (p.t, p.s, p.v, p.a, p.j)])

@@ -1,0 +1,368 @@
+"""A study: a base scene, the parameters it varies and the design that picks their values.
+
+``load_study`` reads a YAML or JSON study file (or a dict), ``Study.design()`` lists the cases and
+``Study.batch(indices)`` turns any cases into the engine's :class:`~engine.scene.SceneBatch`.
+
+Batch building is vectorised: cases are grouped by their categorical values (isolator types), the scene
+of each group is validated once, and the continuous values go into the arrays directly. Each parameter's
+values are checked when the study is validated (every level of a categorical parameter, the extremes of a
+continuous one, applied to the scene and validated by pydantic); what only a combination of values can
+break (a mount that would carry no load) is caught when the batch is built.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from pydantic import Field, PrivateAttr, ValidationError, model_validator
+
+from engine.scene import SceneBatch, concat
+from studies import designs
+from studies.designs import Design, Factor
+from studies.parameters import Target, apply, resolve, scene_dict
+from studies.scenes import build_batch
+from studies.schema import DesignSpec, ParameterSpec, Scene, Simulation, _Model, error_messages
+from studies.units import to_si
+
+SAMPLED_TYPES = ("lhs", "sobol", "random")
+_EXTREME_CHECK_LEVELS = 16
+DRY_RUN_LIMIT = 200_000
+"""Studies of at most this many cases have every case built when they are validated."""
+DRY_RUN_CHUNK = 10_000
+
+
+class Study(_Model):
+    """A design of experiments over a scene.
+
+    ``simulation`` given here overrides the scene's simulation block field by field; after validation it
+    holds the block every case is simulated with.
+    """
+
+    name: str = Field(min_length=1, max_length=200)
+    description: str = ""
+    scene: Scene | None = None
+    scene_file: str | None = Field(
+        None, description="scene file, relative to the study file; read only when loading a study file"
+    )
+    simulation: Simulation | None = None
+    parameters: list[ParameterSpec] = Field(default_factory=list)
+    design_spec: DesignSpec = Field(default_factory=DesignSpec, alias="design")
+
+    _targets: list[Target] = PrivateAttr(default_factory=list)
+    _design: Design | None = PrivateAttr(default=None)
+    _groups: dict[tuple, Scene] = PrivateAttr(default_factory=dict)
+    _base: dict[str, Any] = PrivateAttr(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _plan(self) -> Study:
+        if self.scene is None:
+            raise ValueError(
+                "scene: missing; give the scene inline (scene_file is read only when loading a study file)"
+            )
+        self.simulation = _merged_simulation(self.scene.simulation, self.simulation)
+        self._base = scene_dict(self.scene)  # the scene as every case starts from it
+        self._base["simulation"] = self.simulation.model_dump(mode="json")
+        targets, factors = [], []
+        for i, p in enumerate(self.parameters):
+            try:
+                t = resolve(p.path, self.scene)
+            except ValueError as err:
+                raise ValueError(f"parameters[{i}].path: {err}") from None
+            if t.path.split(".")[0] == "simulation" and t.path not in (
+                "simulation.duration",
+                "simulation.settle_tolerance",
+            ):
+                raise ValueError(f"parameters[{i}].path: {p.path!r} is shared by every case and cannot vary")
+            for j, other in enumerate(targets):
+                if set(t.writes) & set(other.writes):
+                    raise ValueError(
+                        f"parameters[{i}].path: {p.path!r} sets what parameters[{j}] already varies"
+                    )
+            targets.append(t)
+            factors.append(_factor(i, p, t, self.design_spec.type))
+        names = [f.name for f in factors]
+        for i, n in enumerate(names):
+            if n in names[:i]:
+                raise ValueError(
+                    f"parameters[{i}].name: {n!r} is already the name of parameters[{names.index(n)}]; "
+                    "give each a distinct name"
+                )
+        self._targets = targets
+        self._design = _make_design(self.design_spec, factors, targets)
+        self._groups = {}
+        self._check_values()
+        self._check_cases()
+        return self
+
+    # -----------------------------------------------------------------------------------------------------
+
+    def design(self) -> Design:
+        """The cases: a :class:`~studies.designs.Design` (kind, names, values, levels, paths, units).
+
+        The design's definition (the ``design:`` block of the input) is ``design_spec``."""
+        return self._design
+
+    @property
+    def n_cases(self) -> int:
+        return self._design.n_cases
+
+    @property
+    def targets(self) -> list[Target]:
+        """Where each parameter goes in the scene, in parameter order."""
+        return list(self._targets)
+
+    def batch(self, indices: np.ndarray | list[int] | slice) -> SceneBatch:
+        """The engine batch of the cases at ``indices`` (in that order; a slice of the case range works)."""
+        if isinstance(indices, slice):
+            indices = np.arange(self.n_cases)[indices]
+        idx = np.asarray(indices, dtype=np.int64).reshape(-1)
+        if idx.size == 0:
+            raise ValueError("indices: no cases")
+        if idx.min() < 0 or idx.max() >= self.n_cases:
+            raise ValueError(
+                f"indices: case numbers run from 0 to {self.n_cases - 1}, got {idx.min()}..{idx.max()}"
+            )
+        d = self._design
+        cat = [i for i, t in enumerate(self._targets) if t.categorical]
+        cont = [i for i, t in enumerate(self._targets) if not t.categorical]
+        if cat:
+            keys = list(zip(*(d.values[d.names[i]][idx].tolist() for i in cat), strict=True))
+        else:
+            keys = [()] * idx.size
+        groups: dict[tuple, list[int]] = {}
+        for pos, key in enumerate(keys):
+            groups.setdefault(key, []).append(pos)
+        parts, order = [], []
+        for key, positions in groups.items():
+            pos = np.asarray(positions)
+            scene = self._group_scene(key, cat)
+            overrides = {}
+            for i in cont:
+                vals = np.asarray(d.values[d.names[i]][idx[pos]], dtype=np.float64)
+                for leaf in self._targets[i].writes:
+                    overrides[leaf] = vals
+            try:
+                parts.append(build_batch([scene], overrides, n_cases=pos.size))
+            except ValueError as err:
+                raise self._case_error(err, idx[pos]) from None
+            order.append(pos)
+        if len(parts) == 1:
+            return parts[0]
+        batch = concat(parts)
+        inverse = np.empty(idx.size, dtype=np.int64)
+        inverse[np.concatenate(order)] = np.arange(idx.size)
+        return batch.take(inverse)
+
+    def case_values(self, index: int) -> dict[str, Any]:
+        """Parameter name -> value (SI) of one case."""
+        return {n: self._design.values[n][index].item() for n in self._design.names}
+
+    def case_scene(self, index: int) -> Scene:
+        """The full, validated scene of one case, with the study's simulation block (slow path: for
+        inspection and checks; ``build_batch([study.case_scene(i)])`` equals ``study.batch([i])``)."""
+        d = self._design
+        values = [d.values[n][index] for n in d.names]
+        return Scene.model_validate(apply(self._base, self._targets, values))
+
+    # -----------------------------------------------------------------------------------------------------
+
+    def _group_scene(self, key: tuple, cat: list[int]) -> Scene:
+        if key not in self._groups:
+            data = apply(self._base, [self._targets[i] for i in cat], list(key))
+            self._groups[key] = Scene.model_validate(data)
+        return self._groups[key]
+
+    def _case_error(self, err: ValueError, cases: np.ndarray) -> ValueError:
+        """``err`` of a batch of ``cases`` restated with the study's case number and its values."""
+        msg = str(err)
+        m = re.search(r" \(case (\d+)\)", msg)
+        if m and int(m.group(1)) < cases.size:
+            case, msg = int(cases[int(m.group(1))]), msg.replace(m.group(0), "")
+        elif cases.size == 1:
+            case = int(cases[0])
+        else:
+            return ValueError(f"{msg} (among study cases {cases[:8].tolist()}...)")
+        values = ", ".join(
+            _shown(v, t) for v, t in zip(self.case_values(case).values(), self._targets, strict=True)
+        )
+        return ValueError(f"case {case} ({', '.join(self._design.names)} = {values}): {msg}")
+
+    def _check_cases(self) -> None:
+        """Build every case (in chunks) so that a combination of values that is not a physical scene is
+        reported when the study is validated, not when it runs."""
+        n = self.n_cases
+        if n > DRY_RUN_LIMIT:
+            return
+        for start in range(0, n, DRY_RUN_CHUNK):
+            self.batch(np.arange(start, min(n, start + DRY_RUN_CHUNK)))
+
+    def _check_values(self) -> None:
+        """Each parameter's levels (or extremes) applied alone to the scene must give a valid scene."""
+        d = self._design
+        base = self._base
+        for i, (name, target) in enumerate(zip(d.names, self._targets, strict=True)):
+            vals = np.unique(d.values[name])
+            if vals.size > _EXTREME_CHECK_LEVELS and not target.categorical:
+                vals = np.array([vals.min(), vals.max()])
+            for v in vals:
+                try:
+                    Scene.model_validate(apply(base, [target], [v]))
+                except ValidationError as err:
+                    raise ValueError(
+                        f"parameters[{i}] ({name}): the value {_shown(v, target)} makes the scene invalid: "
+                        + "; ".join(error_messages(err))
+                    ) from None
+
+
+def _shown(value: Any, target: Target) -> str:
+    if target.categorical:
+        return str(value)
+    return f"{float(value):.6g} {target.unit}".strip()
+
+
+def _merged_simulation(base: Simulation, given: Simulation | None) -> Simulation:
+    if given is None:
+        return base
+    data = base.model_dump()
+    data.update({k: getattr(given, k) for k in given.model_fields_set})
+    try:
+        return Simulation.model_validate(data)
+    except ValidationError as err:
+        raise ValueError("simulation: " + "; ".join(error_messages(err))) from None
+
+
+def _factor(i: int, p: ParameterSpec, t: Target, design_type: str) -> Factor:
+    name = p.name or t.name
+    where = f"parameters[{i}]"
+    if t.categorical:
+        if p.range is not None:
+            raise ValueError(
+                f"{where}.range: {t.path} is categorical; list its values ({', '.join(t.levels)})"
+            )
+        if p.values is None:
+            if design_type == "list":
+                return Factor(name, t.path, t.unit, levels=np.array(t.levels))
+            raise ValueError(f"{where}.values: give the values of {t.path} ({', '.join(t.levels)})")
+        for k, v in enumerate(p.values):
+            if v not in t.levels:
+                raise ValueError(f"{where}.values[{k}]: {v!r} is not one of {', '.join(t.levels)}")
+        return Factor(name, t.path, t.unit, levels=np.array(p.values))
+    if p.values is not None:
+        levels = [to_si(v, t.dimension, f"{where}.values[{k}]") for k, v in enumerate(p.values)]
+        return Factor(name, t.path, t.unit, levels=np.array(levels))
+    if p.range is not None:
+        r = p.range
+        low = to_si(r.start, t.dimension, f"{where}.range.start")
+        high = to_si(r.stop, t.dimension, f"{where}.range.stop")
+        try:
+            return Factor(name, t.path, t.unit, low=low, high=high, scale=r.scale, num=r.num)
+        except ValueError as err:
+            raise ValueError(f"{where}.range: {err}") from None
+    if design_type == "list":
+        return Factor(name, t.path, t.unit, low=0.0, high=0.0)  # values come from design.cases
+    raise ValueError(f"{where}: give values or range")
+
+
+def _make_design(spec: DesignSpec, factors: list[Factor], targets: list[Target]) -> Design:
+    try:
+        if spec.type == "grid":
+            for f in factors:
+                if f.levels is None and f.num is None:
+                    raise ValueError(f"{f.name}: a grid needs values, or a range with num")
+            return designs.grid(factors)
+        if spec.type in SAMPLED_TYPES:
+            if spec.samples is None:
+                raise ValueError(f"design.samples: a {spec.type} design needs the number of samples")
+            make = {"lhs": designs.latin_hypercube, "sobol": designs.sobol, "random": designs.random}[
+                spec.type
+            ]
+            return make(factors, spec.samples, spec.seed)
+        if spec.cases is None:
+            raise ValueError("design.cases: a list design needs its cases")
+        cases = []
+        for i, case in enumerate(spec.cases):
+            row = {}
+            for k, v in case.items():
+                f = next((f for f in factors if f.name == k), None)
+                if f is not None and not f.categorical:
+                    t = targets[factors.index(f)]
+                    v = to_si(v, t.dimension, f"design.cases[{i}].{k}")
+                row[k] = v
+            cases.append(row)
+        return designs.explicit(factors, cases)
+    except ValueError as err:
+        msg = str(err)
+        raise ValueError(
+            msg if msg.startswith("design") or msg.startswith("parameters") else f"design: {msg}"
+        ) from None
+
+
+def _is_text(source: str | Path) -> bool:
+    """A string holding YAML/JSON (several lines, or a JSON object) rather than a file name."""
+    return isinstance(source, str) and ("\n" in source or source.lstrip().startswith("{"))
+
+
+def _read(source: str | Path, base_dir: str | Path | None = None) -> tuple[dict[str, Any], Path]:
+    """The mapping in a YAML/JSON file or text, and the folder relative paths in it start from."""
+    if _is_text(source):
+        data, where, here = yaml.safe_load(source), "the study text", Path(base_dir or Path.cwd())
+    else:
+        path = Path(source)
+        text = path.read_text(encoding="utf-8")
+        data = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
+        where, here = str(path), path.resolve().parent
+    if not isinstance(data, Mapping):
+        raise ValueError(f"{where}: expected a mapping at the top level, got {type(data).__name__}")
+    return dict(data), here
+
+
+def load_scene(source: str | Path | Mapping[str, Any]) -> Scene:
+    """A validated :class:`~studies.schema.Scene` from a YAML/JSON file, YAML/JSON text or a dict."""
+    if isinstance(source, Mapping):
+        return Scene.model_validate(dict(source))
+    data, _ = _read(source)
+    return Scene.model_validate(data)
+
+
+def load_study(source: str | Path | Mapping[str, Any], base_dir: str | Path | None = None) -> Study:
+    """A validated :class:`Study` from a YAML/JSON file, YAML/JSON text (a string of several lines or a
+    JSON object) or a dict.
+
+    When the study has no inline ``scene``, its ``scene_file`` is read, relative to the study file (for
+    text or a dict: relative to ``base_dir``, default the current directory), and becomes the inline
+    scene. An inline scene wins over ``scene_file`` (a stored definition keeps both). Services that take
+    studies from the network validate with ``Study.model_validate`` instead, which never reads files.
+    """
+    if isinstance(source, Mapping):
+        data, here = dict(source), Path(base_dir) if base_dir is not None else Path.cwd()
+    else:
+        data, here = _read(source, base_dir)
+    if data.get("scene_file") is not None and data.get("scene") is None:
+        scene_path = here / str(data["scene_file"])
+        if not scene_path.is_file():
+            raise FileNotFoundError(f"scene_file: no file {scene_path}")
+        data["scene"], _ = _read(scene_path)
+    return Study.model_validate(data)
+
+
+def isolator_names(scene: Scene) -> list[str]:
+    """Labels of the scene's isolators, in batch order: ``mount_0`` ... (a layout's order is
+    (-x,-y), (+x,-y), (+x,+y), (-x,+y))."""
+    return [f"mount_{j}" for j in range(scene.isolators.count)]
+
+
+def scene_batch(scene: Scene) -> tuple[SceneBatch, dict[str, list[str]]]:
+    """The one-case engine batch of ``scene`` and the labels of its isolators, points and stages
+    (``{"isolators": [...], "points": [...], "stages": [...]}``, in batch order)."""
+    names = {
+        "isolators": isolator_names(scene),
+        "points": list(scene.points),
+        "stages": [s.name for s in scene.stages],
+    }
+    return build_batch([scene]), names
