@@ -135,7 +135,8 @@ def advance_pieces(P, c, t, idx, tol):
     """Move each stage's current piece index ``idx`` (m,) forward to the piece holding time ``t`` (s).
 
     A piece that starts within ``tol`` s after ``t`` counts as started, so steps that land on a
-    breakpoint use the piece that begins there.
+    breakpoint use the piece that begins there. An index of -1 means "before the first piece": the stage
+    rests at its start position until its profile begins.
     """
     K = P.pt.shape[2]
     for i in range(P.pt.shape[1]):
@@ -154,11 +155,17 @@ def stage_state(P, c, t, idx, rho, vr, ar, jr):
     """
     for i in range(P.sm.shape[1]):
         k = idx[i]
-        tau = t - P.pt[c, i, k]
-        j = P.pj[c, i, k]
-        a = P.pa[c, i, k] + j * tau
-        v = P.pv[c, i, k] + (P.pa[c, i, k] + 0.5 * j * tau) * tau
-        s = P.ps[c, i, k] + (P.pv[c, i, k] + (0.5 * P.pa[c, i, k] + j * tau / 6.0) * tau) * tau
+        if k < 0:
+            j = 0.0
+            a = 0.0
+            v = 0.0
+            s = P.ps[c, i, 0]
+        else:
+            tau = t - P.pt[c, i, k]
+            j = P.pj[c, i, k]
+            a = P.pa[c, i, k] + j * tau
+            v = P.pv[c, i, k] + (P.pa[c, i, k] + 0.5 * j * tau) * tau
+            s = P.ps[c, i, k] + (P.pv[c, i, k] + (0.5 * P.pa[c, i, k] + j * tau / 6.0) * tau) * tau
         p = P.parent[i]
         for dd in range(3):
             ed = P.e[c, i, dd]

@@ -98,9 +98,13 @@ def simulate(
         **case_outputs(result, 0, names["isolators"], names["points"]),
     }
     if plot:
-        from service.plots import case_figure
+        from service.plots import case_png
 
-        case_figure(result.history, names, title=str(scene.name)).savefig(plot, dpi=110)
+        h = result.history
+        n = int(h["n_samples"][0])
+        plot.write_bytes(case_png(h["time"][0, :n], h["displacement"][0, :n], h["rotation"][0, :n],
+                                  h["isolator_force"][0, :n], names["isolators"],
+                                  title=f"{scene.name} ({fid}/{integ})"))
         out["plot"] = str(plot)
     if as_json:
         typer.echo(json.dumps(out, indent=2))
@@ -118,7 +122,6 @@ def simulate(
     typer.echo("  min isolator load       " + ", ".join(f"{k} {v:.0f} N" for k, v in out["min_isolator_load"].items()))
     st = "settled" if out["settled"] else "NOT settled (lower bound)"
     typer.echo(f"  settling time           {out['settling_time']:.3f} s ({st})")
-    _ = np
 
 
 def run_study_command(

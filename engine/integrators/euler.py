@@ -33,7 +33,7 @@ def run(P, level, dt, n_steps, O, W, status):
         x[:] = 0.0
         if level == NONLINEAR:
             x[3] = 1.0
-        idx[:] = 0
+        idx[:] = -1
         h = dt[c]
         tol = 1e-6 * h
         observe(P, c, level, 0.0, x, W, O, 0)

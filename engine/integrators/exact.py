@@ -212,7 +212,7 @@ def run_exact(P, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc_on)
         if status[c] != 0:
             continue
         x[:] = 0.0
-        idx[:] = 0
+        idx[:] = -1
         h = dt[c]
         tol = 1e-6 * h
         e = 0

@@ -33,7 +33,7 @@ def run(P, level, dt, n_steps, O, W, status, rtol: float = RTOL, atol: float = A
         x = np.zeros(nx)
         if level == NONLINEAR:
             x[3] = 1.0
-        idx = np.zeros(m, dtype=np.int64)
+        idx = np.full(m, -1, dtype=np.int64)
         bps = np.concatenate([P.pt[c].ravel(), P.ft])
         bps = np.unique(np.concatenate([[0.0, T], bps[(bps > 0) & (bps < T)]]))
         grid = np.arange(N + 1) * h
@@ -53,7 +53,7 @@ def run(P, level, dt, n_steps, O, W, status, rtol: float = RTOL, atol: float = A
 
             sel = grid[(grid > a + 1e-12) & (grid <= b + 1e-12)]
             ends_on_grid = sel.size and abs(sel[-1] - b) <= 1e-12
-            t_eval = sel if ends_on_grid else np.append(sel, b)
+            t_eval = np.clip(sel, a, b) if ends_on_grid else np.append(np.clip(sel, a, b), b)
             sol = solve_ivp(rhs, (a, b), x, method="DOP853", rtol=rtol, atol=atol, t_eval=t_eval)
             if not sol.success:
                 status[c] = 3
