@@ -39,7 +39,7 @@ def rk4_limit(zeta: np.ndarray | float) -> np.ndarray:
 
 
 def step_matrix(A: np.ndarray, h: np.ndarray, integrator: str) -> np.ndarray:
-    """One-step map (C, 12, 12) of ``integrator`` on ``x' = A x`` (A: (C, 12, 12), 1/s), steps ``h`` (C,) s."""
+    """One-step map (C, 12, 12) of ``integrator`` on ``x' = A x`` (A (C, 12, 12), 1/s), steps ``h`` (C,) s."""
     h = np.asarray(h, dtype=float)[:, None, None]
     n = A.shape[-1]
     I = np.eye(n)

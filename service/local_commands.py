@@ -45,10 +45,12 @@ def case_outputs(result, case: int, isolators: list[str], points: list[str]) -> 
     out.update(
         peak_displacement=_labelled(r.peak_displacement[case], AXES),
         peak_rotation=_labelled(r.peak_rotation[case], ROTATIONS),
-        peak_point_displacement={p: _labelled(v, AXES) for p, v in zip(points, r.peak_point_displacement[case],
-                                                                          strict=True)},
-        peak_isolator_force={i: _labelled(v, AXES) for i, v in zip(isolators, r.peak_isolator_force[case],
-                                                                     strict=True)},
+        peak_point_displacement={
+            p: _labelled(v, AXES) for p, v in zip(points, r.peak_point_displacement[case], strict=True)
+        },
+        peak_isolator_force={
+            i: _labelled(v, AXES) for i, v in zip(isolators, r.peak_isolator_force[case], strict=True)
+        },
         min_isolator_load=_labelled(r.min_isolator_load[case], isolators),
         liftoff={i: bool(v < 0) for i, v in zip(isolators, r.min_isolator_load[case], strict=True)},
         rms_displacement=_labelled(r.rms_displacement[case], AXES),
@@ -61,12 +63,12 @@ def case_outputs(result, case: int, isolators: list[str], points: list[str]) -> 
 
 
 def simulate(
-    scene: Annotated[Path, typer.Argument(help="Scene file (YAML or JSON).", exists=True, dir_okay=False)],
+    scene: Annotated[Path, typer.Argument(help="Scene file, YAML or JSON.", exists=True, dir_okay=False)],
     as_json: Annotated[bool, typer.Option("--json", help="Print the outputs as JSON.")] = False,
-    fidelity: Annotated[str | None, typer.Option(help="lti, ltv or nonlinear (default: the scene's).")] = None,
+    fidelity: Annotated[str | None, typer.Option(help="lti, ltv or nonlinear (default: scene's).")] = None,
     integrator: Annotated[str | None, typer.Option(help="euler, rk4, exact or reference.")] = None,
     dt: Annotated[float | None, typer.Option(help="Step, s (default: the scene's).")] = None,
-    plot: Annotated[Path | None, typer.Option(help="Write the c.g., rotation and force traces to this PNG.")] = None,
+    plot: Annotated[Path | None, typer.Option(help="Write c.g., rotation and force traces to a PNG.")] = None,
 ) -> None:
     """Simulate one scene and print its peaks, loads, natural frequencies and settling time."""
     from engine import SceneError
@@ -119,7 +121,8 @@ def simulate(
     typer.echo("  peak c.g. displacement  " + "  ".join(f"{a} {pd[a] * 1e3:.3f} mm" for a in AXES))
     typer.echo("  peak rotation           " + "  ".join(f"{a} {pr[a] * 1e3:.3f} mrad" for a in ROTATIONS))
     typer.echo("  natural frequencies     " + ", ".join(f"{f:.2f}" for f in out["natural_frequency"]) + " Hz")
-    typer.echo("  min isolator load       " + ", ".join(f"{k} {v:.0f} N" for k, v in out["min_isolator_load"].items()))
+    loads = ", ".join(f"{k} {v:.0f} N" for k, v in out["min_isolator_load"].items())
+    typer.echo("  min isolator load       " + loads)
     st = "settled" if out["settled"] else "NOT settled (lower bound)"
     typer.echo(f"  settling time           {out['settling_time']:.3f} s ({st})")
 
