@@ -84,6 +84,7 @@ def simulate(batch: SceneBatch, fidelity: str = "ltv", integrator: str = "rk4", 
                               + ("use a smaller dt or the exact integrator" if n_div[c] else
                                  "use the exact integrator"))
                 n_div[c] = 1
+        n_div[status != OK] = 1
         steps = dt / n_div
     duration = np.asarray(batch.duration, dtype=float)
     n_steps = np.rint(duration / steps).astype(np.int64)

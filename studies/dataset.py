@@ -398,7 +398,7 @@ def netcdf_attr(value: Any) -> Any:
     if isinstance(value, _dt.datetime):
         return value.isoformat()
     if isinstance(value, Mapping | list | tuple):
-        return json.dumps(value, default=_json_default, sort_keys=True)
+        return json.dumps(value, default=_json_default)
     if isinstance(value, np.generic):
         return value.item()
     return value

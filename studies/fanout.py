@@ -74,15 +74,18 @@ def choose_chunk_size(n_cases: int, n_workers: int, seconds_per_case_estimate: f
     ceiling_size = max(floor_size, math.floor(MAX_CHUNK_SECONDS / spc))  # rule 3
     balanced = n // (CHUNKS_PER_WORKER * w)  # rule 2
     size = min(max(balanced, floor_size), ceiling_size)
-    size = min(size, math.ceil(n / w))  # rule 4
+    size = min(size, max(1, n // w))  # rule 4
     return max(1, size)
 
 
 @functools.lru_cache(maxsize=8)
 def _study_from_json(definition_json: str):
-    from studies.study import load_study
+    """The validated Study of a JSON definition, cached per worker process (chunks of one study share it).
 
-    return load_study(json.loads(definition_json))
+    Validated as data (``Study.model_validate``): a worker never reads files named in a definition."""
+    from studies.study import Study
+
+    return Study.model_validate(json.loads(definition_json))
 
 
 def run_chunk(definition_json: str, indices: Sequence[int] | np.ndarray) -> dict[str, np.ndarray]:
@@ -217,6 +220,6 @@ def run_chunks(
         client.cancel(list(pending))
         raise
     if not report.cancelled and report.failed and len(report.failed) == len(report.submitted):
-        first = next(iter(report.failed.items()))
+        first = min(report.failed.items())
         raise FanoutError(f"every chunk failed; chunk {first[0]}: {first[1]}")
     return report

@@ -31,31 +31,31 @@ log = logging.getLogger(__name__)
 
 Progress = Callable[[int, int], None]
 
-# Engine cost model for the chunk size: seconds per case = fixed cost + steps x cost per step.
-_CASE_OVERHEAD_S = 2e-3
-_STEP_COST_S = {"lti": 0.5e-6, "ltv": 2e-6, "nonlinear": 3e-6}
-_INTEGRATOR_FACTOR = {"euler": 0.3, "rk4": 1.0, "exact": 0.5, "reference": 3.0}
+# Engine cost model for the chunk size: seconds per case = fixed cost + steps x cost per step, measured
+# on one core for a 4-mount, 1-stage scene (rk4 ~8 us/step, exact ~2 us/step, fidelity matters little).
+_CASE_OVERHEAD_S = 1e-3
+_STEP_COST_S = {"euler": 3e-6, "rk4": 8e-6, "exact": 2e-6, "reference": 25e-6}
+_FIDELITY_FACTOR = {"lti": 1.0, "ltv": 1.0, "nonlinear": 1.2}
 
 
 def estimate_seconds_per_case(study: Any) -> float:
     """Rough engine time per case, s: a fixed cost plus (duration / dt) steps at a per-step cost that
-    depends on the fidelity and integrator. Only used to size chunks, so a factor of a few is fine."""
+    depends on the integrator and fidelity. Only used to size chunks, so a factor of a few is fine."""
     sim = study.simulation
-    duration = _duration(study)
-    steps = max(1.0, duration / float(sim.dt))
-    per_step = _STEP_COST_S.get(sim.fidelity, 3e-6) * _INTEGRATOR_FACTOR.get(sim.integrator, 1.0)
+    steps = max(1.0, _duration(study) / float(sim.dt))
+    per_step = _STEP_COST_S.get(sim.integrator, 25e-6) * _FIDELITY_FACTOR.get(sim.fidelity, 1.2)
     return _CASE_OVERHEAD_S + steps * per_step
 
 
 def _duration(study: Any) -> float:
+    """Simulated time of the study's first case, s (``duration: auto`` depends on the motion)."""
     d = study.simulation.duration
     if isinstance(d, int | float):
         return float(d)
-    for name in ("duration", "simulated_duration"):
-        value = getattr(study, name, None)
-        if isinstance(value, int | float):
-            return float(value)
-    return 10.0
+    try:
+        return float(np.max(study.batch(np.array([0])).duration))
+    except Exception:  # sizing only: a case that cannot be built fails in its own chunk
+        return 10.0
 
 
 def _worker_count(client: Any) -> int:
@@ -68,13 +68,27 @@ def _worker_count(client: Any) -> int:
 
 
 def study_labels(study: Any) -> tuple[list[str], list[str]]:
-    """(isolator names, point names) of a study's scene, for the dataset's ``isolator``/``point`` labels."""
-    return list(study.isolator_names), list(study.point_names)
+    """(isolator names, point names) of a study's scene: ``mount_<j>`` in the scene's mount order (a
+    layout's order is (-x,-y), (+x,-y), (+x,+y), (-x,+y)) and the points' own names."""
+    scene = study.scene
+    return [f"mount_{j}" for j in range(scene.isolators.count)], [str(p) for p in scene.points]
 
 
 def isolator_types(study: Any) -> list[str]:
-    """Isolator types a study involves: the levels of a varied isolator type, else the scene's own."""
-    return sorted({str(t) for t in study.isolator_types})
+    """Isolator types (presets) a study involves: the values of every varied preset, plus the scene's
+    own group and per-mount presets where no parameter replaces them."""
+    design = study.design()
+    iso = study.scene.isolators
+    varied = {t.path: name for t, name in zip(study.targets, design.names, strict=True)}
+    types = {str(v) for path, name in varied.items() if path.endswith("preset")
+             for v in np.unique(design.values[name])}
+    group_used = iso.mounts is None or any(m.preset is None for m in iso.mounts)
+    if group_used and "isolators.preset" not in varied:
+        types.add(str(iso.preset))
+    for j, mount in enumerate(iso.mounts or []):
+        if mount.preset is not None and f"isolators.list.{j}.preset" not in varied:
+            types.add(str(mount.preset))
+    return sorted(types)
 
 
 def run_study(
@@ -100,8 +114,9 @@ def run_study(
         chunk_size: cases per chunk (default: :func:`studies.fanout.choose_chunk_size`); ignored when
             resuming a run whose split is saved.
 
-    The catalog row goes ``running`` (with ``started``), then ``done``/``cancelled``/``failed`` (with
-    ``finished``; ``error`` says why it failed); ``n_done`` and ``n_failed`` follow the chunks as they arrive.
+    The catalog row goes ``running`` (``started`` is the first start, kept on resume), then
+    ``done``/``cancelled``/``failed`` (with ``finished``; ``error`` says why it failed); ``n_done`` and
+    ``n_failed`` follow the chunks as they arrive.
 
     Raises:
         Whatever stopped the run (the row is marked ``failed`` first), e.g. FanoutError when every chunk
@@ -110,7 +125,8 @@ def run_study(
     from engine import __version__ as engine_version
 
     definition = study.model_dump(mode="json")
-    definition_json = json.dumps(definition, sort_keys=True)
+    # keys keep their order: the order of points in the definition is the order of the point labels
+    definition_json = json.dumps(definition)
     design = study.design()
     n_cases = int(study.n_cases)
     sim = study.simulation
@@ -119,9 +135,8 @@ def run_study(
             definition, name=study.name, n_cases=n_cases, parameters=list(design.names),
             isolator_types=isolator_types(study), fidelity=sim.fidelity, integrator=sim.integrator,
         )
-    else:
-        store.get(study_id)  # exists, and the id is valid
-    store.update(study_id, status="running", started=utc_now(), finished=None, error=None)
+    row = store.get(study_id)  # exists, and the id is valid
+    store.update(study_id, status="running", started=row["started"] or utc_now(), finished=None, error=None)
     try:
         chunks = store.load_chunk_plan(study_id)
         if chunks is None or int(sum(len(c) for c in chunks)) != n_cases:
@@ -186,19 +201,16 @@ def _counts(arrays: dict[str, np.ndarray]) -> tuple[int, int]:
 
 
 def _design_extra(study: Any) -> dict[str, Any]:
-    """What the design summary should add from the study's definition (type, seed, samples)."""
-    spec = getattr(study, "design_spec", None) or getattr(study, "design_settings", None)
-    if spec is None:
-        return {}
-    dump = spec.model_dump(mode="json") if hasattr(spec, "model_dump") else dict(spec)
-    return {k: v for k, v in dump.items() if k in ("type", "seed", "samples")}
+    """What the design summary adds from the study's ``design:`` block (type, samples, seed)."""
+    dump = study.design_spec.model_dump(mode="json")
+    return {k: v for k, v in dump.items() if k in ("type", "seed", "samples") and v is not None}
 
 
 def make_client(scheduler_address: str | None = None, workers: int = 2, *,
-                dashboard_address: str | None = None):
+                dashboard_address: str | None = ":0"):
     """A Dask client: to ``scheduler_address``, else ``DASK_SCHEDULER_ADDRESS`` / dask's
     ``scheduler-address`` config, else a new LocalCluster of ``workers`` processes with one thread each
-    (closed with the client)."""
+    (closed with the client; its dashboard on ``dashboard_address``, default a free port)."""
     import dask
     from dask.distributed import Client
 
@@ -237,7 +249,7 @@ def run_local(
     with tempfile.TemporaryDirectory(prefix="isolab-") as tmp:
         own = store if store is not None else Store(Path(tmp))
         with LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
-                          dashboard_address=None) as cluster, Client(cluster) as client:
+                          dashboard_address=":0") as cluster, Client(cluster) as client:
             study_id = run_study(study, own, client, progress=progress)
         copy_atomic(own.path(study_id), out_path)
         return own.open_dataset(study_id)

@@ -213,7 +213,7 @@ class Store:
             "fidelity": fidelity,
             "integrator": integrator,
             "definition": (
-                definition if isinstance(definition, str) else json.dumps(definition, sort_keys=True)
+                definition if isinstance(definition, str) else json.dumps(definition)
             ),
         }
         cols = ", ".join(row)
@@ -248,7 +248,7 @@ class Store:
         values = {}
         for key, value in fields.items():
             if key in _JSON_COLUMNS and not isinstance(value, str):
-                value = json.dumps(value, sort_keys=True)
+                value = json.dumps(value)
             elif key in ("started", "finished") and value is not None:
                 value = _utc_text(value, key)
             values[key] = value

@@ -1,0 +1,322 @@
+"""Chunked fan-out over a real Dask LocalCluster: chunk sizing, failures, cancellation, resume."""
+
+from __future__ import annotations
+
+import json
+import math
+import operator
+import sys
+import threading
+import time
+from pathlib import Path
+
+import cloudpickle
+import numpy as np
+import pytest
+import xarray as xr
+from distributed import Client, LocalCluster
+
+from engine import __version__ as engine_version
+from engine import simulate
+from engine.results import FAILED, OK, UNSTABLE
+from studies import fanout, runner
+from studies.dataset import to_dataset
+from studies.fanout import (
+    CHUNKS_PER_WORKER,
+    FanoutError,
+    choose_chunk_size,
+    plan_chunks,
+    run_chunks,
+)
+from studies.runner import make_client, run_local, run_study, study_labels
+from studies.store import Store
+from studies.study import load_study
+
+# the tasks below are defined in this test module: ship them to the workers by value
+cloudpickle.register_pickle_by_value(sys.modules[__name__])
+
+
+@pytest.fixture(scope="module")
+def client():
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
+        with Client(cluster) as c:
+            yield c
+
+
+def squares_task(definition_json: str, indices: np.ndarray) -> dict[str, np.ndarray]:
+    """A stand-in worker task: value = index^2, fails for the chunks starting at ``fail``."""
+    spec = json.loads(definition_json)
+    time.sleep(spec.get("sleep", 0.0))
+    if int(indices[0]) in spec.get("fail", []):
+        raise ZeroDivisionError(f"no good at case {int(indices[0])}")
+    return {
+        "status": np.zeros(len(indices), dtype=np.int8),
+        "message": np.array([""] * len(indices)),
+        "value": indices.astype(float) ** 2,
+        "indices": indices,
+    }
+
+
+# ---------------------------------------------------------------------------------------- planning
+def test_plan_chunks_is_deterministic_and_covers_every_case_once() -> None:
+    chunks = plan_chunks(10, 4)
+    assert [c.tolist() for c in chunks] == [[0, 1, 2, 3], [4, 5, 6, 7], [8, 9]]
+    assert [c.tolist() for c in plan_chunks(10, 4)] == [c.tolist() for c in chunks]
+    assert plan_chunks(0, 3) == []
+    assert [c.tolist() for c in plan_chunks(3, 100)] == [[0, 1, 2]]
+    with pytest.raises(ValueError, match="chunk_size"):
+        plan_chunks(10, 0)
+
+
+@pytest.mark.parametrize(("n", "workers", "spc", "size"), [
+    (1_000_000, 2, 1e-3, 30_000),  # huge study: capped at 30 s of work per chunk
+    (1000, 2, 0.01, 125),          # 10 s of work: 8 chunks of 1.25 s (4 per worker)
+    (400, 2, 0.01, 100),           # 4 s: 1 s chunks, 4 of them (2 per worker)
+    (10, 2, 0.01, 5),              # 0.1 s: one chunk per worker
+    (100, 2, 0.5, 12),             # 50 s: 9 chunks of 6 s
+    (5, 8, 100.0, 1),              # fewer cases than workers: one case per chunk
+])
+def test_chunk_size_rule(n: int, workers: int, spc: float, size: int) -> None:
+    assert choose_chunk_size(n, workers, spc) == size
+
+
+def test_chunk_size_rule_holds_across_studies() -> None:
+    for n in (1, 7, 50, 333, 4096, 10**5, 10**7):
+        for w in (1, 2, 3, 16, 64):
+            for spc in (1e-5, 3e-4, 2e-3, 0.05, 1.0, 40.0):
+                size = choose_chunk_size(n, w, spc)
+                n_chunks = math.ceil(n / size)
+                work = size * spc
+                if n * spc >= CHUNKS_PER_WORKER * w * 1.0 and spc <= 1.0:
+                    # long enough for both: >= ~1 s per chunk and >= 4 chunks per worker
+                    assert work >= 1.0 - 1e-9 and n_chunks >= CHUNKS_PER_WORKER * w, (n, w, spc, size)
+                else:
+                    # short study: chunks of >= 1 s where that still feeds every worker
+                    assert work >= 1.0 - 1e-9 or n_chunks >= min(n, w), (n, w, spc, size)
+                assert work <= 30.0 or size == 1, (n, w, spc, size)
+
+
+def test_chunk_size_inputs_are_checked() -> None:
+    with pytest.raises(ValueError, match="n_workers"):
+        choose_chunk_size(10, 0, 1.0)
+    with pytest.raises(ValueError, match="seconds_per_case_estimate"):
+        choose_chunk_size(10, 2, 0.0)
+    with pytest.raises(ValueError, match="n_cases"):
+        choose_chunk_size(0, 2, 1.0)
+
+
+# -------------------------------------------------------------------------------------- fan-out
+def test_every_chunk_arrives_once_with_its_cases(client: Client) -> None:
+    chunks = plan_chunks(23, 5)
+    got: dict[int, dict] = {}
+    seen: list[tuple[int, int]] = []
+    report = run_chunks(client, json.dumps({}), chunks, on_chunk=lambda k, a: got.__setitem__(k, a),
+                        progress=lambda d, t: seen.append((d, t)), task=squares_task, key_prefix="t1")
+    assert sorted(got) == [0, 1, 2, 3, 4] and sorted(report.submitted) == [0, 1, 2, 3, 4]
+    assert report.failed == {} and not report.cancelled
+    for k, arrays in got.items():
+        np.testing.assert_array_equal(arrays["value"], chunks[k] ** 2.0)
+    assert seen[0] == (0, 23) and seen[-1] == (23, 23)
+    assert [d for d, _ in seen] == sorted(d for d, _ in seen)
+
+
+def test_skipped_chunks_are_not_submitted(client: Client) -> None:
+    chunks = plan_chunks(20, 5)
+    got: dict[int, dict] = {}
+    seen: list[int] = []
+    report = run_chunks(client, json.dumps({}), chunks, skip={0, 2},
+                        on_chunk=lambda k, a: got.__setitem__(k, a),
+                        progress=lambda d, t: seen.append(d), task=squares_task, key_prefix="t2")
+    assert sorted(report.submitted) == [1, 3] and sorted(got) == [1, 3]
+    assert seen[0] == 10 and seen[-1] == 20
+    nothing = run_chunks(client, "{}", chunks, skip={0, 1, 2, 3}, task=squares_task)
+    assert nothing.submitted == []
+
+
+def test_a_failing_chunk_fails_its_cases_and_the_study_goes_on(client: Client) -> None:
+    chunks = plan_chunks(12, 4)
+    got: dict[int, dict] = {}
+    report = run_chunks(client, json.dumps({"fail": [4]}), chunks,
+                        on_chunk=lambda k, a: got.__setitem__(k, a), task=squares_task, key_prefix="t3")
+    assert list(report.failed) == [1]
+    assert "ZeroDivisionError: no good at case 4" in report.failed[1]
+    assert got[1]["status"].tolist() == [FAILED] * 4
+    assert all("no good at case 4" in m for m in got[1]["message"].tolist())
+    assert "value" not in got[1]  # its outputs are missing, not made up
+    assert got[0]["status"].tolist() == [OK] * 4 and got[2]["value"].tolist() == [64.0, 81.0, 100.0, 121.0]
+
+
+def test_when_every_chunk_fails_the_run_raises(client: Client) -> None:
+    with pytest.raises(FanoutError, match="no good at case"):
+        run_chunks(client, json.dumps({"fail": [0, 3]}), plan_chunks(6, 3), task=squares_task,
+                   key_prefix="t4")
+
+
+def test_cancel_stops_outstanding_chunks(client: Client) -> None:
+    chunks = plan_chunks(12, 1)  # 12 chunks of 0.3 s on 2 workers: ~1.8 s uninterrupted
+    cancel = threading.Event()
+    got: dict[int, dict] = {}
+
+    def on_chunk(k, arrays):
+        got[k] = arrays
+        cancel.set()
+
+    t0 = time.perf_counter()
+    report = run_chunks(client, json.dumps({"sleep": 0.3}), chunks, on_chunk=on_chunk, cancel=cancel,
+                        task=squares_task, key_prefix="t5")
+    elapsed = time.perf_counter() - t0
+    assert report.cancelled
+    assert 1 <= len(got) <= 3 and sorted(report.completed) == sorted(got)
+    assert elapsed < 1.5
+    time.sleep(0.5)
+    assert sum(len(v) for v in client.processing().values()) == 0  # nothing left running
+
+
+# ------------------------------------------------------------------------ studies on a real cluster
+def small_study(integrator: str = "rk4", dt: str = "2 ms", masses=("500 kg", "1000 kg"),
+                duration: str = "1.5 s") -> dict:
+    """The article's scriber cut down: a 1 m Y move, three isolator types x the given stage masses."""
+    return {
+        "name": "small-scriber",
+        "scene": {
+            "machine": {"block": {"size": ["2.6 m", "4.2 m", "0.34 m"], "density": "2700 kg/m^3",
+                                  "corner": [0, 0, 0]}},
+            "isolators": {"preset": "air",
+                          "layout": {"span_x": "2.2 m", "span_y": "3.6 m", "height": "0.5 m"}},
+            "stages": [{"name": "y", "mass": "1000 kg", "home": ["1.3 m", "0.6 m", "0.47 m"],
+                        "axis": [0, 1, 0],
+                        "profile": {"type": "trapezoid", "travel": "1 m", "velocity": "1 m/s",
+                                    "acceleration": "1 g"}}],
+            "points": {"tool": ["1.3 m", "0.6 m", "0.6 m"], "camera": ["1.3 m", "3.6 m", "0.9 m"]},
+            "simulation": {"fidelity": "lti", "integrator": integrator, "dt": dt, "auto_step": False,
+                           "duration": duration},
+        },
+        "parameters": [{"path": "isolators.preset", "values": ["active", "air", "elastomer"]},
+                       {"path": "stages.y.mass", "values": list(masses)}],
+        "design": {"type": "grid"},
+    }
+
+
+def direct_dataset(study) -> xr.Dataset:
+    """The same study run by the engine directly on one batch of every case, laid out the same way."""
+    sim = study.simulation
+    result = simulate(study.batch(np.arange(study.n_cases)), fidelity=sim.fidelity, integrator=sim.integrator,
+                      dt=sim.dt, auto_step=sim.auto_step)
+    iso, pts = study_labels(study)
+    return to_dataset(result, study.design(), isolator_names=iso, point_names=pts, attrs={})
+
+
+def test_study_on_the_cluster_gives_the_engine_numbers(client: Client, tmp_path: Path) -> None:
+    # explicit Euler at 25 ms is past the stability limit of the stiff (elastomer, ~17 Hz) mounts only
+    study = load_study(small_study(integrator="euler", dt="25 ms"))
+    store = Store(tmp_path)
+    seen: list[tuple[int, int]] = []
+    sid = run_study(study, store, client, chunk_size=2, progress=lambda d, t: seen.append((d, t)))
+    assert seen[0] == (0, 6) and seen[-1] == (6, 6) and len(seen) == 4
+    with xr.open_dataset(store.path(sid)) as f:
+        ds = f.load()
+    direct = direct_dataset(study)
+    for name in direct.data_vars:
+        np.testing.assert_array_equal(ds[name].values, direct[name].values, err_msg=name)
+    assert ds.status.sel(isolator_type="elastomer").values.tolist() == [UNSTABLE, UNSTABLE]
+    assert np.isnan(ds.peak_displacement.sel(isolator_type="elastomer")).all()
+    assert (ds.status.sel(isolator_type=["active", "air"]) == OK).all()
+    # softer mounts and a heavier stage move the base more
+    y = ds.peak_displacement.sel(axis="y")
+    assert float(y.sel(isolator_type="active", stage_y_mass=1000)) > float(
+        y.sel(isolator_type="air", stage_y_mass=1000))
+    assert float(y.sel(isolator_type="air", stage_y_mass=1000)) > float(
+        y.sel(isolator_type="air", stage_y_mass=500))
+    row = store.get(sid)
+    assert (row["status"], row["n_cases"], row["n_done"], row["n_failed"]) == ("done", 6, 6, 2)
+    assert row["parameters"] == ["isolator_type", "stage_y_mass"]
+    assert row["isolator_types"] == ["active", "air", "elastomer"]
+    assert row["fidelity"] == "lti" and row["integrator"] == "euler"
+    assert row["started"] <= row["finished"] and row["error"] is None
+    assert not store.chunk_dir(sid).exists()
+    assert ds.attrs["engine_version"] == engine_version and ds.attrs["dt"] == 0.025
+    assert json.loads(ds.attrs["study"]) == study.model_dump(mode="json")
+    assert json.loads(ds.attrs["design"])["type"] == "grid"
+
+
+def test_an_interrupted_study_resumes_without_recomputing(client: Client, tmp_path: Path,
+                                                           monkeypatch) -> None:
+    definition = small_study(masses=[f"{m} kg" for m in range(300, 1500, 150)])  # 3 x 8 = 24 cases
+    study = load_study(definition)
+    calls: list[dict] = []
+
+    def counting_run_chunks(client, definition_json, chunks, skip=(), **kw):
+        report = fanout.run_chunks(client, definition_json, chunks, skip=skip, **kw)
+        calls.append({"skip": set(skip), "submitted": set(report.submitted),
+                      "completed": set(report.completed)})
+        return report
+
+    monkeypatch.setattr(runner, "run_chunks", counting_run_chunks)
+    store = Store(tmp_path / "interrupted")
+    cancel = threading.Event()
+    sid = run_study(study, store, client, chunk_size=2, cancel=cancel,
+                    progress=lambda done, total: cancel.set() if done > 0 else None)
+    row = store.get(sid)
+    saved = store.done_chunks(sid)
+    assert row["status"] == "cancelled" and row["finished"] is not None
+    assert 0 < len(saved) < 12 and row["n_done"] == 2 * len(saved)
+    assert not store.path(sid).exists()
+
+    resumed = run_study(study, store, client, study_id=sid)
+    assert resumed == sid and store.get(sid)["status"] == "done"
+    assert store.get(sid)["started"] == row["started"] and store.get(sid)["n_done"] == 24
+    first, second = calls
+    assert second["skip"] == saved
+    assert second["submitted"] == set(range(12)) - saved  # finished chunks are not recomputed
+    assert second["submitted"] and not (second["submitted"] & first["completed"])
+
+    whole = Store(tmp_path / "whole")
+    other = run_study(study, whole, client, chunk_size=2)
+    a, b = store.open_dataset(sid), whole.open_dataset(other)
+    for name in b.data_vars:
+        np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=name)
+    np.testing.assert_array_equal(a.stage_y_mass.values, np.arange(300.0, 1500.0, 150.0))
+    assert (a.status == OK).all()
+    for name in b.data_vars:  # and both equal the engine run directly
+        np.testing.assert_array_equal(a[name].values, direct_dataset(study)[name].values, err_msg=name)
+
+
+def test_a_study_whose_every_chunk_fails_is_marked_failed(client: Client, tmp_path: Path,
+                                                           monkeypatch) -> None:
+    def every_chunk_fails(client, definition_json, chunks, **kw):
+        return fanout.run_chunks(client, json.dumps({"fail": [int(c[0]) for c in chunks]}), chunks,
+                                 task=squares_task, **kw)
+
+    monkeypatch.setattr(runner, "run_chunks", every_chunk_fails)
+    store = Store(tmp_path)
+    with pytest.raises(FanoutError, match="no good at case 0"):
+        run_study(load_study(small_study()), store, client, chunk_size=3)
+    (row,) = store.list()
+    assert row["status"] == "failed" and "FanoutError" in row["error"] and row["finished"] is not None
+    assert row["n_done"] == 6 and row["n_failed"] == 6
+    assert not store.path(row["id"]).exists()
+
+
+def test_make_client_joins_the_configured_scheduler(client: Client, monkeypatch) -> None:
+    monkeypatch.setenv("DASK_SCHEDULER_ADDRESS", client.scheduler.address)
+    with make_client(workers=1) as joined:
+        assert joined.scheduler.address == client.scheduler.address
+        assert len(joined.scheduler_info()["workers"]) == 2
+        assert joined.submit(operator.add, 2, 3).result() == 5
+
+
+def test_run_local_writes_the_dataset_file(tmp_path: Path) -> None:
+    out = tmp_path / "out" / "small.nc"
+    out.parent.mkdir()
+    ds = run_local(small_study(integrator="exact", duration="1 s"), out, workers=1)
+    assert sorted(p.name for p in out.parent.iterdir()) == ["small.nc"]
+    with xr.open_dataset(out) as f:
+        back = f.load()
+    xr.testing.assert_identical(back, ds)
+    study = load_study(small_study(integrator="exact", duration="1 s"))
+    direct = direct_dataset(study)
+    np.testing.assert_array_equal(back.natural_frequency.values, direct.natural_frequency.values)
+    # 1 Hz active mounts have the lowest first mode, ~17 Hz elastomer the highest last mode
+    f1 = back.natural_frequency.sel(mode=1, stage_y_mass=500)
+    assert float(f1.sel(isolator_type="active")) < float(f1.sel(isolator_type="air")) < float(
+        f1.sel(isolator_type="elastomer"))
