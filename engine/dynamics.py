@@ -18,6 +18,8 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit
+from numba.core import types
+from numba.experimental import structref
 
 LTI, LTV, NONLINEAR = 0, 1, 2
 FIDELITIES = {"lti": LTI, "ltv": LTV, "nonlinear": NONLINEAR}
@@ -34,6 +36,48 @@ Params = namedtuple(
         "g", "gstiff",
     ],
 )
+
+
+class _Fields(types.StructRef):
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+@structref.register
+class ParamsType(_Fields):
+    pass
+
+
+@structref.register
+class WorkType(_Fields):
+    pass
+
+
+@structref.register
+class PeaksType(_Fields):
+    pass
+
+
+class KernelParams(structref.StructRefProxy):
+    """``Params`` as the kernels take it: passed by reference, so a call costs one pointer, not a copy of
+    every array's descriptor."""
+
+
+class KernelWork(structref.StructRefProxy):
+    """``engine.model.Work`` as the kernels take it."""
+
+
+class KernelPeaks(structref.StructRefProxy):
+    """``engine.peaks.Peaks`` as the kernels take it."""
+
+
+structref.define_proxy(KernelParams, ParamsType, list(Params._fields))
+
+
+def kernel_struct(nt):
+    """The kernel view of a ``Params``, ``Work`` or ``Peaks`` named tuple; its arrays are shared, not copied."""
+    proxy = {"Params": KernelParams, "Work": KernelWork, "Peaks": KernelPeaks}[type(nt).__name__]
+    return proxy(*nt)
 
 
 # ----------------------------------------------------------------------------------------------- vectors
@@ -186,13 +230,12 @@ def recorded_floor(P, c, t, xf, vf):
 
     Linear interpolation between samples; zero before the first sample, held after the last.
     """
-    ft = P.ft
-    nf = ft.shape[0]
-    if nf > 0 and t >= ft[0]:
-        lo, hi = 0, nf  # last sample at or before t: ft[lo] <= t < ft[hi]
+    nf = P.ft.shape[0]
+    if nf > 0 and t >= P.ft[0]:
+        lo, hi = 0, nf  # last sample at or before t: P.ft[lo] <= t < P.ft[hi]
         while hi - lo > 1:
             mid = (lo + hi) // 2
-            if ft[mid] <= t:
+            if P.ft[mid] <= t:
                 lo = mid
             else:
                 hi = mid
@@ -212,10 +255,15 @@ def recorded_floor(P, c, t, xf, vf):
 def floor_motion(P, c, t, xf, vf):
     """Floor displacement ``xf`` (3,) m and velocity ``vf`` (3,) m/s under the isolators at ``t`` (s)."""
     for dd in range(3):
+        amp = P.famp[c, dd]
+        if amp == 0.0:
+            xf[dd] = 0.0
+            vf[dd] = 0.0
+            continue
         w = P.fomega[c, dd]
         arg = w * t + P.fphase[c, dd]
-        xf[dd] = P.famp[c, dd] * np.sin(arg)
-        vf[dd] = P.famp[c, dd] * w * np.cos(arg)
+        xf[dd] = amp * np.sin(arg)
+        vf[dd] = amp * w * np.cos(arg)
     recorded_floor(P, c, t, xf, vf)
 
 
@@ -300,54 +348,46 @@ def accel(P, c, level, t, x, idx, W):
     ``acc = [d2u/dt2 (m/s^2), dw/dt (rad/s^2)]``. ``W`` is the case's scratch space
     (``engine.model.Work``). Returns False when the level's mass matrix is not positive definite.
     """
-    rho, vr, ar, jr = W.rho, W.vr, W.ar, W.jr
-    stage_state(P, c, t, idx, rho, vr, ar, jr)
+    stage_state(P, c, t, idx, W.rho, W.vr, W.ar, W.jr)
     floor_motion(P, c, t, W.xf, W.vf)
-    acc = W.acc
     if level == LTI:
-        f = W.f
-        lti_forcing(P, c, rho, ar, W.xf, W.vf, f)
+        lti_forcing(P, c, W.rho, W.ar, W.xf, W.vf, W.f)
         for i in range(6):
             s = 0.0
             for j in range(6):
-                s += P.a21[c, i, j] * x[j] + P.a22[c, i, j] * x[6 + j] + P.minv[c, i, j] * f[j]
-            acc[i] = s
+                s += P.a21[c, i, j] * x[j] + P.a22[c, i, j] * x[6 + j] + P.minv[c, i, j] * W.f[j]
+            W.acc[i] = s
         return True
 
-    M = W.M
-    b = acc
     g = P.g
-    R = W.R
     if level == NONLINEAR:
-        quat_to_matrix(x[3:7], R)
+        quat_to_matrix(x[3:7], W.R)
         off = 7
     else:
         off = 6
     w0, w1, w2 = x[off + 3], x[off + 4], x[off + 5]
-    F = W.F
-    isolator_forces(P, c, level, x, R, W.xf, W.vf, F)
-    I = P.inertia[c]
+    isolator_forces(P, c, level, x, W.R, W.xf, W.vf, W.F)
     mt = P.mtot[c]
     for i in range(6):
-        b[i] = 0.0
+        W.acc[i] = 0.0
         for j in range(6):
-            M[i, j] = 0.0
+            W.M[i, j] = 0.0
     for i in range(3):
-        M[i, i] = mt
+        W.M[i, i] = mt
         for j in range(3):
-            M[3 + i, 3 + j] = I[i, j]
+            W.M[3 + i, 3 + j] = P.inertia[c, i, j]
     # isolators: force (floor frame) and moment (body frame) with the vertical preload
     for j in range(P.d.shape[1]):
-        F0, F1, F2 = F[j, 0], F[j, 1], F[j, 2]
-        b[0] += F0
-        b[1] += F1
-        b[2] += F2
+        F0, F1, F2 = W.F[j, 0], W.F[j, 1], W.F[j, 2]
+        W.acc[0] += F0
+        W.acc[1] += F1
+        W.acc[2] += F2
         d0, d1, d2 = P.d[c, j, 0], P.d[c, j, 1], P.d[c, j, 2]
         if level == NONLINEAR:
             T2 = F2 + P.f0[c, j]
-            G0 = R[0, 0] * F0 + R[1, 0] * F1 + R[2, 0] * T2
-            G1 = R[0, 1] * F0 + R[1, 1] * F1 + R[2, 1] * T2
-            G2 = R[0, 2] * F0 + R[1, 2] * F1 + R[2, 2] * T2
+            G0 = W.R[0, 0] * F0 + W.R[1, 0] * F1 + W.R[2, 0] * T2
+            G1 = W.R[0, 1] * F0 + W.R[1, 1] * F1 + W.R[2, 1] * T2
+            G2 = W.R[0, 2] * F0 + W.R[1, 2] * F1 + W.R[2, 2] * T2
             m0, m1, m2 = _cross(d0, d1, d2, G0, G1, G2)
         else:
             m0, m1, m2 = _cross(d0, d1, d2, F0, F1, F2)
@@ -358,25 +398,25 @@ def accel(P, c, level, t, x, idx, W):
                 m0 += n0
                 m1 += n1
                 m2 += n2
-        b[3] += m0
-        b[4] += m1
-        b[5] += m2
+        W.acc[3] += m0
+        W.acc[4] += m1
+        W.acc[5] += m2
     if level == NONLINEAR:
         # gyroscopic term
-        I0 = I[0, 0] * w0 + I[0, 1] * w1 + I[0, 2] * w2
-        I1 = I[1, 0] * w0 + I[1, 1] * w1 + I[1, 2] * w2
-        I2 = I[2, 0] * w0 + I[2, 1] * w1 + I[2, 2] * w2
+        I0 = P.inertia[c, 0, 0] * w0 + P.inertia[c, 0, 1] * w1 + P.inertia[c, 0, 2] * w2
+        I1 = P.inertia[c, 1, 0] * w0 + P.inertia[c, 1, 1] * w1 + P.inertia[c, 1, 2] * w2
+        I2 = P.inertia[c, 2, 0] * w0 + P.inertia[c, 2, 1] * w1 + P.inertia[c, 2, 2] * w2
         y0, y1, y2 = _cross(w0, w1, w2, I0, I1, I2)
-        b[3] -= y0
-        b[4] -= y1
-        b[5] -= y2
+        W.acc[3] -= y0
+        W.acc[4] -= y1
+        W.acc[5] -= y2
         # the machine's own weight acts at its c.g.: no moment; stage weights below
-        gb0, gb1, gb2 = -g * R[2, 0], -g * R[2, 1], -g * R[2, 2]  # R^T (0, 0, -g)
+        gb0, gb1, gb2 = -g * W.R[2, 0], -g * W.R[2, 1], -g * W.R[2, 2]  # R^T (0, 0, -g)
     for i in range(P.sm.shape[1]):
         m = P.sm[c, i]
-        r0, r1, r2 = rho[i, 0], rho[i, 1], rho[i, 2]
-        a0, a1, a2 = ar[i, 0], ar[i, 1], ar[i, 2]
-        c0, c1, c2 = _cross(w0, w1, w2, vr[i, 0], vr[i, 1], vr[i, 2])
+        r0, r1, r2 = W.rho[i, 0], W.rho[i, 1], W.rho[i, 2]
+        a0, a1, a2 = W.ar[i, 0], W.ar[i, 1], W.ar[i, 2]
+        c0, c1, c2 = _cross(w0, w1, w2, W.vr[i, 0], W.vr[i, 1], W.vr[i, 2])
         # body-frame acceleration terms that do not depend on the unknown accelerations
         if level == NONLINEAR:
             o0, o1, o2 = _cross(w0, w1, w2, r0, r1, r2)
@@ -385,14 +425,14 @@ def accel(P, c, level, t, x, idx, W):
             k1 = z1 + 2.0 * c1 + a1
             k2 = z2 + 2.0 * c2 + a2
             # translation (floor frame): -m R k
-            b[0] -= m * (R[0, 0] * k0 + R[0, 1] * k1 + R[0, 2] * k2)
-            b[1] -= m * (R[1, 0] * k0 + R[1, 1] * k1 + R[1, 2] * k2)
-            b[2] -= m * (R[2, 0] * k0 + R[2, 1] * k1 + R[2, 2] * k2)
+            W.acc[0] -= m * (W.R[0, 0] * k0 + W.R[0, 1] * k1 + W.R[0, 2] * k2)
+            W.acc[1] -= m * (W.R[1, 0] * k0 + W.R[1, 1] * k1 + W.R[1, 2] * k2)
+            W.acc[2] -= m * (W.R[2, 0] * k0 + W.R[2, 1] * k1 + W.R[2, 2] * k2)
             # rotation (body frame): rho x (m R^T g - m k)
             h0, h1, h2 = _cross(r0, r1, r2, m * gb0 - m * k0, m * gb1 - m * k1, m * gb2 - m * k2)
-            b[3] += h0
-            b[4] += h1
-            b[5] += h2
+            W.acc[3] += h0
+            W.acc[4] += h1
+            W.acc[5] += h2
             # mass matrix coupling: translation row -m R [rho]x, rotation row m [rho]x R^T
             for col in range(3):
                 e0 = 1.0 if col == 0 else 0.0
@@ -401,58 +441,57 @@ def accel(P, c, level, t, x, idx, W):
                 # column col of -[rho]x is e_col x rho
                 x0, x1, x2 = _cross(e0, e1, e2, r0, r1, r2)
                 for row in range(3):
-                    M[row, 3 + col] += m * (R[row, 0] * x0 + R[row, 1] * x1 + R[row, 2] * x2)
-                    M[3 + col, row] += m * (R[row, 0] * x0 + R[row, 1] * x1 + R[row, 2] * x2)
+                    W.M[row, 3 + col] += m * (W.R[row, 0] * x0 + W.R[row, 1] * x1 + W.R[row, 2] * x2)
+                    W.M[3 + col, row] += m * (W.R[row, 0] * x0 + W.R[row, 1] * x1 + W.R[row, 2] * x2)
         else:
             # translation: -m (a_rel + theta x a_rel + 2 w x v_rel)
             ta0, ta1, ta2 = _cross(x[3], x[4], x[5], a0, a1, a2)
-            b[0] -= m * (a0 + ta0 + 2.0 * c0)
-            b[1] -= m * (a1 + ta1 + 2.0 * c1)
-            b[2] -= m * (a2 + ta2 + 2.0 * c2)
+            W.acc[0] -= m * (a0 + ta0 + 2.0 * c0)
+            W.acc[1] -= m * (a1 + ta1 + 2.0 * c1)
+            W.acc[2] -= m * (a2 + ta2 + 2.0 * c2)
             # rotation: -m rho x (a_rel + 2 w x v_rel) + m (rho - rho_h) x g + m rho x (-theta x g)
             h0, h1, h2 = _cross(r0, r1, r2, a0 + 2.0 * c0, a1 + 2.0 * c1, a2 + 2.0 * c2)
             s0 = r0 - P.rho_h[c, i, 0]
             s1 = r1 - P.rho_h[c, i, 1]
-            b[3] += -m * h0 - m * s1 * g
-            b[4] += -m * h1 + m * s0 * g
-            b[5] += -m * h2
+            W.acc[3] += -m * h0 - m * s1 * g
+            W.acc[4] += -m * h1 + m * s0 * g
+            W.acc[5] += -m * h2
             if P.gstiff:
                 # -theta x g = theta x (0, 0, g)
                 tg0, tg1, tg2 = _cross(x[3], x[4], x[5], 0.0, 0.0, g)
                 n0, n1, n2 = _cross(r0, r1, r2, tg0, tg1, tg2)
-                b[3] += m * n0
-                b[4] += m * n1
-                b[5] += m * n2
+                W.acc[3] += m * n0
+                W.acc[4] += m * n1
+                W.acc[5] += m * n2
             for col in range(3):
                 e0 = 1.0 if col == 0 else 0.0
                 e1 = 1.0 if col == 1 else 0.0
                 e2 = 1.0 if col == 2 else 0.0
                 x0, x1, x2 = _cross(e0, e1, e2, r0, r1, r2)
-                M[0, 3 + col] += m * x0
-                M[1, 3 + col] += m * x1
-                M[2, 3 + col] += m * x2
-                M[3 + col, 0] += m * x0
-                M[3 + col, 1] += m * x1
-                M[3 + col, 2] += m * x2
+                W.M[0, 3 + col] += m * x0
+                W.M[1, 3 + col] += m * x1
+                W.M[2, 3 + col] += m * x2
+                W.M[3 + col, 0] += m * x0
+                W.M[3 + col, 1] += m * x1
+                W.M[3 + col, 2] += m * x2
         # rotation-rotation block: I + m [rho]x^T [rho]x = I + m (|rho|^2 1 - rho rho^T)
         rr = r0 * r0 + r1 * r1 + r2 * r2
-        M[3, 3] += m * (rr - r0 * r0)
-        M[4, 4] += m * (rr - r1 * r1)
-        M[5, 5] += m * (rr - r2 * r2)
-        M[3, 4] -= m * r0 * r1
-        M[4, 3] -= m * r0 * r1
-        M[3, 5] -= m * r0 * r2
-        M[5, 3] -= m * r0 * r2
-        M[4, 5] -= m * r1 * r2
-        M[5, 4] -= m * r1 * r2
-    return solve_spd(M, b, 6)
+        W.M[3, 3] += m * (rr - r0 * r0)
+        W.M[4, 4] += m * (rr - r1 * r1)
+        W.M[5, 5] += m * (rr - r2 * r2)
+        W.M[3, 4] -= m * r0 * r1
+        W.M[4, 3] -= m * r0 * r1
+        W.M[3, 5] -= m * r0 * r2
+        W.M[5, 3] -= m * r0 * r2
+        W.M[4, 5] -= m * r1 * r2
+        W.M[5, 4] -= m * r1 * r2
+    return solve_spd(W.M, W.acc, 6)
 
 
 @njit(cache=True)
 def derivative(P, c, level, t, x, idx, W, dx):
     """Time derivative ``dx`` of the state ``x`` at ``t`` (s). Returns False on a singular mass matrix."""
     okm = accel(P, c, level, t, x, idx, W)
-    acc = W.acc
     if level == NONLINEAR:
         q0, q1, q2, q3 = x[3], x[4], x[5], x[6]
         w0, w1, w2 = x[10], x[11], x[12]
@@ -462,9 +501,9 @@ def derivative(P, c, level, t, x, idx, W, dx):
         dx[5] = 0.5 * (q0 * w1 - q1 * w2 + q3 * w0)
         dx[6] = 0.5 * (q0 * w2 + q1 * w1 - q2 * w0)
         for i in range(6):
-            dx[7 + i] = acc[i]
+            dx[7 + i] = W.acc[i]
     else:
         for i in range(6):
             dx[i] = x[6 + i]
-            dx[6 + i] = acc[i]
+            dx[6 + i] = W.acc[i]
     return okm

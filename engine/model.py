@@ -10,10 +10,13 @@ from collections import namedtuple
 
 import numpy as np
 
-from engine.dynamics import Params
+from numba.experimental import structref
+
+from engine.dynamics import KernelWork, Params, WorkType
 from engine.scene import SceneBatch
 
 Work = namedtuple("Work", ["rho", "vr", "ar", "jr", "xf", "vf", "acc", "f", "M", "R", "F", "x1", "k1", "k2"])
+structref.define_proxy(KernelWork, WorkType, list(Work._fields))
 
 
 def skew(v: np.ndarray) -> np.ndarray:

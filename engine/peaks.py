@@ -10,7 +10,17 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from engine.dynamics import NONLINEAR, floor_motion, isolator_forces, quat_to_matrix, quat_to_rotvec
+from numba.experimental import structref
+
+from engine.dynamics import (
+    NONLINEAR,
+    KernelPeaks,
+    PeaksType,
+    floor_motion,
+    isolator_forces,
+    quat_to_matrix,
+    quat_to_rotvec,
+)
 
 Peaks = namedtuple(
     "Peaks",
@@ -20,6 +30,7 @@ Peaks = namedtuple(
         "slot", "h_u", "h_th", "h_poi", "h_force", "h_t",
     ],
 )
+structref.define_proxy(KernelPeaks, PeaksType, list(Peaks._fields))
 
 DIVERGED_DISPLACEMENT = 1.0
 """A c.g. or point displacement beyond this (m) can only come from a diverging integration."""
@@ -58,35 +69,32 @@ def observe(P, c, level, t, x, W, O, step):
     Returns False (and stores ``t`` in ``O.diverged``) when the state is not finite or has left any
     physically possible range.
     """
-    R = W.R
-    th = W.acc  # reuse scratch: rotation vector (3,)
     if level == NONLINEAR:
-        quat_to_matrix(x[3:7], R)
-        quat_to_rotvec(x[3:7], th)
+        quat_to_matrix(x[3:7], W.R)
+        quat_to_rotvec(x[3:7], W.acc)
     else:
-        th[0], th[1], th[2] = x[3], x[4], x[5]
+        W.acc[0], W.acc[1], W.acc[2] = x[3], x[4], x[5]
     u0, u1, u2 = x[0], x[1], x[2]
     ok = True
     for i in range(3):
-        if not (abs(x[i]) < DIVERGED_DISPLACEMENT and abs(th[i]) < DIVERGED_ROTATION):
+        if not (abs(x[i]) < DIVERGED_DISPLACEMENT and abs(W.acc[i]) < DIVERGED_ROTATION):
             ok = False
     if not ok:
         O.diverged[c] = t
         return False
     slot = O.slot[c]
-    tgt = O.target[c]
     settle = t >= O.t_last[c] - 1e-12
     err = 0.0
     for i in range(3):
         a = abs(x[i])
         if a > O.u[c, i]:
             O.u[c, i] = a
-        a = abs(th[i])
+        a = abs(W.acc[i])
         if a > O.th[c, i]:
             O.th[c, i] = a
         O.sumsq[c, i] += x[i] * x[i]
         if settle:
-            e = abs(x[i] - tgt[i])
+            e = abs(x[i] - O.target[c, i])
             if e > err:
                 err = e
     O.nobs[c] += 1.0
@@ -94,18 +102,18 @@ def observe(P, c, level, t, x, W, O, step):
         O.h_t[slot, step] = t
         for i in range(3):
             O.h_u[slot, step, i] = x[i]
-            O.h_th[slot, step, i] = th[i]
+            O.h_th[slot, step, i] = W.acc[i]
     # points of interest: u + (R - I) d  (linear: u + theta x d)
     for p in range(P.pts.shape[1]):
         d0, d1, d2 = P.pts[c, p, 0], P.pts[c, p, 1], P.pts[c, p, 2]
         if level == NONLINEAR:
-            r0 = R[0, 0] * d0 + R[0, 1] * d1 + R[0, 2] * d2 - d0
-            r1 = R[1, 0] * d0 + R[1, 1] * d1 + R[1, 2] * d2 - d1
-            r2 = R[2, 0] * d0 + R[2, 1] * d1 + R[2, 2] * d2 - d2
+            r0 = W.R[0, 0] * d0 + W.R[0, 1] * d1 + W.R[0, 2] * d2 - d0
+            r1 = W.R[1, 0] * d0 + W.R[1, 1] * d1 + W.R[1, 2] * d2 - d1
+            r2 = W.R[2, 0] * d0 + W.R[2, 1] * d1 + W.R[2, 2] * d2 - d2
         else:
-            r0 = th[1] * d2 - th[2] * d1
-            r1 = th[2] * d0 - th[0] * d2
-            r2 = th[0] * d1 - th[1] * d0
+            r0 = W.acc[1] * d2 - W.acc[2] * d1
+            r1 = W.acc[2] * d0 - W.acc[0] * d2
+            r2 = W.acc[0] * d1 - W.acc[1] * d0
         pv0, pv1, pv2 = u0 + r0, u1 + r1, u2 + r2
         if abs(pv0) > O.poi[c, p, 0]:
             O.poi[c, p, 0] = abs(pv0)
@@ -115,9 +123,9 @@ def observe(P, c, level, t, x, W, O, step):
             O.poi[c, p, 2] = abs(pv2)
         if settle:
             # target point displacement from the linearised static offset
-            e0 = tgt[4] * d2 - tgt[5] * d1 + tgt[0]
-            e1 = tgt[5] * d0 - tgt[3] * d2 + tgt[1]
-            e2 = tgt[3] * d1 - tgt[4] * d0 + tgt[2]
+            e0 = O.target[c, 4] * d2 - O.target[c, 5] * d1 + O.target[c, 0]
+            e1 = O.target[c, 5] * d0 - O.target[c, 3] * d2 + O.target[c, 1]
+            e2 = O.target[c, 3] * d1 - O.target[c, 4] * d0 + O.target[c, 2]
             e = max(abs(pv0 - e0), abs(pv1 - e1), abs(pv2 - e2))
             if e > err:
                 err = e
@@ -128,16 +136,15 @@ def observe(P, c, level, t, x, W, O, step):
     if settle and err > O.tol[c]:
         O.last_viol[c] = t
     floor_motion(P, c, t, W.xf, W.vf)
-    F = W.F
-    isolator_forces(P, c, level, x, R, W.xf, W.vf, F)
+    isolator_forces(P, c, level, x, W.R, W.xf, W.vf, W.F)
     for j in range(P.d.shape[1]):
         for i in range(3):
-            a = abs(F[j, i])
+            a = abs(W.F[j, i])
             if a > O.force[c, j, i]:
                 O.force[c, j, i] = a
             if slot >= 0:
-                O.h_force[slot, step, j, i] = F[j, i]
-        load = P.f0[c, j] + F[j, 2]
+                O.h_force[slot, step, j, i] = W.F[j, i]
+        load = P.f0[c, j] + W.F[j, 2]
         if load < O.min_load[c, j]:
             O.min_load[c, j] = load
     return True

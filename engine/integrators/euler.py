@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from engine.dynamics import NONLINEAR, accel, advance_pieces, quat_step
+from engine.dynamics import kernel_struct, NONLINEAR, accel, advance_pieces, quat_step
 from engine.peaks import observe
 
 ORDER = 1
@@ -18,7 +18,7 @@ LEVELS = ("lti", "ltv", "nonlinear")
 
 
 @njit(cache=True)
-def run(P, level, dt, n_steps, O, W, status):
+def _run(P, level, dt, n_steps, O, W, status):
     """Integrate every case ``c`` over ``n_steps[c]`` steps of ``dt[c]`` s; set ``status[c]``
     (0 done, 1 diverged, 3 singular mass matrix)."""
     C = dt.shape[0]
@@ -43,9 +43,8 @@ def run(P, level, dt, n_steps, O, W, status):
             if not accel(P, c, level, t, x, idx, W):
                 status[c] = 3
                 break
-            a = W.acc
             for i in range(6):
-                x[off + i] += h * a[i]
+                x[off + i] += h * W.acc[i]
             for i in range(3):
                 x[i] += h * x[off + i]
             if level == NONLINEAR:
@@ -56,3 +55,9 @@ def run(P, level, dt, n_steps, O, W, status):
             if not observe(P, c, level, (k + 1) * h, x, W, O, k + 1):
                 status[c] = 1
                 break
+
+
+def run(P, level, dt, n_steps, O, W, status):
+    """Integrate every case ``c`` over ``n_steps[c]`` steps of ``dt[c]`` s; set ``status[c]``
+    (0 done, 1 diverged, 3 singular mass matrix)."""
+    _run(kernel_struct(P), level, dt, n_steps, kernel_struct(O), kernel_struct(W), status)

@@ -14,7 +14,7 @@ import numpy as np
 import scipy.linalg
 from numba import njit
 
-from engine.dynamics import _cross, advance_pieces, lti_forcing, recorded_floor, stage_state
+from engine.dynamics import _cross, advance_pieces, kernel_struct, lti_forcing, recorded_floor, stage_state
 from engine.peaks import observe
 
 ORDER = None  # exact
@@ -124,17 +124,14 @@ def prepare(P, dt: np.ndarray, duration: np.ndarray):
 @njit(cache=True)
 def _forcing_poly(P, c, t, idx, W, deg, Fv):
     """Forcing ``F0..F_deg`` (6 each) at the start ``t`` (s) of a piece of polynomial forcing."""
-    rho, vr, ar, jr = W.rho, W.vr, W.ar, W.jr
-    stage_state(P, c, t, idx, rho, vr, ar, jr)
-    xf, vf = W.xf, W.vf
+    stage_state(P, c, t, idx, W.rho, W.vr, W.ar, W.jr)
     for i in range(3):
-        xf[i] = 0.0
-        vf[i] = 0.0
-    recorded_floor(P, c, t, xf, vf)
-    f = W.f
-    lti_forcing(P, c, rho, ar, xf, vf, f)
+        W.xf[i] = 0.0
+        W.vf[i] = 0.0
+    recorded_floor(P, c, t, W.xf, W.vf)
+    lti_forcing(P, c, W.rho, W.ar, W.xf, W.vf, W.f)
     for i in range(6):
-        Fv[i] = f[i]
+        Fv[i] = W.f[i]
     if deg == 0:
         return
     for i in range(6, Fv.shape[0]):
@@ -142,10 +139,10 @@ def _forcing_poly(P, c, t, idx, W, deg, Fv):
     g = P.g
     for i in range(P.sm.shape[1]):
         m = P.sm[c, i]
-        r0, r1, r2 = rho[i, 0], rho[i, 1], rho[i, 2]
-        v0, v1, v2 = vr[i, 0], vr[i, 1], vr[i, 2]
-        a0, a1, a2 = ar[i, 0], ar[i, 1], ar[i, 2]
-        j0, j1, j2 = jr[i, 0], jr[i, 1], jr[i, 2]
+        r0, r1, r2 = W.rho[i, 0], W.rho[i, 1], W.rho[i, 2]
+        v0, v1, v2 = W.vr[i, 0], W.vr[i, 1], W.vr[i, 2]
+        a0, a1, a2 = W.ar[i, 0], W.ar[i, 1], W.ar[i, 2]
+        j0, j1, j2 = W.jr[i, 0], W.jr[i, 1], W.jr[i, 2]
         # f_t = -m a ; f_r = -m rho x a + m (rho - rho_h) x (0, 0, -g)
         Fv[6] -= m * j0
         Fv[7] -= m * j1
@@ -167,9 +164,9 @@ def _forcing_poly(P, c, t, idx, W, deg, Fv):
             Fv[23] += -2.0 * m * p2
     if P.ft.shape[0] > 0:
         for j in range(P.d.shape[1]):
-            p0 = P.k[c, j, 0] * vf[0]
-            p1 = P.k[c, j, 1] * vf[1]
-            p2 = P.k[c, j, 2] * vf[2]
+            p0 = P.k[c, j, 0] * W.vf[0]
+            p1 = P.k[c, j, 1] * W.vf[1]
+            p2 = P.k[c, j, 2] * W.vf[2]
             Fv[6] += p0
             Fv[7] += p1
             Fv[8] += p2
@@ -246,4 +243,5 @@ def run(P, level, dt, n_steps, O, W, status):
     """Integrate every case exactly at the output step ``dt[c]`` s (LTI level only)."""
     duration = dt * n_steps
     full, ev, sub_b, sub_a, deg, osc = prepare(P, dt, duration)
-    run_exact(P, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, bool(osc))
+    run_exact(kernel_struct(P), dt, n_steps, kernel_struct(O), kernel_struct(W), status, full, ev, sub_b, sub_a,
+              deg, bool(osc))

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from engine.dynamics import NONLINEAR, advance_pieces, derivative
+from engine.dynamics import NONLINEAR, advance_pieces, derivative, kernel_struct
 from engine.peaks import observe
 
 ORDER = None
@@ -23,6 +23,7 @@ def run(P, level, dt, n_steps, O, W, status, rtol: float = RTOL, atol: float = A
     """Integrate every case, sampling the outputs every ``dt[c]`` s; set ``status[c]``."""
     C = dt.shape[0]
     m = P.sm.shape[1]
+    KP, KO, KW = kernel_struct(P), kernel_struct(O), kernel_struct(W)
     nx = 13 if level == NONLINEAR else 12
     for c in range(C):
         if status[c] != 0:
@@ -37,7 +38,7 @@ def run(P, level, dt, n_steps, O, W, status, rtol: float = RTOL, atol: float = A
         bps = np.concatenate([P.pt[c].ravel(), P.ft])
         bps = np.unique(np.concatenate([[0.0, T], bps[(bps > 0) & (bps < T)]]))
         grid = np.arange(N + 1) * h
-        observe(P, c, level, 0.0, x, W, O, 0)
+        observe(KP, c, level, 0.0, x, KW, KO, 0)
         dx = np.zeros(nx)
         k_next = 1
         failed = False
@@ -45,10 +46,10 @@ def run(P, level, dt, n_steps, O, W, status, rtol: float = RTOL, atol: float = A
             if b - a <= 1e-12 * max(T, 1.0):
                 continue
             idx_a = idx.copy()
-            advance_pieces(P, c, a, idx_a, 1e-9 * h)
+            advance_pieces(KP, c, a, idx_a, 1e-9 * h)
 
             def rhs(t, y, idx_a=idx_a, c=c, dx=dx):
-                derivative(P, c, level, t, y, idx_a, W, dx)
+                derivative(KP, c, level, t, y, idx_a, KW, dx)
                 return dx.copy()
 
             sel = grid[(grid > a + 1e-12) & (grid <= b + 1e-12)]
@@ -65,7 +66,7 @@ def run(P, level, dt, n_steps, O, W, status, rtol: float = RTOL, atol: float = A
                 y = sol.y[:, j].copy()
                 if level == NONLINEAR:
                     y[3:7] /= np.linalg.norm(y[3:7])
-                if not observe(P, c, level, sel[j], y, W, O, k_next):
+                if not observe(KP, c, level, sel[j], y, KW, KO, k_next):
                     status[c] = 1
                     failed = True
                     break

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from engine.dynamics import NONLINEAR, advance_pieces, derivative
+from engine.dynamics import kernel_struct, NONLINEAR, advance_pieces, derivative
 from engine.peaks import observe
 
 ORDER = 4
@@ -17,7 +17,7 @@ LEVELS = ("lti", "ltv", "nonlinear")
 
 
 @njit(cache=True)
-def run(P, level, dt, n_steps, O, W, status):
+def _run(P, level, dt, n_steps, O, W, status):
     """Integrate every case ``c`` over ``n_steps[c]`` steps of ``dt[c]`` s; set ``status[c]``
     (0 done, 1 diverged, 3 singular mass matrix)."""
     C = dt.shape[0]
@@ -65,3 +65,9 @@ def run(P, level, dt, n_steps, O, W, status):
             if not observe(P, c, level, (k + 1) * h, x, W, O, k + 1):
                 status[c] = 1
                 break
+
+
+def run(P, level, dt, n_steps, O, W, status):
+    """Integrate every case ``c`` over ``n_steps[c]`` steps of ``dt[c]`` s; set ``status[c]``
+    (0 done, 1 diverged, 3 singular mass matrix)."""
+    _run(kernel_struct(P), level, dt, n_steps, kernel_struct(O), kernel_struct(W), status)
