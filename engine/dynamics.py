@@ -75,7 +75,7 @@ structref.define_proxy(KernelParams, ParamsType, list(Params._fields))
 
 
 def kernel_struct(nt):
-    """The kernel view of a ``Params``, ``Work`` or ``Peaks`` named tuple; its arrays are shared, not copied."""
+    """The kernel view of a ``Params``, ``Work`` or ``Peaks`` named tuple (arrays shared, not copied)."""
     proxy = {"Params": KernelParams, "Work": KernelWork, "Peaks": KernelPeaks}[type(nt).__name__]
     return proxy(*nt)
 

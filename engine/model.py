@@ -9,7 +9,6 @@ from __future__ import annotations
 from collections import namedtuple
 
 import numpy as np
-
 from numba.experimental import structref
 
 from engine.dynamics import KernelWork, Params, WorkType

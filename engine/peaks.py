@@ -9,7 +9,6 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit
-
 from numba.experimental import structref
 
 from engine.dynamics import (

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from engine.dynamics import kernel_struct, NONLINEAR, accel, advance_pieces, quat_step
+from engine.dynamics import NONLINEAR, accel, advance_pieces, kernel_struct, quat_step
 from engine.peaks import observe
 
 ORDER = 1

@@ -243,5 +243,5 @@ def run(P, level, dt, n_steps, O, W, status):
     """Integrate every case exactly at the output step ``dt[c]`` s (LTI level only)."""
     duration = dt * n_steps
     full, ev, sub_b, sub_a, deg, osc = prepare(P, dt, duration)
-    run_exact(kernel_struct(P), dt, n_steps, kernel_struct(O), kernel_struct(W), status, full, ev, sub_b, sub_a,
-              deg, bool(osc))
+    run_exact(kernel_struct(P), dt, n_steps, kernel_struct(O), kernel_struct(W), status,
+              full, ev, sub_b, sub_a, deg, bool(osc))

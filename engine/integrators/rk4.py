@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from engine.dynamics import kernel_struct, NONLINEAR, advance_pieces, derivative
+from engine.dynamics import NONLINEAR, advance_pieces, derivative, kernel_struct
 from engine.peaks import observe
 
 ORDER = 4
