@@ -72,7 +72,9 @@ def augmented(P) -> tuple[np.ndarray, int, int]:
 
 def step_maps(Z: np.ndarray, h: np.ndarray) -> np.ndarray:
     """Rows of ``expm(Z h)`` that advance the base's state: (..., 12, N). ``h`` broadcasts over cases."""
-    E = scipy.linalg.expm(Z * np.asarray(h)[..., None, None])
+    A = Z * np.asarray(h)[..., None, None]
+    N = A.shape[-1]
+    E = scipy.linalg.expm(A.reshape(-1, N, N)).reshape(A.shape)  # one flat batch: much faster than nd
     return np.ascontiguousarray(E[..., :12, :])
 
 
