@@ -2,9 +2,9 @@
 
 import sys
 
-from benchmarks import pairs
+from benchmarks import kernels, pairs
 
-COMMANDS = {"pairs": pairs.main}
+COMMANDS = {"pairs": pairs.main, "kernels": kernels.main}
 
 if __name__ == "__main__":
     args = sys.argv[1:]
