@@ -75,3 +75,9 @@ from service.local_commands import run_study_command, simulate  # noqa: E402
 
 app.command("simulate")(simulate)
 app.command("run")(run_study_command)
+
+from service.client import fetch_command, status_command, submit_command  # noqa: E402
+
+app.command("submit")(submit_command)
+app.command("status")(status_command)
+app.command("fetch")(fetch_command)

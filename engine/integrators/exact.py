@@ -198,7 +198,7 @@ def _apply(E, x, Fv, osc_on, t, P, c, xn):
                 xn[i] += E[i, o + 2 * a] * sa + E[i, o + 2 * a + 1] * ca
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def run_exact(P, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc_on):
     C = dt.shape[0]
     m = P.sm.shape[1]

@@ -16,7 +16,7 @@ ORDER = 4
 LEVELS = ("lti", "ltv", "nonlinear")
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _run(P, level, dt, n_steps, O, W, status):
     """Integrate every case ``c`` over ``n_steps[c]`` steps of ``dt[c]`` s; set ``status[c]``
     (0 done, 1 diverged, 3 singular mass matrix)."""

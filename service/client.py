@@ -1,0 +1,370 @@
+"""Python client of the isolab REST API (on httpx).
+
+    from service.client import Client
+
+    with Client("http://127.0.0.1:8000") as api:
+        study_id = api.submit("studies/examples/isolator-comparison.yaml")["id"]
+        api.wait(study_id)                          # rich progress bar
+        ds = api.dataset(study_id)                  # xarray.Dataset, in memory
+        quiet = api.cases(study_id, filter="peak_displacement_y<5 mm,liftoff_any==false",
+                          sort="settling_time")
+
+A study file's ``scene_file`` is read here, on the client's machine, and sent inline (the server never
+reads files). Every failed request raises :class:`ClientError` carrying the server's message.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any, NoReturn
+
+import httpx
+import typer
+
+if TYPE_CHECKING:
+    import xarray as xr
+
+DEFAULT_URL = "http://127.0.0.1:8000"
+FINISHED = ("done", "failed", "cancelled")
+
+
+class ClientError(RuntimeError):
+    """A request failed. ``status_code`` is the HTTP status (None when the server was not reached),
+    ``detail`` the server's error body (a message, or FastAPI's list of ``{loc, msg, type}``)."""
+
+    def __init__(self, message: str, status_code: int | None = None, detail: Any = None):
+        super().__init__(message)
+        self.status_code = status_code
+        self.detail = detail
+
+
+def _message(response: httpx.Response) -> tuple[str, Any]:
+    try:
+        body = response.json()
+    except ValueError:
+        return response.text.strip() or response.reason_phrase, None
+    detail = body.get("detail", body) if isinstance(body, dict) else body
+    if isinstance(detail, list):
+        parts = []
+        for d in detail:
+            if isinstance(d, Mapping):
+                loc = ".".join(str(x) for x in d.get("loc", []) if x != "body")
+                parts.append(f"{loc}: {d.get('msg', '')}" if loc else str(d.get("msg", "")))
+            else:
+                parts.append(str(d))
+        return "; ".join(parts), detail
+    return str(detail), detail
+
+
+def read_study_file(path: str | Path) -> dict[str, Any]:
+    """A study file (YAML or JSON) as a dict ready to send: its ``scene_file`` (relative to the study
+    file) is read and inlined as ``scene``."""
+    import yaml
+
+    path = Path(path)
+    text = path.read_text(encoding="utf-8")
+    data = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
+    if not isinstance(data, Mapping):
+        raise ValueError(f"{path}: expected a mapping at the top level, got {type(data).__name__}")
+    data = dict(data)
+    scene_file = data.pop("scene_file", None)
+    if scene_file is not None:
+        if data.get("scene") is not None:
+            raise ValueError(f"{path}: scene_file: give scene or scene_file, not both")
+        scene_path = path.resolve().parent / str(scene_file)
+        if not scene_path.is_file():
+            raise FileNotFoundError(f"{path}: scene_file: no file {scene_path}")
+        scene_text = scene_path.read_text(encoding="utf-8")
+        scene = json.loads(scene_text) if scene_path.suffix.lower() == ".json" else yaml.safe_load(scene_text)
+        if not isinstance(scene, Mapping):
+            raise ValueError(f"{scene_path}: expected a mapping at the top level, got {type(scene).__name__}")
+        data["scene"] = dict(scene)
+    return data
+
+
+class Client:
+    """The isolab REST API.
+
+    Args:
+        base_url: the service's address.
+        token: bearer token, when the service has one (default: ``ISOLAB_API_TOKEN``).
+        timeout: seconds to wait for one request (downloads: for each read).
+    """
+
+    def __init__(self, base_url: str = DEFAULT_URL, token: str | None = None, timeout: float = 60.0):
+        token = token if token is not None else (os.environ.get("ISOLAB_API_TOKEN") or None)
+        headers = {"Authorization": f"Bearer {token}"} if token else {}
+        self.base_url = base_url.rstrip("/")
+        self._http = httpx.Client(base_url=self.base_url, headers=headers, timeout=timeout)
+
+    # ------------------------------------------------------------------------------------ plumbing
+    def close(self) -> None:
+        self._http.close()
+
+    def __enter__(self) -> Client:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _request(self, method: str, url: str, **kwargs: Any) -> httpx.Response:
+        try:
+            response = self._http.request(method, url, **kwargs)
+        except httpx.HTTPError as err:
+            raise ClientError(f"{method} {self.base_url}{url}: {type(err).__name__}: {err}") from err
+        if response.status_code >= 400:
+            message, detail = _message(response)
+            raise ClientError(
+                f"{method} {url} -> {response.status_code}: {message}", response.status_code, detail
+            )
+        return response
+
+    # ------------------------------------------------------------------------------------- studies
+    def submit(self, study: Mapping[str, Any] | str | Path) -> dict[str, Any]:
+        """Submit a study: a definition dict (inline scene), or the path of a YAML/JSON study file
+        (its ``scene_file`` is read here and inlined). Returns ``{id, status, n_cases, links}``."""
+        body = dict(study) if isinstance(study, Mapping) else read_study_file(study)
+        return self._request("POST", "/studies", json=body).json()
+
+    def status(self, study_id: str) -> dict[str, Any]:
+        """A study's status, progress ``{done, total, failed}``, times, error and definition."""
+        return self._request("GET", f"/studies/{study_id}").json()
+
+    def list(self, **filters: Any) -> list[dict[str, Any]]:
+        """Studies in the catalog, newest first. Filters: name, status, isolator_type, created_after,
+        created_before (ISO 8601), limit (<= 500), offset."""
+        params = {k: v for k, v in filters.items() if v is not None}
+        return self._request("GET", "/studies", params=params).json()["items"]
+
+    def wait(
+        self, study_id: str, progress: bool = True, poll: float = 0.5, timeout: float | None = None
+    ) -> dict[str, Any]:
+        """Poll until the study is done, failed or cancelled; returns its final status.
+
+        Args:
+            progress: show a rich progress bar of the cases computed.
+            poll: seconds between polls.
+            timeout: give up after this many seconds (ClientError); None waits for ever.
+        """
+        deadline = None if timeout is None else time.monotonic() + timeout
+        bar = None
+        try:
+            if progress:
+                from rich.progress import (
+                    BarColumn,
+                    MofNCompleteColumn,
+                    Progress,
+                    TextColumn,
+                    TimeElapsedColumn,
+                )
+
+                bar = Progress(
+                    TextColumn("{task.description}"),
+                    BarColumn(),
+                    MofNCompleteColumn(),
+                    TextColumn("cases"),
+                    TimeElapsedColumn(),
+                )
+                bar.start()
+                task = bar.add_task(study_id[:8], total=None)
+            while True:
+                info = self.status(study_id)
+                if bar is not None:
+                    bar.update(
+                        task,
+                        total=info["progress"]["total"],
+                        completed=info["progress"]["done"],
+                        description=f"{info['name']} [{info['status']}]",
+                    )
+                if info["status"] in FINISHED:
+                    return info
+                if deadline is not None and time.monotonic() > deadline:
+                    raise ClientError(f"study {study_id} is still {info['status']} after {timeout} s")
+                time.sleep(poll)
+        finally:
+            if bar is not None:
+                bar.stop()
+
+    def download(self, study_id: str, path: str | Path) -> Path:
+        """Stream a done study's netCDF dataset to ``path`` (written atomically); returns the path."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+        try:
+            with os.fdopen(fd, "wb") as out:
+                try:
+                    with self._http.stream("GET", f"/studies/{study_id}/dataset") as response:
+                        if response.status_code >= 400:
+                            response.read()
+                            message, detail = _message(response)
+                            raise ClientError(
+                                f"GET /studies/{study_id}/dataset -> {response.status_code}: {message}",
+                                response.status_code,
+                                detail,
+                            )
+                        for chunk in response.iter_bytes():
+                            out.write(chunk)
+                except httpx.HTTPError as err:
+                    raise ClientError(
+                        f"GET /studies/{study_id}/dataset: {type(err).__name__}: {err}"
+                    ) from err
+            os.replace(tmp_name, path)
+        except BaseException:
+            Path(tmp_name).unlink(missing_ok=True)
+            raise
+        return path
+
+    def dataset(self, study_id: str) -> xr.Dataset:
+        """A done study's dataset, loaded into memory (downloaded to a temporary file, opened, loaded,
+        closed, removed)."""
+        import xarray as xr
+
+        with tempfile.TemporaryDirectory(prefix="isolab-") as tmp:
+            path = self.download(study_id, Path(tmp) / f"{study_id}.nc")
+            with xr.open_dataset(path) as ds:
+                return ds.load()
+
+    def cases(self, study_id: str, **query: Any) -> list[dict[str, Any]]:
+        """Rows of a done study's case table: one dict per case. Query: filter, sort, columns (a list or a
+        comma-separated string), limit, offset."""
+        params = {
+            k: (",".join(v) if isinstance(v, list | tuple) else v) for k, v in query.items() if v is not None
+        }
+        params["format"] = "json"
+        return self._request("GET", f"/studies/{study_id}/cases", params=params).json()["rows"]
+
+    def timeseries(self, study_id: str, case: int, every: int = 1) -> dict[str, Any]:
+        """Time histories of one case (recomputed by the server), SI units."""
+        return self._request(
+            "GET", f"/studies/{study_id}/cases/{case}/timeseries", params={"every": every}
+        ).json()
+
+    def delete(self, study_id: str) -> None:
+        """Cancel a queued or running study; remove a finished one."""
+        self._request("DELETE", f"/studies/{study_id}")
+
+    # ---------------------------------------------------------------------------------- comparisons
+    def compare(
+        self,
+        scene: Mapping[str, Any] | str | Path,
+        types: list[str] | None = None,
+        simulation: Mapping[str, Any] | None = None,
+    ) -> dict[str, Any]:
+        """Run one scene (a dict, or a YAML/JSON scene file) under several isolator types (default all
+        three); the side-by-side table with the best type per column."""
+        if not isinstance(scene, Mapping):
+            import yaml
+
+            path = Path(scene)
+            text = path.read_text(encoding="utf-8")
+            scene = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
+        body: dict[str, Any] = {"scene": dict(scene)}
+        if types is not None:
+            body["isolator_types"] = list(types)
+        if simulation is not None:
+            body["simulation"] = dict(simulation)
+        return self._request("POST", "/comparisons", json=body).json()
+
+
+# ------------------------------------------------------------------------------ command-line commands
+# ``isolab submit``, ``isolab status`` and ``isolab fetch``, registered in service/cli.py.
+UrlOption = Annotated[str, typer.Option("--url", envvar="ISOLAB_URL", help="Address of the isolab service.")]
+TokenOption = Annotated[
+    str | None,
+    typer.Option("--token", envvar="ISOLAB_API_TOKEN", help="Bearer token of the service, if any."),
+]
+
+
+def _fail(err: Exception) -> NoReturn:
+    typer.echo(f"error: {err}", err=True)
+    raise typer.Exit(code=1)
+
+
+def _progress_text(info: Mapping[str, Any]) -> str:
+    p = info["progress"]
+    text = f"{info['id']}  {info['name']}  {info['status']}  {p['done']}/{p['total']} cases"
+    if p.get("failed"):
+        text += f" ({p['failed']} not ok)"
+    if info.get("error"):
+        text += f"  error: {info['error']}"
+    return text
+
+
+def submit_command(
+    study: Annotated[Path, typer.Argument(help="Study file (YAML or JSON).", exists=True, dir_okay=False)],
+    wait: Annotated[
+        bool, typer.Option("--wait", help="Wait for the study to finish (progress bar).")
+    ] = False,
+    url: UrlOption = DEFAULT_URL,
+    token: TokenOption = None,
+) -> None:
+    """Submit a study file to the service (its scene_file is read here and sent inline); print its id."""
+    try:
+        with Client(url, token=token) as api:
+            accepted = api.submit(study)
+            typer.echo(f"{accepted['id']}  queued  {accepted['n_cases']} cases")
+            if not wait:
+                return
+            info = api.wait(accepted["id"], progress=True)
+    except (ClientError, OSError, ValueError) as err:
+        _fail(err)
+    typer.echo(_progress_text(info))
+    if info["status"] != "done":
+        raise typer.Exit(code=1)
+
+
+def status_command(
+    study_id: Annotated[
+        str | None, typer.Argument(help="Study id; without it, list the latest studies.")
+    ] = None,
+    url: UrlOption = DEFAULT_URL,
+    token: TokenOption = None,
+    limit: Annotated[int, typer.Option(min=1, max=500, help="Studies to list.")] = 20,
+) -> None:
+    """Show one study's status and progress, or list the latest studies."""
+    try:
+        with Client(url, token=token) as api:
+            if study_id is not None:
+                info = api.status(study_id)
+            else:
+                rows = api.list(limit=limit)
+    except ClientError as err:
+        _fail(err)
+    if study_id is not None:
+        typer.echo(_progress_text(info))
+        for key in ("created", "started", "finished"):
+            if info.get(key):
+                typer.echo(f"  {key:<9}{info[key]}")
+        if info.get("parameters"):
+            typer.echo(f"  varies   {', '.join(info['parameters'])}")
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table("id", "name", "status", "cases", "created")
+    for r in rows:
+        p = r["progress"]
+        table.add_row(r["id"], r["name"], r["status"], f"{p['done']}/{p['total']}", r["created"][:19])
+    Console(width=160).print(table)
+
+
+def fetch_command(
+    study_id: Annotated[str, typer.Argument(help="Study id.")],
+    output: Annotated[
+        Path, typer.Option("--output", "-o", help="Where to write the netCDF file.", dir_okay=False)
+    ],
+    url: UrlOption = DEFAULT_URL,
+    token: TokenOption = None,
+) -> None:
+    """Download a done study's netCDF dataset."""
+    try:
+        with Client(url, token=token) as api:
+            path = api.download(study_id, output)
+    except (ClientError, OSError) as err:
+        _fail(err)
+    typer.echo(f"{path}  {path.stat().st_size} bytes")

@@ -1,0 +1,193 @@
+"""The Python client and the ``isolab submit/status/fetch`` commands against a real uvicorn server.
+
+The server runs in a thread on 127.0.0.1 (a free port) with a 2-worker LocalCluster, one for the module.
+"""
+
+from __future__ import annotations
+
+import copy
+import socket
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import uvicorn
+import xarray as xr
+import yaml
+from typer.testing import CliRunner
+
+from engine import simulate
+from service.app import create_app
+from service.cli import app as cli_app
+from service.client import Client, ClientError, read_study_file
+from service.schemas import EXAMPLE_SCENE
+from service.settings import Settings
+from studies.study import load_study
+
+G = 9.80665
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def url(tmp_path_factory: pytest.TempPathFactory):
+    port = free_port()
+    app = create_app(Settings(data_dir=tmp_path_factory.mktemp("data"), workers=2))
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
+    thread = threading.Thread(target=server.run, name="uvicorn", daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 90
+    while not server.started:
+        assert thread.is_alive(), "the server stopped while starting"
+        assert time.monotonic() < deadline, "the server did not start"
+        time.sleep(0.1)
+    yield f"http://127.0.0.1:{port}"
+    server.should_exit = True
+    thread.join(60)
+    assert not thread.is_alive()
+
+
+@pytest.fixture(scope="module")
+def study_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A study file that names its scene by ``scene_file`` (relative to itself), as users write them."""
+    root = tmp_path_factory.mktemp("files")
+    scene = copy.deepcopy(EXAMPLE_SCENE)
+    scene["simulation"] = {"fidelity": "lti", "integrator": "exact", "dt": "2 ms", "duration": "2 s"}
+    (root / "scenes").mkdir()
+    (root / "scenes" / "scriber.yaml").write_text(yaml.safe_dump(scene))
+    study = {
+        "name": "client-grid",
+        "scene_file": "scenes/scriber.yaml",
+        "parameters": [
+            {"path": "isolators.preset", "values": ["air", "elastomer"]},
+            {"path": "stages.y.profile.acceleration", "values": ["1 g", "1.5 g", "2 g"]},
+        ],
+        "design": {"type": "grid"},
+    }
+    path = root / "study.yaml"
+    path.write_text(yaml.safe_dump(study, sort_keys=False))
+    return path
+
+
+@pytest.fixture(scope="module")
+def done(url: str, study_file: Path) -> dict:
+    with Client(url) as api:
+        accepted = api.submit(study_file)
+        final = api.wait(accepted["id"], progress=True, poll=0.2, timeout=60)
+    return {"id": accepted["id"], "accepted": accepted, "final": final}
+
+
+def test_read_study_file_inlines_the_scene(study_file: Path) -> None:
+    body = read_study_file(study_file)
+    assert "scene_file" not in body
+    assert body["scene"]["stages"][0]["mass"] == "1000 kg"
+
+
+def test_submit_yaml_wait_and_dataset(url: str, study_file: Path, done: dict) -> None:
+    assert done["accepted"]["n_cases"] == 6
+    assert done["final"]["status"] == "done"
+    assert done["final"]["progress"] == {"done": 6, "total": 6, "failed": 0}
+    with Client(url) as api:
+        ds = api.dataset(done["id"])
+    assert isinstance(ds, xr.Dataset)
+    assert ds.peak_displacement.dims == ("isolator_type", "stage_y_acceleration", "axis")
+    np.testing.assert_allclose(ds.stage_y_acceleration.values, [G, 1.5 * G, 2 * G], rtol=1e-12)
+    # the same numbers as the engine gives for the study file read locally
+    study = load_study(study_file)
+    sim = study.simulation
+    direct = simulate(study.batch([4]), fidelity=sim.fidelity, integrator=sim.integrator, dt=sim.dt)
+    assert study.case_values(4) == {
+        "isolator_type": "elastomer",
+        "stage_y_acceleration": pytest.approx(1.5 * G),
+    }
+    cell = ds.sel(isolator_type="elastomer", stage_y_acceleration=1.5 * G)
+    np.testing.assert_allclose(
+        cell.peak_displacement.values, direct.peak_displacement[0], rtol=1e-9, atol=1e-15
+    )
+    np.testing.assert_allclose(cell.min_isolator_load.values, direct.min_isolator_load[0], rtol=1e-9)
+
+
+def test_cases_status_list_and_timeseries(url: str, done: dict) -> None:
+    with Client(url) as api:
+        rows = api.cases(
+            done["id"],
+            filter="isolator_type==air",
+            sort="-stage_y_acceleration",
+            columns=["case", "stage_y_acceleration", "peak_displacement_y"],
+        )
+        assert [r["case"] for r in rows] == [2, 1, 0]
+        assert [list(r) for r in rows] == [["case", "stage_y_acceleration", "peak_displacement_y"]] * 3
+        y = [r["peak_displacement_y"] for r in rows]
+        assert y[0] > y[1] > y[2] > 0  # harder acceleration, larger motion
+        info = api.status(done["id"])
+        assert info["status"] == "done" and info["definition"]["name"] == "client-grid"
+        assert done["id"] in [s["id"] for s in api.list(name="client-grid")]
+        ts = api.timeseries(done["id"], 2, every=5)
+        assert max(abs(v) for v in ts["displacement"]["y"]) <= y[0] * (1 + 1e-12)
+        assert len(ts["time"]) == 201
+
+
+def test_compare(url: str) -> None:
+    with Client(url) as api:
+        body = api.compare(EXAMPLE_SCENE, types=["elastomer", "active"], simulation={"duration": "1 s"})
+    assert body["isolator_types"] == ["elastomer", "active"]
+    assert body["best"]["natural_frequency_1"] == "active"
+    assert body["best"]["peak_displacement_y"] == "elastomer"
+
+
+def test_errors_carry_the_server_message(url: str, study_file: Path) -> None:
+    with Client(url) as api:
+        bad = read_study_file(study_file)
+        bad["design"] = {"type": "lhs"}
+        with pytest.raises(ClientError, match="design.samples") as err:
+            api.submit(bad)
+        assert err.value.status_code == 422
+        assert err.value.detail[0]["loc"] == ["body", "design", "samples"]
+        with pytest.raises(ClientError, match="no study with id") as err:
+            api.status("0" * 32)
+        assert err.value.status_code == 404
+    with Client(f"http://127.0.0.1:{free_port()}", timeout=2) as nowhere, pytest.raises(ClientError) as err:
+        nowhere.status("0" * 32)
+    assert err.value.status_code is None
+
+
+def test_delete_through_the_client(url: str, study_file: Path) -> None:
+    definition = read_study_file(study_file)
+    definition["name"] = "client-delete"
+    with Client(url) as api:
+        sid = api.submit(definition)["id"]
+        api.wait(sid, progress=False, poll=0.1, timeout=60)
+        api.delete(sid)
+        with pytest.raises(ClientError) as err:
+            api.status(sid)
+        assert err.value.status_code == 404
+
+
+def test_cli_submit_status_fetch(url: str, study_file: Path, done: dict, tmp_path: Path) -> None:
+    runner = CliRunner()
+    result = runner.invoke(cli_app, ["submit", str(study_file), "--wait", "--url", url])
+    assert result.exit_code == 0, result.output
+    sid = result.output.split()[0]
+    assert len(sid) == 32 and "done" in result.output and "6/6 cases" in result.output
+
+    result = runner.invoke(cli_app, ["status", sid, "--url", url])
+    assert result.exit_code == 0 and "done" in result.output and "isolator_type" in result.output
+    result = runner.invoke(cli_app, ["status", "--url", url])
+    assert result.exit_code == 0 and sid in result.output and done["id"] in result.output
+
+    out = tmp_path / "fetched" / "grid.nc"
+    result = runner.invoke(cli_app, ["fetch", sid, "-o", str(out), "--url", url])
+    assert result.exit_code == 0, result.output
+    with xr.open_dataset(out) as fetched, Client(url) as api:
+        reference = api.dataset(done["id"])  # the same study submitted twice: the same numbers
+        xr.testing.assert_equal(fetched.peak_displacement.load(), reference.peak_displacement)
+
+    result = runner.invoke(cli_app, ["fetch", "f" * 32, "-o", str(tmp_path / "x.nc"), "--url", url])
+    assert result.exit_code == 1 and "404" in result.output
+    assert not (tmp_path / "x.nc").exists()
