@@ -25,7 +25,6 @@ import numpy as np
 from engine import profiles
 from engine.scene import GRAVITY, SceneBatch, SceneError
 from studies.isolators import (
-    PRESETS,
     CollinearIsolatorsError,
     damping_from_ratio,
     load_share,
@@ -165,7 +164,7 @@ def _mount_values(cases: _Cases, n: int) -> tuple[np.ndarray, np.ndarray, np.nda
     """Per case and mount: f_vertical, f_horizontal (Hz), zeta and sky-hook flag, from overrides, the
     mount's own preset, the group's overrides and the group's preset, in that order."""
     c = cases.c
-    group_preset = cases.each(lambda s: PRESETS[s.isolators.preset])
+    group_preset = cases.each(lambda s: s.isolators.preset_of(s.isolators.preset))
     listed = cases.scenes[0].isolators.mounts is not None
     out = {}
     for key in ("f_vertical", "f_horizontal", "zeta"):
@@ -182,7 +181,7 @@ def _mount_values(cases: _Cases, n: int) -> tuple[np.ndarray, np.ndarray, np.nda
                         lambda s, j=j, key=key: (
                             np.nan
                             if s.isolators.mounts[j].preset is None
-                            else getattr(PRESETS[s.isolators.mounts[j].preset], key)
+                            else getattr(s.isolators.preset_of(s.isolators.mounts[j].preset), key)
                         )
                     ),
                     dtype=np.float64,
@@ -201,8 +200,8 @@ def _mount_values(cases: _Cases, n: int) -> tuple[np.ndarray, np.ndarray, np.nda
                 if mt.skyhook is not None:
                     return mt.skyhook
                 if mt.preset is not None:
-                    return PRESETS[mt.preset].skyhook
-            return iso.skyhook if iso.skyhook is not None else PRESETS[iso.preset].skyhook
+                    return iso.preset_of(mt.preset).skyhook
+            return iso.skyhook if iso.skyhook is not None else iso.preset_of(iso.preset).skyhook
 
         sky[:, j] = cases.each(flag)
     return out["f_vertical"], out["f_horizontal"], out["zeta"], sky

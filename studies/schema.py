@@ -11,6 +11,7 @@ A study (parameters and design on top of a scene) is :class:`studies.study.Study
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Annotated, Any, Literal
 
 import numpy as np
@@ -30,7 +31,7 @@ from pydantic import (
 )
 
 from engine.scene import SceneError
-from studies.isolators import CollinearIsolatorsError, load_share
+from studies.isolators import PRESETS, CollinearIsolatorsError, IsolatorPreset, load_share
 from studies.units import (
     Acceleration,
     Angle,
@@ -268,15 +269,28 @@ class Mount(_Model):
     )
 
 
+class PresetTuning(_Model):
+    """The figures of the model of one isolator type this machine would use (vendor data)."""
+
+    f_vertical: PositiveFrequency | None = None
+    f_horizontal: PositiveFrequency | None = None
+    zeta: DampingRatio | None = None
+    skyhook: bool | None = None
+
+
 class Isolators(_Model):
     """The isolators: a type (``preset``) with optional overrides, placed by a ``layout`` or a ``list``.
 
     Stiffness and damping of a mount along each floor axis come, in order of precedence, from the mount's
     explicit ``k``/``c``, the group's ``k``/``c`` for that axis, or the preset frequency (X, Y from
     ``f_horizontal``, Z from ``f_vertical``) and ``zeta`` applied to the static load the mount carries.
+    ``tuning`` replaces a type's preset figures by those of the model this machine would use, whenever
+    that type is chosen: a study that varies ``preset`` then compares those models, where the group's
+    overrides would apply to every type alike.
     """
 
     preset: PresetName = "air"
+    tuning: dict[PresetName, PresetTuning] = Field(default_factory=dict)
     f_vertical: PositiveFrequency | None = None
     f_horizontal: PositiveFrequency | None = None
     zeta: DampingRatio | None = None
@@ -305,6 +319,14 @@ class Isolators(_Model):
     @property
     def count(self) -> int:
         return 4 if self.mounts is None else len(self.mounts)
+
+    def preset_of(self, name: str) -> IsolatorPreset:
+        """The figures of type ``name``: the preset, with this machine's ``tuning`` of it applied."""
+        base = PRESETS[name]
+        tune = self.tuning.get(name)
+        if tune is None:
+            return base
+        return replace(base, **{k: v for k, v in tune.model_dump().items() if v is not None})
 
 
 # ---------------------------------------------------------------------------------------------------------

@@ -359,3 +359,16 @@ def test_scene_batch_labels():
         "stages": ["y", "x"],
     }
     assert b.n_cases == 1 and b.n_isolators == 4
+
+
+def test_tuning_applies_only_to_the_chosen_type():
+    """A machine's tuned air mounts stay air mounts: choosing another type takes that type's preset."""
+    d = symmetric("air", tuning={"air": {"f_vertical": "3.5 Hz", "zeta": "20 %"}})
+    b = build_batch([Scene.model_validate(d)])
+    m_total = b.mass[0] + b.stage_mass[0].sum()
+    np.testing.assert_allclose(b.iso_k[0, :, 2].sum(), m_total * (2 * math.pi * 3.5) ** 2, rtol=1e-12)
+    np.testing.assert_allclose(b.iso_k[0, :, 0].sum(), m_total * (2 * math.pi * 3.0) ** 2, rtol=1e-12)
+    np.testing.assert_allclose(b.iso_c[0, :, 2], 2 * 0.2 * np.sqrt(b.iso_k[0, :, 2] * m_total / 4))
+    d["isolators"]["preset"] = "elastomer"
+    b = build_batch([Scene.model_validate(d)])
+    np.testing.assert_allclose(b.iso_k[0, :, 2].sum(), m_total * (2 * math.pi * 10.0) ** 2, rtol=1e-12)
