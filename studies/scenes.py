@@ -33,6 +33,7 @@ from studies.isolators import (
 from studies.parameters import check_leaf_values
 from studies.schema import (
     AUTO_DURATION_CAP,
+    AUTO_DURATION_DECAYS,
     AUTO_DURATION_MARGIN,
     MAX_TRAVEL,
     MoveSegment,
@@ -458,11 +459,9 @@ def build_batch(
         "simulation.duration", lambda s: None if sim(s).duration == "auto" else sim(s).duration
     )
     last_move = profiles.end_time(pieces).max(axis=-1) if m else np.zeros(c)
-    auto = np.minimum(last_move + AUTO_DURATION_MARGIN, AUTO_DURATION_CAP)
-    duration = np.where(np.isnan(duration), auto, duration)
     settle = cases.get("simulation.settle_tolerance", lambda s: sim(s).settle_tolerance)
 
-    return SceneBatch(
+    batch = SceneBatch(
         mass=np.array(mass, dtype=np.float64),
         inertia=inertia,
         cg=np.array(cg, dtype=np.float64),
@@ -490,6 +489,29 @@ def build_batch(
         gravity_stiffness=gravity_stiffness.pop(),
         g=g,
     )
+    auto = np.isnan(duration)
+    if auto.any():
+        decay = slowest_decay_time(batch.take(np.flatnonzero(auto)))
+        margin = np.maximum(AUTO_DURATION_MARGIN, AUTO_DURATION_DECAYS * decay)
+        batch.duration[auto] = np.minimum(last_move[auto] + margin, AUTO_DURATION_CAP)
+    return batch
+
+
+def slowest_decay_time(batch: SceneBatch) -> np.ndarray:
+    """(C,) largest time constant ``1 / (zeta w)`` over the modes that have stiffness and damping, s
+    (0 where none has both; a mode without damping never decays and is left to the cap)."""
+    from engine import modal
+    from engine import model as engine_model
+
+    try:
+        md = modal.modes(engine_model.mass_matrix(batch), engine_model.stiffness_matrix(batch),
+                         engine_model.damping_matrix(batch))
+    except np.linalg.LinAlgError:
+        return np.zeros(batch.n_cases)
+    w = 2 * np.pi * md.frequency
+    rate = md.damping_ratio * w
+    tau = np.where((w > 0) & (rate > 0), 1.0 / np.where(rate > 0, rate, 1.0), 0.0)
+    return tau.max(axis=1)
 
 
 def _axis(values: object, axis: str) -> float | None:

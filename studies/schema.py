@@ -46,12 +46,16 @@ from studies.units import (
     Stiffness,
     Time,
     Velocity,
+    to_si,
 )
 
 MAX_TRAVEL = 20.0
 """Largest stage travel accepted when the machine's size is not known, m."""
 AUTO_DURATION_MARGIN = 3.0
-"""``duration: auto`` simulates this long after the last stage move ends, s."""
+"""``duration: auto`` simulates at least this long after the last stage move ends, s."""
+AUTO_DURATION_DECAYS = 9.2
+"""...and at least this many time constants ``1 / (zeta w)`` of the slowest-decaying mode: long enough for
+its amplitude to fall by 10^4 (ln 10^4 = 9.2), so a settling time is measured, not cut off."""
 AUTO_DURATION_CAP = 60.0
 """Longest ``duration: auto``, s."""
 
@@ -493,16 +497,94 @@ class Floor(_Model):
 # simulation
 
 
-class Simulation(_Model):
-    """How to simulate: model fidelity, integrator, step, duration and settling tolerance."""
+ACCURACY_LEVELS: dict[str, float | None] = {"fast": 0.05, "balanced": 0.005, "reference": None}
+"""Accuracy requests and the relative error each allows on the sizing outputs (``reference`` runs the
+nonlinear level with the reference integrator itself)."""
+DEFAULT_FIDELITY = "ltv"
+DEFAULT_INTEGRATOR = "rk4"
+DEFAULT_DT = 1e-3
+"""Fidelity, integrator and step (s) of a simulation block that names neither them nor an accuracy."""
+MIN_DT = 1e-4
+MAX_DT = 1e-2
+"""Accepted time steps, s: the range the engine's extreme-scene tests cover."""
+_CHOICE_FIELDS = ("fidelity", "integrator")
+_REQUEST_FIELDS = ("accuracy", "tolerance")
 
-    fidelity: Literal["lti", "ltv", "nonlinear"] = "ltv"
-    integrator: Literal["euler", "rk4", "exact", "reference"] = "rk4"
-    dt: PositiveTime = Field(1e-3, description="time step, s")
+
+def parse_tolerance(value: Any, field: str = "simulation.tolerance") -> tuple[float, bool]:
+    """An accuracy tolerance: ``(value, relative)``.
+
+    ``"10 um"`` (a length) is an absolute tolerance on peak displacement, m; ``"1 %"`` (dimensionless) a
+    relative error of the sizing outputs. A bare number is refused: it would be ambiguous.
+    """
+    if not isinstance(value, str):
+        raise ValueError(f"{field}: give a length such as '10 um' (absolute error of peak displacement) or "
+                         f"a percentage such as '1 %' (relative error), got {value!r}")
+    try:
+        float(value.strip())
+    except ValueError:
+        pass
+    else:
+        raise ValueError(f"{field}: {value!r} has no unit; write '10 um' (absolute error of peak "
+                         "displacement) or '1 %' (relative error)")
+    try:
+        x, relative = to_si(value, "length", field), False
+    except ValueError:
+        try:
+            x, relative = to_si(value, "dimensionless", field), True
+        except ValueError:
+            raise ValueError(f"{field}: cannot read {value!r} as a length ('10 um') or a relative error "
+                             "('1 %')") from None
+    if relative and not 0.0 < x <= 1.0:
+        raise ValueError(f"{field}: a relative tolerance must lie in (0, 100 %], got {value!r}")
+    if not relative and not 0.0 < x <= 1.0:
+        raise ValueError(f"{field}: an absolute tolerance must lie in (0, 1 m], got {value!r}")
+    return x, relative
+
+
+class Simulation(_Model):
+    """How to simulate: model fidelity, integrator and step, or an accuracy request; duration and settling
+    tolerance.
+
+    Give either ``fidelity``/``integrator`` (defaults ltv and rk4, step ``dt`` default 1 ms) or an accuracy
+    request: ``accuracy`` (fast ~5 %, balanced ~0.5 %, reference) or ``tolerance`` (``"10 um"`` of peak
+    displacement, or a relative error ``"1 %"``). An accuracy request lets the study runner pick the
+    cheapest fidelity, integrator and step whose error, measured on pilot cases of the study against the
+    nonlinear reference, stays inside it (:mod:`studies.accuracy`); ``dt`` then caps the step it may pick
+    (``reference``: the step). Until a runner resolves it, ``fidelity``, ``integrator`` and ``dt`` of such
+    a block are None.
+
+    Where a study's simulation block overrides its scene's, an accuracy request replaces the scene's
+    fidelity, integrator and step as a whole (and an explicit fidelity or integrator replaces a scene's
+    accuracy request).
+    """
+
+    fidelity: Literal["lti", "ltv", "nonlinear"] | None = Field(
+        None, description=f"model level (default {DEFAULT_FIDELITY}); not with accuracy/tolerance"
+    )
+    integrator: Literal["euler", "rk4", "exact", "reference"] | None = Field(
+        None, description=f"time integrator (default {DEFAULT_INTEGRATOR}); not with accuracy/tolerance"
+    )
+    dt: Annotated[Time, Field(ge=MIN_DT, le=MAX_DT)] | None = Field(
+        None,
+        description=f"time step, s ({MIN_DT * 1e3:g} to {MAX_DT * 1e3:g} ms; default {DEFAULT_DT * 1e3:g} ms); "
+        "with an accuracy request the largest step it may pick",
+    )
+    accuracy: Literal["fast", "balanced", "reference"] | None = Field(
+        None,
+        description="let the runner pick fidelity, integrator and step: fast (~5 % error), balanced (~0.5 %) "
+        "or reference (nonlinear level, reference integrator)",
+    )
+    tolerance: str | None = Field(
+        None,
+        description="let the runner pick fidelity, integrator and step for this error: a length such as "
+        "'10 um' (peak displacement) or a relative error such as '1 %'",
+    )
     auto_step: bool = Field(True, description="shorten the step where the integrator would be unstable")
     duration: Literal["auto"] | Annotated[Time, Field(gt=0, le=3600)] = Field(
         "auto",
-        description=f"s, or auto: last stage move end + {AUTO_DURATION_MARGIN:g} s "
+        description=f"s, or auto: last stage move end + the larger of {AUTO_DURATION_MARGIN:g} s and "
+        f"{AUTO_DURATION_DECAYS:g} time constants of the slowest-decaying mode "
         f"(at most {AUTO_DURATION_CAP:g} s)",
     )
     settle_tolerance: PositiveLength = Field(10e-6, description="m")
@@ -510,16 +592,57 @@ class Simulation(_Model):
         True, description="include the rocking stiffness of preload and weights that tilt with the base"
     )
 
-    @field_validator("integrator")
+    @field_validator("tolerance", mode="before")
     @classmethod
-    def _integrator_fits(cls, value: str, info: ValidationInfo) -> str:
-        fidelity = info.data.get("fidelity")
-        if value == "exact" and fidelity not in (None, "lti"):
+    def _tolerance_text(cls, value: Any) -> str | None:
+        if value is None:
+            return value
+        x, relative = parse_tolerance(value)
+        return f"{x * 100:.6g} %" if relative else f"{x:.6g} m"
+
+    @model_validator(mode="after")
+    def _choice_or_request(self) -> Simulation:
+        if self.accuracy is not None and self.tolerance is not None:
+            raise ValueError(
+                f"simulation.accuracy: give accuracy or tolerance, not both (got accuracy {self.accuracy!r} "
+                f"and tolerance {self.tolerance!r})"
+            )
+        fields_set = self.__pydantic_fields_set__
+        request = self.accuracy if self.accuracy is not None else self.tolerance
+        if request is not None:
+            given = {k: getattr(self, k) for k in _CHOICE_FIELDS if getattr(self, k) is not None}
+            if given:
+                what = " and ".join(f"{k} {v!r}" for k, v in given.items())
+                raise ValueError(
+                    f"simulation.accuracy: an accuracy request ({'accuracy' if self.accuracy else 'tolerance'} "
+                    f"{request!r}) picks the fidelity and integrator itself; give either the request or "
+                    f"{'/'.join(_CHOICE_FIELDS)}, not both (got {what})"
+                )
+            # a request overrides a scene's choice as a whole when this block is merged over it
+            fields_set.update(_CHOICE_FIELDS)
+            if self.dt is None:
+                fields_set.add("dt")
+            return self
+        if any(getattr(self, k) is not None for k in _CHOICE_FIELDS):
+            fields_set.update(_REQUEST_FIELDS)  # and an explicit choice overrides a scene's request
+        for name, default in (("fidelity", DEFAULT_FIDELITY), ("integrator", DEFAULT_INTEGRATOR),
+                              ("dt", DEFAULT_DT)):
+            if getattr(self, name) is None:  # a default, not an input: it must not override when merged
+                setattr(self, name, default)
+                fields_set.discard(name)
+        if self.integrator == "exact" and self.fidelity != "lti":
             raise ValueError(
                 f"simulation.integrator: 'exact' discretisation needs a time-invariant model "
-                f"(fidelity lti), got fidelity {fidelity!r}"
+                f"(fidelity lti), got fidelity {self.fidelity!r}"
             )
-        return value
+        return self
+
+    @property
+    def request(self) -> str | None:
+        """The accuracy request as text (``"fast"``, ``"tolerance 1 %"``), or None for an explicit choice."""
+        if self.accuracy is not None:
+            return self.accuracy
+        return None if self.tolerance is None else f"tolerance {self.tolerance}"
 
 
 # ---------------------------------------------------------------------------------------------------------

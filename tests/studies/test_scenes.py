@@ -13,7 +13,7 @@ import yaml
 from engine import profiles
 from engine.model import preload
 from engine.scene import SceneError
-from studies.scenes import build_batch
+from studies.scenes import build_batch, slowest_decay_time
 from studies.schema import Scene, Simulation
 from studies.study import Study, load_study
 
@@ -69,9 +69,12 @@ def test_article_scene_batch_shapes_and_values():
     ref = profiles.stack([y, x])
     for got, want in zip((b.prof_t, b.prof_s, b.prof_v, b.prof_a, b.prof_j), ref, strict=True):
         np.testing.assert_array_equal(got, want)
-    # duration auto: last move end (out 1.602 s, dwell, back 1.602 s, dwell) + 3 s
+    # duration auto: last move end (out 1.602 s, dwell, back 1.602 s, dwell) + 9.2 time constants of the
+    # slowest-decaying mode (the 3.5 Hz, 10 % heave: 1 / (0.1 * 2 pi 3.5) = 0.455 s), more than 3 s
     end = 2 * (3.0 / 2.0 + 2.0 / (2 * G)) + 2 * 0.2
-    assert b.duration[0] == pytest.approx(end + 3.0)
+    tau = slowest_decay_time(b)[0]
+    assert tau == pytest.approx(1 / (0.1 * 2 * math.pi * 3.5), rel=0.05)
+    assert b.duration[0] == pytest.approx(end + 9.2 * tau)
     assert b.settle_tol[0] == 10e-6 and b.gravity_stiffness and b.g == G
 
 
@@ -162,6 +165,16 @@ def test_floor_motion_and_simulation_fields():
     np.testing.assert_allclose(b.floor_t, [0, 0.002, 0.004, 0.006])
     np.testing.assert_allclose(b.floor_disp[0], [[0] * 4, [0] * 4, [0, 1e-6, 2e-6, 1e-6]])
     assert b.duration[0] == 1.0 and b.gravity_stiffness and b.has_floor_motion
+
+
+def test_auto_duration_lets_the_slowest_mode_decay():
+    """Soft, lightly damped mounts need longer than the 3 s margin: 9.2 time constants 1 / (zeta w)."""
+    d = symmetric("air", f_vertical="1 Hz", f_horizontal="1 Hz", zeta="10 %")
+    b = build_batch([Scene.model_validate(d)])
+    last = b.prof_t[0].max()  # the final rest piece starts when the move ends
+    tau_heave = 1.0 / (0.1 * 2 * math.pi * 1.0)  # 1.6 s; a rocking mode may decay slower still
+    assert 9.2 * tau_heave * (1 - 1e-9) <= b.duration[0] - last < 60.0
+    assert b.duration[0] == pytest.approx(min(last + 9.2 * slowest_decay_time(b)[0], 60.0), rel=1e-9)
 
 
 def test_auto_duration_is_capped():
