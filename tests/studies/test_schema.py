@@ -460,7 +460,7 @@ def test_examples_load():
     np.testing.assert_allclose(d.levels["stage_y_acceleration"], np.linspace(0.5, 2.0, 4) * G)
     lhs = load_study(EXAMPLES / "lhs-10000.yaml")
     assert lhs.n_cases == 10_000 and lhs.simulation.integrator == "exact" and lhs.simulation.fidelity == "lti"
-    assert lhs.design_spec.seed == 1 and lhs.simulation.duration == 3.0
+    assert lhs.design_spec.seed == 1 and lhs.simulation.duration == 5.0
 
 
 def test_study_round_trips_through_json():
