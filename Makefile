@@ -11,7 +11,7 @@ PORT ?= 8000
 WORKERS ?= 2
 DATA ?= ./data
 
-.PHONY: install serve test bench lint
+.PHONY: install serve test bench load lint
 
 install: $(STAMP)
 
@@ -37,6 +37,10 @@ bench: $(STAMP)
 	else \
 		echo "no benchmark entry point: add an 'isolab bench' command or benchmarks/__main__.py" >&2; exit 1; \
 	fi
+
+# Load on a real `isolab serve`: 50 clients and a 100,000-case study on loopback; stops within 2 minutes.
+load: $(STAMP)
+	timeout 150 $(PY) -m benchmarks.load --budget 120
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check engine studies service tests

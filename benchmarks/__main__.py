@@ -1,10 +1,11 @@
-"""``python -m benchmarks [pairs] ...``: run the benchmarks and print their figures."""
+"""``python -m benchmarks [pairs|kernels|accuracy|endtoend] ...``: run the benchmarks and print their figures."""
 
 import sys
 
-from benchmarks import kernels, pairs
+from benchmarks import accuracy, endtoend, kernels, pairs
 
-COMMANDS = {"pairs": pairs.main, "kernels": kernels.main}
+COMMANDS = {"pairs": pairs.main, "kernels": kernels.main, "accuracy": accuracy.main,
+            "endtoend": endtoend.main}
 
 if __name__ == "__main__":
     args = sys.argv[1:]

@@ -6,8 +6,10 @@ study queue, which resumes unfinished studies (the study store opens when first 
 stops the queue (running studies stay queued for the next start) and closes the client. Start it with
 ``isolab serve``, which hands the app to uvicorn.
 
-When ``ISOLAB_API_TOKEN`` is set, every route but ``/health`` wants ``Authorization: Bearer <token>``;
-request bodies larger than ``ISOLAB_MAX_BODY_BYTES`` are refused with 413.
+When ``ISOLAB_API_TOKEN`` is set, every route but ``/health`` (and the API description: ``/docs``,
+``/redoc``, ``/openapi.json``) wants ``Authorization: Bearer <token>``; request bodies larger than
+``ISOLAB_MAX_BODY_BYTES`` are refused with 413 before they are read, JSON nested too deep with 422
+(:class:`service.request_limits.RequestLimits`). CORS answers only the origins of ``ISOLAB_CORS_ORIGINS``.
 """
 
 from __future__ import annotations
@@ -15,24 +17,31 @@ from __future__ import annotations
 import hmac
 import logging
 import socket
+import sys
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from importlib.metadata import PackageNotFoundError, version
 
+import dask
 from anyio import to_thread
 from distributed import Client, LocalCluster
 from fastapi import Depends, FastAPI, HTTPException, Request
 from fastapi.middleware.cors import CORSMiddleware
-from fastapi.responses import JSONResponse
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
-from starlette.types import ASGIApp, Message, Receive, Scope, Send
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from service.jobs import JobQueue
-from service.routes import comparisons, health, studies
+from service.jobs import RUNNING_STUDIES, JobQueue
+from service.request_limits import RequestLimits, unreadable_body_is_422
+from service.routes import comparisons, health, heavy_work_limiter, studies
 from service.settings import Settings, load_settings
+from service.worker_priority import LowerPriority
 
 #: Port of the Dask dashboard of the in-process LocalCluster, when free.
 DASHBOARD_PORT = 8787
+#: Tasks the LocalCluster's scheduler gives a worker per thread: 1.0, none waiting in a worker's own queue.
+WORKER_SATURATION = 1.0
+#: Seconds a thread may hold the interpreter lock while another waits (Python's default is 0.005).
+SWITCH_INTERVAL_S = 0.001
 
 log = logging.getLogger(__name__)
 
@@ -64,15 +73,20 @@ def start_dask(settings: Settings) -> tuple[Client, LocalCluster | None]:
     if settings.scheduler_address is not None:
         log.info("joining Dask scheduler at %s", settings.scheduler_address)
         return Client(settings.scheduler_address), None
-    cluster = LocalCluster(
-        n_workers=settings.workers,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=free_dashboard_address(),
-        silence_logs=logging.WARNING,
-    )
+    # a worker holds only the chunk it runs: the next one is picked when it is free, by priority, so a
+    # study submitted while a large one runs waits for one chunk (see studies.fanout), not for two
+    with dask.config.set({"distributed.scheduler.worker-saturation": WORKER_SATURATION}):
+        cluster = LocalCluster(
+            n_workers=settings.workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=free_dashboard_address(),
+            silence_logs=logging.WARNING,
+        )
     try:
         client = Client(cluster)
+        # the workers share this machine's cores with the API: the API answers first (see worker_priority)
+        client.register_plugin(LowerPriority())
     except BaseException:
         cluster.close()
         raise
@@ -89,7 +103,7 @@ def stop_dask(client: Client, cluster: LocalCluster | None) -> None:
             cluster.close()
 
 
-def require_token(
+async def require_token(
     request: Request,
     credentials: HTTPAuthorizationCredentials | None = Depends(HTTPBearer(auto_error=False)),
 ) -> None:
@@ -101,50 +115,6 @@ def require_token(
     if not hmac.compare_digest(given.encode(), token.encode()):
         raise HTTPException(status_code=401, detail="missing or wrong bearer token",
                             headers={"WWW-Authenticate": "Bearer"})
-
-
-class BodyLimit:
-    """ASGI middleware: refuse request bodies larger than ``max_bytes`` with 413 (by Content-Length up
-    front, or while a body without one streams in)."""
-
-    def __init__(self, app: ASGIApp, max_bytes: int):
-        self.app = app
-        self.max_bytes = int(max_bytes)
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http":
-            await self.app(scope, receive, send)
-            return
-        length = dict(scope.get("headers") or []).get(b"content-length")
-        if length is not None and length.isdigit() and int(length) > self.max_bytes:
-            await self._refuse(scope, receive, send)
-            return
-        seen = 0
-
-        async def limited() -> Message:
-            nonlocal seen
-            message = await receive()
-            if message["type"] == "http.request":
-                seen += len(message.get("body", b""))
-                if seen > self.max_bytes:
-                    raise _TooLarge
-            return message
-
-        try:
-            await self.app(scope, limited, send)
-        except _TooLarge:
-            await self._refuse(scope, receive, send)
-
-    async def _refuse(self, scope: Scope, receive: Receive, send: Send) -> None:
-        response = JSONResponse(
-            {"detail": f"request body larger than {self.max_bytes} bytes (ISOLAB_MAX_BODY_BYTES)"},
-            status_code=413,
-        )
-        await response(scope, receive, send)
-
-
-class _TooLarge(Exception):
-    pass
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -166,8 +136,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.state.dask = client
         app.state.dask_cluster = cluster
         jobs: JobQueue | None = None
+        # threads finishing studies, validating submissions and running the Dask scheduler hold the
+        # interpreter lock for long stretches: hand it on sooner, so that a status request waits less
+        switch_interval = sys.getswitchinterval()
+        sys.setswitchinterval(min(switch_interval, SWITCH_INTERVAL_S))
         try:
-            jobs = JobQueue(settings.data_dir, client)  # the store opens when first needed
+            jobs = JobQueue(settings.data_dir, client, concurrency=RUNNING_STUDIES)  # store opens when needed
             await to_thread.run_sync(jobs.start)
             app.state.jobs = jobs
             yield
@@ -178,6 +152,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             app.state.dask = None
             app.state.dask_cluster = None
             await to_thread.run_sync(stop_dask, client, cluster)
+            sys.setswitchinterval(switch_interval)
 
     app = FastAPI(
         title="isolab",
@@ -189,7 +164,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.dask = None
     app.state.dask_cluster = None
     app.state.jobs = None
-    app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
+    app.state.heavy_work = heavy_work_limiter()
+    app.add_middleware(RequestLimits, max_bytes=settings.max_body_bytes)
+    app.add_exception_handler(StarletteHTTPException, unreadable_body_is_422)
     if settings.cors_origins:
         app.add_middleware(
             CORSMiddleware,

@@ -30,6 +30,8 @@ if TYPE_CHECKING:
     import xarray as xr
 
 DEFAULT_URL = "http://127.0.0.1:8000"
+KEEPALIVE_S = 2.0
+"""Seconds an idle connection is kept for reuse (uvicorn closes idle connections after 5 s)."""
 FINISHED = ("done", "failed", "cancelled")
 
 
@@ -100,7 +102,14 @@ class Client:
         token = token if token is not None else (os.environ.get("ISOLAB_API_TOKEN") or None)
         headers = {"Authorization": f"Bearer {token}"} if token else {}
         self.base_url = base_url.rstrip("/")
-        self._http = httpx.Client(base_url=self.base_url, headers=headers, timeout=timeout)
+        self._http = httpx.Client(
+            base_url=self.base_url,
+            headers=headers,
+            timeout=timeout,
+            # idle connections are dropped before the server's 5 s keep-alive timeout closes them: a
+            # request is never sent on a connection the server is closing at that moment
+            limits=httpx.Limits(keepalive_expiry=KEEPALIVE_S),
+        )
 
     # ------------------------------------------------------------------------------------ plumbing
     def close(self) -> None:

@@ -27,6 +27,11 @@ log = logging.getLogger(__name__)
 #: Studies whose catalog status means "not finished": the queue takes them up again at start-up.
 UNFINISHED = ("queued", "running")
 
+RUNNING_STUDIES = 8
+"""Studies the service runs at once (one thread each, mostly waiting for chunks). Their chunks share the
+cluster chunk by chunk (see :mod:`studies.fanout`), so a small study submitted while large ones run waits
+for one chunk, not for them to finish; more studies than this wait in the queue."""
+
 _PAGE = 1000
 CATALOG = "catalog.sqlite"
 """File name of the store's catalog under its root (see :mod:`studies.store`)."""

@@ -427,3 +427,50 @@ def netcdf_encoding(ds: xr.Dataset) -> dict[str, dict[str, Any]]:
             e["_FillValue"] = None
         enc[str(name)] = e
     return enc
+
+
+# ------------------------------------------------------------------------------------- error estimate
+ERROR_ESTIMATE_PREFIX = "error_estimate_"
+
+
+def add_error_estimate(
+    ds: xr.Dataset,
+    values: Mapping[str, float],
+    *,
+    worst_case: Mapping[str, int | None],
+    cases: Sequence[int],
+    excluded: Mapping[int, str],
+    method: str,
+    meaning: Mapping[str, str],
+    units: Mapping[str, str],
+) -> xr.Dataset:
+    """``ds`` with the study's measured error: one scalar variable ``error_estimate_<output>`` per output
+    (``units``, ``long_name`` from ``meaning``, ``case``: the study case where the largest error was found,
+    -1 when none could be compared) and the attributes ``error_estimate_cases`` (the sampled cases),
+    ``error_estimate_excluded`` (case -> why it could not be compared) and ``error_estimate_method``.
+    A NaN value means no sampled case could be compared."""
+    out = ds.copy()
+    for name, value in values.items():
+        case = worst_case.get(name)
+        out[ERROR_ESTIMATE_PREFIX + name] = xr.Variable(
+            (), np.float64(value),
+            attrs={
+                "units": units.get(name, "1"),
+                "long_name": f"{meaning.get(name, name)}, over the sampled cases against the reference level",
+                "case": np.int64(-1 if case is None else case),
+            },
+        )
+    out.attrs["error_estimate_cases"] = json.dumps([int(c) for c in cases])
+    out.attrs["error_estimate_excluded"] = json.dumps({str(int(k)): str(v) for k, v in excluded.items()})
+    out.attrs["error_estimate_method"] = str(method)
+    return out
+
+
+def error_estimate(ds: xr.Dataset) -> dict[str, float]:
+    """The measured error a stored study carries: output -> largest error found (see
+    :func:`add_error_estimate`); empty for a dataset without one."""
+    return {
+        str(name)[len(ERROR_ESTIMATE_PREFIX):]: float(ds[name])
+        for name in ds.data_vars
+        if str(name).startswith(ERROR_ESTIMATE_PREFIX)
+    }

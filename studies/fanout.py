@@ -16,6 +16,23 @@ Chunk size rule (:func:`choose_chunk_size`):
    an interruption loses little;
 4. when the whole study is too short for rules 1 and 2 together, rule 1 wins, but never with fewer chunks
    than workers (each worker still gets a share).
+
+Studies share the cluster: a run submits its chunks together at Dask priority minus their number, so a
+study of few chunks submitted while a large one runs starts as soon as a worker finishes its current
+chunk, instead of waiting for every queued chunk of the large one (Dask otherwise runs tasks in submission
+order); studies of equal size run first come, first served.
+
+Inside a chunk the engine runs on batches of at most ``ENGINE_BATCH_CASES`` cases. The chunk size is then a
+scheduling choice only: a worker's memory does not grow with it (the exact integrator holds a few step
+maps per case and breakpoint, ~0.13 MB per case on the article scene, so a 4,000-case batch would take
+~0.8 GB), and batches of a few hundred cases run no slower than larger ones (they stay in cache).
+
+Timings: each task measures itself (preparing the batch, the engine's wall and CPU time, packing the
+result) and returns the figures with its arrays; :func:`run_chunks` adds when the chunk was submitted and
+when its result arrived and was fetched, keeps them in :attr:`FanoutReport.timings`, and, when the
+environment variable ``ISOLAB_TIMINGS`` names a file, appends one JSON line per event to it
+(:func:`record_timing`; the store records its reads and writes there too). ``python -m benchmarks endtoend``
+reads that journal from a running service.
 """
 
 from __future__ import annotations
@@ -23,11 +40,13 @@ from __future__ import annotations
 import functools
 import json
 import math
+import os
 import threading
 import time
 import uuid
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -37,11 +56,46 @@ MIN_CHUNK_SECONDS = 1.0
 MAX_CHUNK_SECONDS = 30.0
 CHUNKS_PER_WORKER = 4
 TASK_RETRIES = 2
+ENGINE_BATCH_CASES = 500
+"""Most cases one engine call of a chunk simulates (bounds a worker's memory; see the module docstring)."""
+TIMINGS_ENV = "ISOLAB_TIMINGS"
+"""Environment variable naming the timing journal file (JSON lines); unset or empty: no journal."""
+TASK_TIMING_FIELDS = ("task_start", "task_end", "prepare_s", "engine_s", "engine_cpu_s", "pack_s", "pid")
+"""Figures a chunk task returns under the key ``"timing"``: start and end (Unix time, s), time to rebuild
+the study and build the batches (s), engine wall and CPU time (s), time to pack the result arrays (s), and
+the worker's process id."""
 _POLL_SECONDS = 0.05
+_journal_lock = threading.Lock()
 
 
 class FanoutError(RuntimeError):
     """Every chunk of a run failed: nothing was computed."""
+
+
+def record_timing(event: str, **fields: Any) -> None:
+    """Append ``{"event": event, "t": <Unix time, s>, "pid": <process id>, **fields}`` as one JSON line to
+    the journal named by ``ISOLAB_TIMINGS``; does nothing when the variable is unset or empty.
+
+    Durations are in seconds, times are Unix times in seconds. A journal that cannot be written is skipped
+    silently: timings never stop a study."""
+    path = os.environ.get(TIMINGS_ENV, "")
+    if not path:
+        return
+    record = {"event": str(event), "t": time.time(), "pid": os.getpid(), **fields}
+    line = json.dumps(record, default=_json_number) + "\n"
+    try:
+        with _journal_lock, open(path, "a", encoding="utf-8") as f:
+            f.write(line)
+    except OSError:
+        pass
+
+
+def _json_number(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return str(value)
 
 
 def plan_chunks(n_cases: int, chunk_size: int) -> list[np.ndarray]:
@@ -91,24 +145,78 @@ def _study_from_json(definition_json: str):
 def run_chunk(definition_json: str, indices: Sequence[int] | np.ndarray) -> dict[str, np.ndarray]:
     """Run the cases ``indices`` of the study defined by ``definition_json`` (the worker task).
 
-    Deterministic given its inputs, so Dask may rerun it elsewhere if a worker dies. Returns the
-    result arrays of :func:`studies.dataset.result_arrays` plus ``indices``.
+    The engine runs on consecutive batches of at most ``ENGINE_BATCH_CASES`` cases. Deterministic given
+    its inputs, so Dask may rerun it elsewhere if a worker dies. Returns the result arrays of
+    :func:`studies.dataset.result_arrays` plus ``indices``, and the task's own timings under ``"timing"``
+    (float64, in the order of ``TASK_TIMING_FIELDS``).
     """
     from engine import simulate
 
+    task_start = time.time()
+    t0 = time.perf_counter()
     idx = np.asarray(indices, dtype=np.int64)
     study = _study_from_json(definition_json)
     sim = study.simulation
-    result = simulate(
-        study.batch(idx),
-        fidelity=sim.fidelity,
-        integrator=sim.integrator,
-        dt=sim.dt,
-        auto_step=sim.auto_step,
-    )
-    arrays = result_arrays(result)
+    prepare = time.perf_counter() - t0
+    engine_wall = engine_cpu = pack = 0.0
+    parts: list[dict[str, np.ndarray]] = []
+    for start in range(0, len(idx), ENGINE_BATCH_CASES):
+        t0 = time.perf_counter()
+        batch = study.batch(idx[start:start + ENGINE_BATCH_CASES])
+        t1 = time.perf_counter()
+        c1 = time.thread_time()
+        result = simulate(batch, fidelity=sim.fidelity, integrator=sim.integrator, dt=sim.dt,
+                          auto_step=sim.auto_step)
+        c2 = time.thread_time()
+        t2 = time.perf_counter()
+        parts.append(result_arrays(result))
+        del batch, result
+        prepare += t1 - t0
+        engine_wall += t2 - t1
+        engine_cpu += c2 - c1
+        pack += time.perf_counter() - t2
+    t0 = time.perf_counter()
+    arrays = parts[0] if len(parts) == 1 else {name: np.concatenate([p[name] for p in parts])
+                                               for name in parts[0]}
     arrays["indices"] = idx
+    pack += time.perf_counter() - t0
+    arrays["timing"] = np.array([task_start, time.time(), prepare, engine_wall, engine_cpu, pack,
+                                 float(os.getpid())])
     return arrays
+
+
+@dataclass
+class ChunkTiming:
+    """Where one chunk's time went (durations in s, times as Unix times in s).
+
+    Attributes:
+        n_cases: cases in the chunk.
+        submitted: when the chunk was handed to Dask.
+        task_start, task_end: when the task started and ended on its worker (NaN for a task that gave no
+            timings, e.g. one that raised).
+        worker_pid: the worker's process id (0 if unknown).
+        prepare_s: time in the task to rebuild the study and build the engine batches.
+        engine_s, engine_cpu_s: engine wall and CPU time in the task.
+        pack_s: time in the task to turn results into arrays.
+        arrived: when the client learnt the task was finished (up to the 50 ms poll later).
+        fetch_s: time to fetch the result from the worker (transfer and deserialisation).
+        result_bytes: size of the result arrays.
+        handled_s: time in ``on_chunk`` (the runner saves the chunk and updates the catalog there).
+    """
+
+    n_cases: int
+    submitted: float
+    task_start: float = float("nan")
+    task_end: float = float("nan")
+    worker_pid: int = 0
+    prepare_s: float = float("nan")
+    engine_s: float = float("nan")
+    engine_cpu_s: float = float("nan")
+    pack_s: float = float("nan")
+    arrived: float = float("nan")
+    fetch_s: float = 0.0
+    result_bytes: int = 0
+    handled_s: float = 0.0
 
 
 @dataclass
@@ -120,12 +228,14 @@ class FanoutReport:
         completed: chunk indices whose arrays were handed to ``on_chunk`` (including failed ones).
         failed: chunk index -> error text, for chunks whose task raised.
         cancelled: the run was cancelled before every chunk came back.
+        timings: chunk index -> :class:`ChunkTiming`, for every chunk that came back.
     """
 
     submitted: list[int] = field(default_factory=list)
     completed: list[int] = field(default_factory=list)
     failed: dict[int, str] = field(default_factory=dict)
     cancelled: bool = False
+    timings: dict[int, ChunkTiming] = field(default_factory=dict)
 
 
 def run_chunks(
@@ -174,14 +284,20 @@ def run_chunks(
         return report
 
     token = uuid.uuid4().hex[:8]
+    record_timing("fanout_start", key_prefix=key_prefix, n_chunks=len(chunks), n_todo=len(todo),
+                  n_cases=total, chunk_cases=[len(chunks[k]) for k in todo])
     futures = {}
-    for k in todo:
-        fut = client.submit(
-            task, definition_json, np.asarray(chunks[k], dtype=np.int64),
-            key=f"{key_prefix}-chunk-{k}-{token}", pure=False, retries=TASK_RETRIES,
-        )
+    # one call for every chunk (the scheduler queues them all, none waits in a busy worker's own queue),
+    # at a priority that puts studies with fewer chunks to run first (see the module docstring)
+    submitted = client.map(
+        task, [definition_json] * len(todo), [np.asarray(chunks[k], dtype=np.int64) for k in todo],
+        key=[f"{key_prefix}-chunk-{k}-{token}" for k in todo], pure=False, retries=TASK_RETRIES,
+        priority=-len(todo),
+    )
+    for k, fut in zip(todo, submitted, strict=True):
         futures[fut] = k
         report.submitted.append(k)
+        report.timings[k] = ChunkTiming(n_cases=len(chunks[k]), submitted=time.time())
 
     pending = set(futures)
     ac = as_completed(list(futures))
@@ -201,8 +317,13 @@ def run_chunks(
             for fut in batch:
                 pending.discard(fut)
                 k = futures[fut]
+                timing = report.timings[k]
+                timing.arrived = time.time()
                 if fut.status == "finished":
+                    t0 = time.perf_counter()
                     arrays = fut.result()
+                    timing.fetch_s = time.perf_counter() - t0
+                    _take_task_timing(arrays, timing)
                 else:
                     exc = fut.exception() if fut.status == "error" else None
                     text = f"{type(exc).__name__}: {exc}" if exc is not None else f"task {fut.status}"
@@ -211,15 +332,33 @@ def run_chunks(
                     arrays["indices"] = np.asarray(chunks[k], dtype=np.int64)
                 fut.release()
                 if on_chunk is not None:
+                    t0 = time.perf_counter()
                     on_chunk(k, arrays)
+                    timing.handled_s = time.perf_counter() - t0
                 report.completed.append(k)
+                record_timing("chunk", key_prefix=key_prefix, chunk=k, failed=k in report.failed,
+                              **asdict(timing))
                 done += len(chunks[k])
                 if progress is not None:
                     progress(done, total)
     except BaseException:
         client.cancel(list(pending))
         raise
+    record_timing("fanout_end", key_prefix=key_prefix, cancelled=report.cancelled,
+                  n_failed_chunks=len(report.failed))
     if not report.cancelled and report.failed and len(report.failed) == len(report.submitted):
         first = min(report.failed.items())
         raise FanoutError(f"every chunk failed; chunk {first[0]}: {first[1]}")
     return report
+
+
+def _take_task_timing(arrays: dict[str, np.ndarray], timing: ChunkTiming) -> None:
+    """Move a task's own timings (``arrays["timing"]``) into ``timing``; note the result's size."""
+    figures = arrays.pop("timing", None)
+    timing.result_bytes = int(sum(np.asarray(a).nbytes for a in arrays.values()))
+    if figures is None or np.shape(figures) != (len(TASK_TIMING_FIELDS),):
+        return
+    got = dict(zip(TASK_TIMING_FIELDS, np.asarray(figures, dtype=np.float64).tolist(), strict=True))
+    for name in ("task_start", "task_end", "prepare_s", "engine_s", "engine_cpu_s", "pack_s"):
+        setattr(timing, name, got[name])
+    timing.worker_pid = int(got["pid"])

@@ -7,6 +7,11 @@ A run saves every chunk as it arrives (``<id>.chunks/<k>.npz``, see :class:`stud
 calling :func:`run_study` again with the same ``study_id`` after an interruption (cancel, crash, restart)
 computes only the chunks that are not saved yet. The chunk split itself is saved with the first chunk, so a
 resumed run splits the cases the same way even on a cluster of another size.
+
+Around the fan-out (see :mod:`studies.accuracy`): a study that asks for an accuracy instead of naming its
+model gets the cheapest fidelity, integrator and step that meets it, measured on pilot cases on a worker
+before the chunks run (the chunks then run the resolved definition); and every dataset carries its
+measured error, from a seeded sample of cases rerun at the reference level on the same client.
 """
 
 from __future__ import annotations
@@ -16,6 +21,8 @@ import logging
 import os
 import tempfile
 import threading
+import time
+import uuid
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -23,7 +30,24 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from studies.dataset import from_chunks, to_dataset
+from studies.accuracy import (
+    ESTIMATED_OUTPUTS,
+    OUTPUT_MEANING,
+    OUTPUT_UNITS,
+    REFERENCE_PAIR,
+    Choice,
+    ErrorEstimate,
+    cached_choice,
+    choose,
+    choose_from_json,
+    error_sample,
+    estimate_errors,
+    exact_estimate,
+    reference_arrays,
+    remember_choice,
+    resolved_definition,
+)
+from studies.dataset import add_error_estimate, from_chunks, result_arrays, to_dataset
 from studies.fanout import choose_chunk_size, plan_chunks, run_chunks
 from studies.store import Store, copy_atomic, utc_now
 
@@ -42,7 +66,7 @@ def estimate_seconds_per_case(study: Any) -> float:
     """Rough engine time per case, s: a fixed cost plus (duration / dt) steps at a per-step cost that
     depends on the integrator and fidelity. Only used to size chunks, so a factor of a few is fine."""
     sim = study.simulation
-    steps = max(1.0, _duration(study) / float(sim.dt))
+    steps = max(1.0, _duration(study) / float(sim.dt if sim.dt is not None else 1e-3))
     per_step = _STEP_COST_S.get(sim.integrator, 25e-6) * _FIDELITY_FACTOR.get(sim.fidelity, 1.2)
     return _CASE_OVERHEAD_S + steps * per_step
 
@@ -138,11 +162,22 @@ def run_study(
     row = store.get(study_id)  # exists, and the id is valid
     store.update(study_id, status="running", started=row["started"] or utc_now(), finished=None, error=None)
     try:
+        # an accuracy request is resolved before the fan-out: the chunks run the chosen model
+        choice = _choice(client, study, definition_json, cancel, f"isolab-{study_id}")
+        if choice is None:
+            store.update(study_id, status="cancelled", finished=utc_now())
+            return study_id
+        if choice.request is None:
+            run_json, run = definition_json, study
+        else:
+            run_json = json.dumps(resolved_definition(study, choice))
+            run = type(study).model_validate(json.loads(run_json))
+            store.update(study_id, fidelity=choice.fidelity, integrator=choice.integrator)
         chunks = store.load_chunk_plan(study_id)
         if chunks is None or int(sum(len(c) for c in chunks)) != n_cases:
             store.clear_chunks(study_id)
             size = chunk_size or choose_chunk_size(n_cases, _worker_count(client),
-                                                   estimate_seconds_per_case(study))
+                                                   estimate_seconds_per_case(run))
             chunks = plan_chunks(n_cases, size)
             store.save_chunk_plan(study_id, chunks)
         saved = store.load_chunks(study_id)
@@ -160,7 +195,7 @@ def run_study(
                      n_failed=sum(c[1] for c in counts.values()))
         if skip:
             log.info("study %s: resuming, %d of %d chunks already done", study_id, len(skip), len(chunks))
-        report = run_chunks(client, definition_json, chunks, skip=skip, on_chunk=on_chunk,
+        report = run_chunks(client, run_json, chunks, skip=skip, on_chunk=on_chunk,
                             progress=progress, cancel=cancel, key_prefix=f"isolab-{study_id}")
         if report.cancelled:
             store.update(study_id, status="cancelled", finished=utc_now())
@@ -169,18 +204,20 @@ def run_study(
         iso_names, point_names = study_labels(study)
         result = from_chunks(store.load_chunks(study_id), chunks, n_isolators=len(iso_names),
                              n_points=len(point_names))
+        estimate = _error_estimate(client, run, run_json, result, f"isolab-{study_id}")
         attrs = {
             "title": f"isolab study {study.name}",
             "study": definition_json,
             "study_id": study_id,
             "design": _design_extra(study),
             "engine_version": engine_version,
-            "fidelity": sim.fidelity,
-            "integrator": sim.integrator,
-            "dt": float(sim.dt),
+            **choice.attrs(),
             "auto_step": bool(sim.auto_step),
         }
         ds = to_dataset(result, design, isolator_names=iso_names, point_names=point_names, attrs=attrs)
+        ds = add_error_estimate(ds, estimate.values, worst_case=estimate.worst_case, cases=estimate.cases,
+                                excluded=estimate.excluded, method=estimate.method,
+                                meaning=OUTPUT_MEANING, units=OUTPUT_UNITS)
         store.write_dataset(study_id, ds)
         store.clear_chunks(study_id)
         n_failed = int(np.count_nonzero(result.status != 0))
@@ -193,6 +230,65 @@ def run_study(
         except Exception:  # the catalog itself failed: report the original error
             log.exception("study %s: could not mark the study failed", study_id)
         raise
+
+
+def _wait(client: Any, future: Any, cancel: threading.Event | None) -> Any:
+    """The result of a Dask future; None (and the future cancelled) when ``cancel`` is set first."""
+    while not future.done():
+        if cancel is not None and cancel.is_set():
+            client.cancel([future])
+            return None
+        if cancel is not None:
+            cancel.wait(0.05)
+        else:
+            time.sleep(0.05)
+    return future.result()
+
+
+def _choice(client: Any, study: Any, definition_json: str, cancel: threading.Event | None,
+            key_prefix: str) -> Choice | None:
+    """The fidelity, integrator and step to run with: the study's own, or measured for its accuracy
+    request on a worker (:func:`studies.accuracy.choose`); None when cancelled meanwhile."""
+    if study.simulation.request is None or study.simulation.accuracy == "reference":
+        return choose(study)
+    known = cached_choice(study)
+    if known is not None:
+        return known
+    future = client.submit(choose_from_json, definition_json, pure=False,
+                           key=f"{key_prefix}-accuracy-{uuid.uuid4().hex[:8]}")
+    choice = _wait(client, future, cancel)
+    if choice is not None:
+        remember_choice(study, choice)
+    return choice
+
+
+def _error_estimate(client: Any, study: Any, run_json: str, result: Any, key_prefix: str) -> ErrorEstimate:
+    """Rerun a seeded sample of cases at the reference level (on the cluster, one task per case, at the
+    step each case used) and compare: the largest error per output."""
+    sim = study.simulation
+    cases = error_sample(study)
+    outputs = [o for o in ESTIMATED_OUTPUTS
+               if o != "peak_point_displacement" or np.shape(result.peak_point_displacement)[1] > 0]
+    if (sim.fidelity, sim.integrator) == REFERENCE_PAIR:
+        return exact_estimate(cases, outputs)
+    ours = {k: np.asarray(v)[cases] for k, v in result_arrays(result).items()}
+    dt = np.where(np.isfinite(ours["dt"]), ours["dt"], float(sim.dt))
+    token = uuid.uuid4().hex[:8]
+    futures = [client.submit(reference_arrays, run_json, [c], float(dt[k]), pure=False,
+                             key=f"{key_prefix}-reference-{c}-{token}") for k, c in enumerate(cases)]
+    try:
+        parts = client.gather(futures)
+    except Exception as err:  # the study's own results stand; the estimate says why it is missing
+        log.exception("error estimate: the reference reruns failed")
+        failed = estimate_errors(ours, {**ours, "status": np.full(len(cases), 3, dtype=np.int8)}, cases,
+                                 outputs)
+        return ErrorEstimate(failed.values, failed.worst_case, failed.cases,
+                             {c: f"reference rerun failed: {type(err).__name__}: {err}" for c in cases},
+                             "reference reruns failed")
+    reference = {k: np.concatenate([np.asarray(p[k]) for p in parts]) for k in parts[0]}
+    method = ("nonlinear level, reference integrator (DOP853, rtol 1e-10), sampled at the step each case "
+              "used")
+    return estimate_errors(ours, reference, cases, outputs, method=method)
 
 
 def _counts(arrays: dict[str, np.ndarray]) -> tuple[int, int]:

@@ -16,6 +16,7 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import (
+    AfterValidator,
     BaseModel,
     ConfigDict,
     Discriminator,
@@ -59,25 +60,74 @@ its amplitude to fall by 10^4 (ln 10^4 = 9.2), so a settling time is measured, n
 AUTO_DURATION_CAP = 60.0
 """Longest ``duration: auto``, s."""
 
+MIN_MACHINE_MASS, MAX_MACHINE_MASS = 10.0, 1e5
+"""Machine base mass without stages, kg."""
+MIN_MOUNT_FREQUENCY, MAX_MOUNT_FREQUENCY = 0.5, 60.0
+"""Isolator natural frequency under its load, Hz."""
+MAX_DAMPING_RATIO = 2.0
+"""Isolator damping ratio (1; 200 %)."""
+MIN_STAGE_MASS, MAX_STAGE_MASS = 0.1, 5000.0
+"""Stage moving mass, kg."""
+MIN_STAGE_VELOCITY, MAX_STAGE_VELOCITY = 1e-3, 10.0
+"""Stage velocity, m/s."""
+MIN_STAGE_ACCELERATION, MAX_STAGE_ACCELERATION = 0.01, 50.0
+"""Stage acceleration, m/s^2 (50 m/s^2 is about 5 g)."""
+MIN_STAGE_JERK, MAX_STAGE_JERK = 1.0, 1e5
+"""Stage jerk, m/s^3."""
+MIN_BASE_SIZE, MAX_BASE_SIZE = 0.05, 20.0
+"""Side of a block base, m."""
+MIN_SPAN, MAX_SPAN = 0.05, 20.0
+"""Distance between the mounts of a layout, m."""
+MAX_MOUNT_HEIGHT = 5.0
+"""How far the c.g. may sit above (or below, negative) the mounts of a layout, m."""
+MAX_STAGE_MASS_RATIO = 1.0
+"""The stages together weigh at most this many times the machine base. Stages are point masses: a base
+lighter than its stages leaves the composite body almost without rotational inertia, its rocking modes
+reach kHz, and they shift with the stages' positions faster than the stability guard allows for."""
+# The accepted ranges above (and MIN_DT/MAX_DT) are the ranges tests/engine/test_extremes.py draws scenes
+# from: within them every result is finite and bounded, or flagged unstable/tipping, or refused.
+
+
+
+def _tested_range(low: float, high: float, unit: str) -> AfterValidator:
+    """Refuse a value outside [low, high] (SI): the range tests/engine/test_extremes.py covers."""
+
+    def check(value: float) -> float:
+        if not low <= value <= high:
+            u = f" {unit}" if unit else ""
+            raise ValueError(f"must lie between {low:g}{u} and {high:g}{u} (the range the engine is tested "
+                             f"over), got {value:.6g}{u}")
+        return value
+
+    return AfterValidator(check)
+
+
 PresetName = Literal["active", "air", "elastomer"]
 Name = Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", max_length=64)]
 """Names of stages and points: a letter, then letters, digits or underscores (they appear in parameter
 paths and dataset coordinates)."""
 
 PositiveLength = Annotated[Length, Field(gt=0)]
-PositiveMass = Annotated[Mass, Field(gt=0)]
+BaseSize = Annotated[Length, Field(gt=0), _tested_range(MIN_BASE_SIZE, MAX_BASE_SIZE, "m")]
+Span = Annotated[Length, Field(gt=0), _tested_range(MIN_SPAN, MAX_SPAN, "m")]
+MachineMass = Annotated[Mass, Field(gt=0), _tested_range(MIN_MACHINE_MASS, MAX_MACHINE_MASS, "kg")]
+StageMass = Annotated[Mass, Field(gt=0), _tested_range(MIN_STAGE_MASS, MAX_STAGE_MASS, "kg")]
 PositiveTime = Annotated[Time, Field(gt=0)]
 NonNegativeTime = Annotated[Time, Field(ge=0)]
-PositiveVelocity = Annotated[Velocity, Field(gt=0)]
-PositiveAcceleration = Annotated[Acceleration, Field(gt=0)]
-PositiveJerk = Annotated[Jerk, Field(gt=0)]
-PositiveFrequency = Annotated[Frequency, Field(gt=0)]
+StageVelocity = Annotated[Velocity, Field(gt=0), _tested_range(MIN_STAGE_VELOCITY, MAX_STAGE_VELOCITY, "m/s")]
+StageAcceleration = Annotated[
+    Acceleration, Field(gt=0), _tested_range(MIN_STAGE_ACCELERATION, MAX_STAGE_ACCELERATION, "m/s^2")
+]
+StageJerk = Annotated[Jerk, Field(gt=0), _tested_range(MIN_STAGE_JERK, MAX_STAGE_JERK, "m/s^3")]
+MountFrequency = Annotated[
+    Frequency, Field(gt=0), _tested_range(MIN_MOUNT_FREQUENCY, MAX_MOUNT_FREQUENCY, "Hz")
+]
 NonNegativeFrequency = Annotated[Frequency, Field(ge=0)]
 NonNegativeStiffness = Annotated[Stiffness, Field(ge=0)]
 NonNegativeDamping = Annotated[Damping, Field(ge=0)]
 PositiveDensity = Annotated[Density, Field(gt=0)]
 PositiveInertia = Annotated[Inertia, Field(gt=0)]
-DampingRatio = Annotated[Dimensionless, Field(ge=0)]
+DampingRatio = Annotated[Dimensionless, Field(ge=0), _tested_range(0.0, MAX_DAMPING_RATIO, "")]
 Vec3 = tuple[Length, Length, Length]
 """A position or displacement [x, y, z], m."""
 
@@ -103,7 +153,7 @@ def _check_principal_moments(moments: np.ndarray, field: str) -> None:
 class Block(_Model):
     """A solid rectangular block (the granite base): mass and inertia computed from size and density."""
 
-    size: tuple[PositiveLength, PositiveLength, PositiveLength] = Field(description="[lx, ly, lz], m")
+    size: tuple[BaseSize, BaseSize, BaseSize] = Field(description="[lx, ly, lz], m")
     density: PositiveDensity = Field(description="kg/m^3 (granite: about 2700)")
     corner: Vec3 = Field((0.0, 0.0, 0.0), description="position of the block's minimum corner, m")
 
@@ -122,7 +172,7 @@ class Machine(_Model):
     allowed) or ``inertia_diagonal``; or a ``block`` (size, density, corner) from which all three follow.
     """
 
-    mass: PositiveMass | None = Field(None, description="kg")
+    mass: MachineMass | None = Field(None, description="kg")
     inertia: list[list[Inertia]] | None = Field(None, description="3x3 tensor about the c.g., kg m^2")
     inertia_diagonal: tuple[PositiveInertia, PositiveInertia, PositiveInertia] | None = Field(
         None, description="[Ixx, Iyy, Izz] about the c.g., kg m^2"
@@ -165,6 +215,12 @@ class Machine(_Model):
                 raise ValueError(
                     "machine: give either block or mass/inertia/cg, not both "
                     f"(got block and {sorted(direct)})"
+                )
+            mass = self.block.properties()[0]
+            if not MIN_MACHINE_MASS <= mass <= MAX_MACHINE_MASS:
+                raise ValueError(
+                    f"machine.block: size and density give a mass of {mass:.6g} kg, outside the accepted "
+                    f"{MIN_MACHINE_MASS:g} kg to {MAX_MACHINE_MASS:g} kg"
                 )
             return self
         missing = [k for k in ("mass", "cg") if getattr(self, k) is None]
@@ -239,9 +295,11 @@ class AxisDamping(_Model):
 class Layout(_Model):
     """Four mounts at (cg_x +- span_x/2, cg_y +- span_y/2, cg_z - height) around the machine's c.g."""
 
-    span_x: PositiveLength = Field(description="distance between the mounts along X, m")
-    span_y: PositiveLength = Field(description="distance between the mounts along Y, m")
-    height: Length = Field(description="how far the machine's c.g. sits above the mounts, m")
+    span_x: Span = Field(description="distance between the mounts along X, m")
+    span_y: Span = Field(description="distance between the mounts along Y, m")
+    height: Annotated[Length, _tested_range(-MAX_MOUNT_HEIGHT, MAX_MOUNT_HEIGHT, "m")] = Field(
+        description="how far the machine's c.g. sits above the mounts, m"
+    )
 
     def positions(self, cg: np.ndarray) -> np.ndarray:
         """(4, 3) mount positions, m, for a machine c.g. at ``cg`` (m)."""
@@ -261,8 +319,8 @@ class Mount(_Model):
 
     position: Vec3 = Field(description="point of action, m")
     preset: PresetName | None = None
-    f_vertical: PositiveFrequency | None = None
-    f_horizontal: PositiveFrequency | None = None
+    f_vertical: MountFrequency | None = None
+    f_horizontal: MountFrequency | None = None
     zeta: DampingRatio | None = None
     skyhook: bool | None = None
     k: tuple[NonNegativeStiffness, NonNegativeStiffness, NonNegativeStiffness] | None = Field(
@@ -276,8 +334,8 @@ class Mount(_Model):
 class PresetTuning(_Model):
     """The figures of the model of one isolator type this machine would use (vendor data)."""
 
-    f_vertical: PositiveFrequency | None = None
-    f_horizontal: PositiveFrequency | None = None
+    f_vertical: MountFrequency | None = None
+    f_horizontal: MountFrequency | None = None
     zeta: DampingRatio | None = None
     skyhook: bool | None = None
 
@@ -295,8 +353,8 @@ class Isolators(_Model):
 
     preset: PresetName = "air"
     tuning: dict[PresetName, PresetTuning] = Field(default_factory=dict)
-    f_vertical: PositiveFrequency | None = None
-    f_horizontal: PositiveFrequency | None = None
+    f_vertical: MountFrequency | None = None
+    f_horizontal: MountFrequency | None = None
     zeta: DampingRatio | None = None
     skyhook: bool | None = None
     k: AxisStiffness | None = None
@@ -342,8 +400,8 @@ class TrapezoidProfile(_Model):
 
     type: Literal["trapezoid"]
     travel: Length = Field(description="signed distance along the stage axis, m")
-    velocity: PositiveVelocity
-    acceleration: PositiveAcceleration
+    velocity: StageVelocity
+    acceleration: StageAcceleration
     start: NonNegativeTime = 0.0
 
 
@@ -352,9 +410,9 @@ class SCurveProfile(_Model):
 
     type: Literal["scurve"]
     travel: Length
-    velocity: PositiveVelocity
-    acceleration: PositiveAcceleration
-    jerk: PositiveJerk
+    velocity: StageVelocity
+    acceleration: StageAcceleration
+    jerk: StageJerk
     start: NonNegativeTime = 0.0
 
 
@@ -363,9 +421,9 @@ class ScanProfile(_Model):
 
     type: Literal["scan"]
     travel: Length
-    velocity: PositiveVelocity
-    acceleration: PositiveAcceleration
-    jerk: PositiveJerk | None = None
+    velocity: StageVelocity
+    acceleration: StageAcceleration
+    jerk: StageJerk | None = None
     dwell: NonNegativeTime = 0.0
     repeats: int = Field(1, ge=1, le=1000)
     start: NonNegativeTime = 0.0
@@ -373,9 +431,9 @@ class ScanProfile(_Model):
 
 class MoveSegment(_Model):
     move: Length = Field(description="signed distance, m")
-    velocity: PositiveVelocity
-    acceleration: PositiveAcceleration
-    jerk: PositiveJerk | None = None
+    velocity: StageVelocity
+    acceleration: StageAcceleration
+    jerk: StageJerk | None = None
 
 
 class DwellSegment(_Model):
@@ -422,7 +480,7 @@ class Stage(_Model):
     """A moving mass that travels along a unit axis fixed in the machine (or in its parent stage)."""
 
     name: Name
-    mass: PositiveMass = Field(description="moving mass, kg")
+    mass: StageMass = Field(description="moving mass, kg")
     home: Vec3 = Field(description="the stage's c.g. at home, floor frame, m")
     axis: tuple[Dimensionless, Dimensionless, Dimensionless] = Field(description="travel direction")
     parent: Name | None = Field(None, description="the stage this one rides on (listed earlier)")
@@ -505,7 +563,7 @@ DEFAULT_INTEGRATOR = "rk4"
 DEFAULT_DT = 1e-3
 """Fidelity, integrator and step (s) of a simulation block that names neither them nor an accuracy."""
 MIN_DT = 1e-4
-MAX_DT = 1e-2
+MAX_DT = 5e-2
 """Accepted time steps, s: the range the engine's extreme-scene tests cover."""
 _CHOICE_FIELDS = ("fidelity", "integrator")
 _REQUEST_FIELDS = ("accuracy", "tolerance")
@@ -565,10 +623,10 @@ class Simulation(_Model):
     integrator: Literal["euler", "rk4", "exact", "reference"] | None = Field(
         None, description=f"time integrator (default {DEFAULT_INTEGRATOR}); not with accuracy/tolerance"
     )
-    dt: Annotated[Time, Field(ge=MIN_DT, le=MAX_DT)] | None = Field(
+    dt: Annotated[Time, Field(gt=0), _tested_range(MIN_DT, MAX_DT, "s")] | None = Field(
         None,
-        description=f"time step, s ({MIN_DT * 1e3:g} to {MAX_DT * 1e3:g} ms; default {DEFAULT_DT * 1e3:g} ms); "
-        "with an accuracy request the largest step it may pick",
+        description=f"time step, s ({MIN_DT * 1e3:g} to {MAX_DT * 1e3:g} ms; default "
+        f"{DEFAULT_DT * 1e3:g} ms); with an accuracy request the largest step it may pick",
     )
     accuracy: Literal["fast", "balanced", "reference"] | None = Field(
         None,
@@ -613,10 +671,17 @@ class Simulation(_Model):
             given = {k: getattr(self, k) for k in _CHOICE_FIELDS if getattr(self, k) is not None}
             if given:
                 what = " and ".join(f"{k} {v!r}" for k, v in given.items())
+                kind = "accuracy" if self.accuracy is not None else "tolerance"
                 raise ValueError(
-                    f"simulation.accuracy: an accuracy request ({'accuracy' if self.accuracy else 'tolerance'} "
-                    f"{request!r}) picks the fidelity and integrator itself; give either the request or "
+                    f"simulation.accuracy: an accuracy request ({kind} {request!r}) picks the fidelity and "
+                    f"integrator itself; give either the request or "
                     f"{'/'.join(_CHOICE_FIELDS)}, not both (got {what})"
+                )
+            if not self.gravity_stiffness:
+                raise ValueError(
+                    "simulation.gravity_stiffness: an accuracy request measures against the nonlinear level, "
+                    "which always has the weights' rocking stiffness; gravity_stiffness: false is for the "
+                    "lti and ltv levels named explicitly"
                 )
             # a request overrides a scene's choice as a whole when this block is merged over it
             fields_set.update(_CHOICE_FIELDS)
@@ -630,6 +695,12 @@ class Simulation(_Model):
             if getattr(self, name) is None:  # a default, not an input: it must not override when merged
                 setattr(self, name, default)
                 fields_set.discard(name)
+        if not self.gravity_stiffness and self.fidelity == "nonlinear":
+            raise ValueError(
+                "simulation.gravity_stiffness: the nonlinear level always has the rocking stiffness of the "
+                "weights that tilt with the base (false applies to lti and ltv only); without it a base that "
+                "would tip is not reported as tipping"
+            )
         if self.integrator == "exact" and self.fidelity != "lti":
             raise ValueError(
                 f"simulation.integrator: 'exact' discretisation needs a time-invariant model "
@@ -710,6 +781,14 @@ class Scene(_Model):
         """What only the assembled scene shows: mounts that cannot carry the weight, moves off the base."""
         from studies.scenes import build_batch
 
+        stages = sum(s.mass for s in self.stages)
+        base = self.machine.properties()[0]
+        if stages > MAX_STAGE_MASS_RATIO * base * (1.0 + 1e-12):
+            raise ValueError(
+                f"stages: together they weigh {stages:.6g} kg, more than {MAX_STAGE_MASS_RATIO:g} times the "
+                f"machine base ({base:.6g} kg); stages are point masses, and a base lighter than its stages "
+                "leaves the machine almost without rotational inertia"
+            )
         try:
             build_batch([self])
         except SceneError as err:

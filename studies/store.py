@@ -14,6 +14,9 @@ fails half-way leaves the previous file untouched and removes its temporary file
 
 The catalog opens a fresh connection per call, so one :class:`Store` can be shared between threads;
 listing and filtering run in SQL and never open a netCDF file.
+
+Writing and reading chunks and writing datasets record their durations in the timing journal when one is
+configured (see :func:`studies.fanout.record_timing`).
 """
 
 from __future__ import annotations
@@ -26,6 +29,8 @@ import re
 import shutil
 import sqlite3
 import tempfile
+import threading
+import time
 import uuid
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
@@ -35,6 +40,7 @@ import numpy as np
 import xarray as xr
 
 from studies.dataset import netcdf_encoding
+from studies.fanout import record_timing
 
 STATUSES = ("queued", "running", "done", "failed", "cancelled")
 _ID = re.compile(r"[0-9a-f]{32}")
@@ -131,10 +137,16 @@ def atomic_path(target: Path) -> Iterator[Path]:
     _fsync_dir(target.parent)
 
 
+NETCDF_LOCK = threading.RLock()
+"""Held around every netCDF open, read and write of this process: the netCDF-C and HDF5 libraries are not
+thread-safe (two threads in them at once, even on different files, can crash the process), and the
+service reads and writes datasets from several threads."""
+
+
 def write_netcdf(ds: xr.Dataset, path: str | Path) -> Path:
     """Write ``ds`` to ``path`` atomically (see :func:`atomic_path`), with :func:`netcdf_encoding`."""
     path = Path(path)
-    with atomic_path(path) as tmp:
+    with atomic_path(path) as tmp, NETCDF_LOCK:
         ds.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=netcdf_encoding(ds))
     return path
 
@@ -347,14 +359,18 @@ class Store:
 
     def write_dataset(self, study_id: str, ds: xr.Dataset) -> Path:
         """Write a study's dataset atomically to :meth:`path`."""
-        return write_netcdf(ds, self.path(study_id))
+        t0 = time.perf_counter()
+        path = write_netcdf(ds, self.path(study_id))
+        record_timing("write_dataset", study_id=study_id, seconds=time.perf_counter() - t0,
+                      bytes=path.stat().st_size)
+        return path
 
     def open_dataset(self, study_id: str) -> xr.Dataset:
         """A study's dataset, loaded into memory (the file is closed again). Raises StudyNotFound."""
         path = self.path(study_id)
         if not path.exists():
             raise StudyNotFound(study_id)
-        with xr.open_dataset(path) as ds:
+        with NETCDF_LOCK, xr.open_dataset(path) as ds:
             return ds.load()
 
     def dataset_ids(self) -> list[str]:
@@ -370,15 +386,20 @@ class Store:
         """Save one chunk's result arrays atomically as ``<id>.chunks/<k>.npz`` (no pickled objects)."""
         k = _chunk_index(chunk_index)
         path = self.chunk_dir(study_id) / f"{k}.npz"
+        t0 = time.perf_counter()
         _save_npz(path, arrays)
+        record_timing("save_chunk", study_id=study_id, chunk=k, seconds=time.perf_counter() - t0,
+                      bytes=path.stat().st_size)
         return path
 
     def load_chunks(self, study_id: str) -> dict[int, dict[str, np.ndarray]]:
         """Every saved chunk of a study: chunk index -> arrays."""
+        t0 = time.perf_counter()
         out: dict[int, dict[str, np.ndarray]] = {}
         for k in self.done_chunks(study_id):
             with np.load(self.chunk_dir(study_id) / f"{k}.npz", allow_pickle=False) as z:
                 out[k] = {name: z[name] for name in z.files}
+        record_timing("load_chunks", study_id=study_id, n_chunks=len(out), seconds=time.perf_counter() - t0)
         return out
 
     def done_chunks(self, study_id: str) -> set[int]:
@@ -405,7 +426,9 @@ class Store:
         """Remove a study's per-chunk results and plan."""
         d = self.chunk_dir(study_id)
         if d.exists():
+            t0 = time.perf_counter()
             shutil.rmtree(d)
+            record_timing("clear_chunks", study_id=study_id, seconds=time.perf_counter() - t0)
 
 
 def _chunk_index(k: Any) -> int:

@@ -12,10 +12,11 @@ import math
 from typing import Any
 
 import numpy as np
-from fastapi import APIRouter, Body, HTTPException
-from fastapi.concurrency import run_in_threadpool
+from fastapi import APIRouter, Body, HTTPException, Request
 from pydantic import ValidationError
 
+from service.request_limits import screen_definition
+from service.routes import run_heavy
 from service.routes.studies import CaseColumns, case_table, invalid, validation_details
 from service.schemas import EXAMPLE_COMPARISON, Comparison, ComparisonRequest, ValidationErrorBody
 
@@ -40,6 +41,9 @@ def comparison_study(request: ComparisonRequest) -> Any:
     """The grid study behind a comparison; 422 naming the request field on bad input."""
     from studies.study import Study
 
+    problems = screen_definition({"scene": request.scene, "simulation": request.simulation}, ["body"])
+    if problems:
+        raise HTTPException(status_code=422, detail=problems)
     body: dict[str, Any] = {
         "name": "comparison",
         "scene": request.scene,
@@ -56,6 +60,10 @@ def comparison_study(request: ComparisonRequest) -> Any:
             if d["loc"][1:2] == ["parameters"]:
                 d["loc"] = ["body", "isolator_types"]
         raise HTTPException(status_code=422, detail=details) from None
+    except (OverflowError, RecursionError) as err:
+        raise invalid(
+            ["body", "scene"], f"the scene cannot be computed: {type(err).__name__}: {err}"
+        ) from None
 
 
 def run_comparison(study: Any) -> CaseColumns:
@@ -143,6 +151,7 @@ def comparison_table(table: CaseColumns, study: Any) -> Comparison:
     summary="Compare isolator types on one scene",
 )
 async def compare(
+    http: Request,
     request: ComparisonRequest = Body(
         openapi_examples={
             "three types": {
@@ -155,9 +164,9 @@ async def compare(
     """Run the same machine and stages on each isolator type and answer a side-by-side table: peak
     displacement and rotation per axis, peak isolator force, smallest isolator load and lift-off,
     settling time and natural frequencies, with the best type per column in ``best``."""
-    study = await run_in_threadpool(comparison_study, request)
+    study = await run_heavy(http, comparison_study, request)
     try:
-        table = await run_in_threadpool(run_comparison, study)
+        table = await run_heavy(http, run_comparison, study)
     except ValueError as err:  # a scene the engine refuses under one of the types
         raise invalid(["body", "scene"], str(err)) from None
     if table.n_cases != len(set(request.isolator_types)):

@@ -38,7 +38,8 @@ from pydantic import ValidationError
 
 from service import plots
 from service.jobs import JobQueue
-from service.routes import app_settings
+from service.request_limits import case_count_bound, quantity_problem, screen_definition
+from service.routes import app_settings, run_heavy
 from service.schemas import (
     EXAMPLE_LHS_STUDY,
     EXAMPLE_STUDY,
@@ -55,7 +56,7 @@ from service.schemas import (
     ValidationErrorBody,
 )
 from service.settings import Settings
-from studies.store import Store, StudyNotFound, utc_now
+from studies.store import NETCDF_LOCK, Store, StudyNotFound, utc_now
 
 router = APIRouter(prefix="/studies", tags=["studies"])
 
@@ -65,17 +66,31 @@ INVALID = {422: {"model": ValidationErrorBody, "description": "invalid input; `l
 MAX_CASE_ROWS = 100_000
 """Most rows one ``GET /studies/{id}/cases`` answer holds."""
 MAX_FILTER_CLAUSES = 64
+MAX_CASE_CELLS = 5_000_000
+"""Most values (rows x columns) one ``GET /studies/{id}/cases`` answer holds."""
+MAX_RECORDED_SAMPLES = 2_000_000
+"""Longest time history (samples) a case is recomputed with: about 200 bytes a sample in memory."""
+MAX_RETURNED_SAMPLES = 200_000
+"""Most samples per series one time-series answer holds (``every`` thins them)."""
+MAX_OFFSET = 1_000_000_000
+"""Largest ``offset`` of a listing (SQLite integers stop at 2**63)."""
 StudyId = Annotated[str, PathParam(description="study id (32 hex digits)")]
 
 
 # ------------------------------------------------------------------------------------- dependencies
-def study_store(request: Request) -> Store:
+# The dependencies are coroutines: they only read app state, and a plain function would cost every
+# request a round trip through the thread pool.
+async def study_store(request: Request) -> Store:
     """FastAPI dependency: the app's study store (the job queue's; opened on first use)."""
-    return job_queue(request).store
+    return _jobs(request).store
 
 
-def job_queue(request: Request) -> JobQueue:
+async def job_queue(request: Request) -> JobQueue:
     """FastAPI dependency: the app's study queue (started by the lifespan)."""
+    return _jobs(request)
+
+
+def _jobs(request: Request) -> JobQueue:
     jobs = getattr(request.app.state, "jobs", None)
     if jobs is None:
         raise RuntimeError(
@@ -160,8 +175,19 @@ def summary(row: dict[str, Any]) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------------------------- study objects
-def validate_definition(body: dict[str, Any]) -> Any:
-    """A :class:`studies.study.Study` from a REST body (inline scene only); 422 naming the field."""
+def too_many_cases(n_cases: int, loc: list[str | int], max_cases: int) -> HTTPException:
+    return invalid(
+        loc,
+        f"the study has {n_cases} cases, more than this service's limit of {max_cases} (ISOLAB_MAX_CASES)",
+    )
+
+
+def validate_definition(body: dict[str, Any], max_cases: int | None = None) -> Any:
+    """A :class:`studies.study.Study` from a REST body (inline scene only); 422 naming the field.
+
+    Hostile values (:func:`service.request_limits.screen_definition`) are refused before validation, and
+    so is a study whose case count, read from the raw definition, is above ``max_cases``: its design is
+    never built."""
     from studies.study import Study
 
     if body.get("scene_file") is not None:
@@ -170,10 +196,18 @@ def validate_definition(body: dict[str, Any]) -> Any:
             "scene_file is not read over the API: give the scene inline "
             "under 'scene' (the Python client and `isolab submit` inline it for you)",
         )
+    problems = screen_definition(body, ["body"])
+    if problems:
+        raise HTTPException(status_code=422, detail=problems)
+    bound = case_count_bound(body)
+    if max_cases is not None and bound is not None and bound[0] > max_cases:
+        raise too_many_cases(bound[0], bound[1], max_cases)
     try:
         return Study.model_validate(body)
     except ValidationError as err:
         raise HTTPException(status_code=422, detail=validation_details(err, ["body"])) from None
+    except (OverflowError, RecursionError) as err:  # a number or a structure past what can be computed
+        raise invalid(["body"], f"the definition cannot be computed: {type(err).__name__}: {err}") from None
 
 
 def stored_definition(study: Any) -> dict[str, Any]:
@@ -353,8 +387,9 @@ def _nan_reduce(func: Any, a: np.ndarray) -> np.ndarray:
 
 @functools.lru_cache(maxsize=4)
 def _cached_case_table(path: str, mtime_ns: int, size: int) -> CaseColumns:
-    with xr.open_dataset(path) as ds:
-        return case_table(ds.load())
+    with NETCDF_LOCK, xr.open_dataset(path) as ds:
+        loaded = ds.load()
+    return case_table(loaded)
 
 
 def stored_case_table(store: Store, study_id: str) -> CaseColumns:
@@ -439,6 +474,10 @@ def _filter_value(table: CaseColumns, column: str, op: str, raw: str) -> Any:
         return float(raw)
     if _QUANTITY.match(raw):
         from studies.units import to_si
+
+        problem = quantity_problem(raw)
+        if problem is not None:
+            raise CaseQueryError("filter", f"{where}: {problem}")
 
         dimension = _UNIT_DIMENSION.get(table.units[column])
         if table.units[column] == "N":
@@ -634,7 +673,8 @@ def _csv_cell(v: Any) -> str:
     responses={**INVALID, 413: {"model": MessageBody, "description": "request body too large"}},
     summary="Submit a study",
 )
-def submit_study(
+async def submit_study(
+    request: Request,
     response: Response,
     definition: Annotated[
         dict[str, Any],
@@ -655,9 +695,18 @@ def submit_study(
     jobs: JobQueue = Depends(job_queue),
 ) -> StudyAccepted:
     """Validate the study, store it in the catalog (status queued) and queue it. 202 with its links."""
+    accepted = await run_heavy(request, accept_study, definition, settings, store, jobs)
+    response.headers["Location"] = accepted.links.self
+    return accepted
+
+
+def accept_study(
+    definition: dict[str, Any], settings: Settings, store: Store, jobs: JobQueue
+) -> StudyAccepted:
+    """Validate a study, store it in the catalog (status queued) and queue it (runs in a worker thread)."""
     from studies.runner import isolator_types
 
-    study = validate_definition(definition)
+    study = validate_definition(definition, settings.max_cases)
     n_cases = int(study.n_cases)
     if n_cases > settings.max_cases:
         spec = study.design_spec
@@ -666,11 +715,7 @@ def submit_study(
             if spec.type in ("lhs", "sobol", "random")
             else (["body", "design", "cases"] if spec.type == "list" else ["body", "parameters"])
         )
-        raise invalid(
-            loc,
-            f"the study has {n_cases} cases, more than this service's limit of "
-            f"{settings.max_cases} (ISOLAB_MAX_CASES)",
-        )
+        raise too_many_cases(n_cases, loc, settings.max_cases)
     sim = study.simulation
     study_id = store.create(
         stored_definition(study),
@@ -685,7 +730,6 @@ def submit_study(
         jobs.submit(study_id)
     except RuntimeError as err:  # shutting down: the study stays queued and runs at the next start
         raise HTTPException(status_code=503, detail=str(err)) from None
-    response.headers["Location"] = f"/studies/{study_id}"
     return StudyAccepted(id=study_id, status="queued", n_cases=n_cases, links=links(study_id))
 
 
@@ -701,7 +745,7 @@ def list_studies(
         str | None, Query(description="ISO 8601 time (UTC if no zone), inclusive")
     ] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    offset: Annotated[int, Query(ge=0, le=MAX_OFFSET)] = 0,
     store: Store = Depends(study_store),
 ) -> StudyList:
     """Studies in the catalog, newest first, filtered (all filters must hold)."""
@@ -764,7 +808,9 @@ def get_dataset(study_id: StudyId, store: Store = Depends(study_store)) -> FileR
         raise HTTPException(
             status_code=404, detail=f"study {study_id} is done but its dataset file is missing"
         )
-    filename = f"{re.sub(r'[^A-Za-z0-9_.-]+', '_', row['name'])}-{study_id}.nc"
+    # the study's name is user text: only letters, digits, _ and - reach the suggested file name
+    stem = re.sub(r"[^A-Za-z0-9_-]+", "_", row["name"]).strip("_-")[:100] or "study"
+    filename = f"{stem}-{study_id}.nc"
     return FileResponse(path, media_type="application/x-netcdf", filename=filename)
 
 
@@ -807,7 +853,7 @@ def get_cases(
         ),
     ] = None,
     limit: Annotated[int, Query(ge=1, le=MAX_CASE_ROWS)] = 1000,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    offset: Annotated[int, Query(ge=0, le=MAX_OFFSET)] = 0,
     format: Annotated[Literal["json", "csv"], Query(description="json (default) or csv")] = "json",
     store: Store = Depends(study_store),
 ) -> Any:
@@ -821,6 +867,12 @@ def get_cases(
         cols, rows, matched = select_cases(table, filter, sort, columns, limit, offset)
     except CaseQueryError as err:
         raise invalid(["query", err.param], str(err)) from None
+    if rows.size * len(cols) > MAX_CASE_CELLS:
+        raise invalid(
+            ["query", "limit"],
+            f"limit: {rows.size} rows x {len(cols)} columns is more than {MAX_CASE_CELLS} values; "
+            "ask for fewer rows or columns (offset pages through the rest)",
+        )
     values = {c: json_values(table.data[c][rows], table.kinds[c]) for c in cols}
     if format == "csv":
         buf = io.StringIO()
@@ -863,8 +915,11 @@ class CaseHistory:
     point_names: list[str]
 
 
-def case_history(study: Any, case: int) -> CaseHistory:
-    """Recompute one case with its time histories recorded (runs the engine: call it off the event loop)."""
+def case_history(study: Any, case: int, every: int = 1) -> CaseHistory:
+    """Recompute one case with its time histories recorded (runs the engine: call it off the event loop).
+
+    Refused (422) when the case would record more than :data:`MAX_RECORDED_SAMPLES` samples, or return
+    more than :data:`MAX_RETURNED_SAMPLES` with every ``every``-th kept."""
     from engine import STATUS_NAMES, simulate
 
     sim = study.simulation
@@ -872,6 +927,20 @@ def case_history(study: Any, case: int) -> CaseHistory:
         batch = study.batch([case])
     except ValueError as err:  # a combination of values no scene can have
         raise invalid(["path", "case"], f"case {case} cannot be simulated: {err}") from None
+    if sim.dt is not None:
+        samples = int(math.ceil(float(batch.duration[0]) / float(sim.dt))) + 1
+        if samples > MAX_RECORDED_SAMPLES:
+            raise invalid(
+                ["path", "case"],
+                f"case {case} runs {samples} time steps; time histories are recomputed only for cases of "
+                f"at most {MAX_RECORDED_SAMPLES} (a shorter duration or a longer step)",
+            )
+        if math.ceil(samples / every) > MAX_RETURNED_SAMPLES:
+            raise invalid(
+                ["query", "every"],
+                f"case {case} has {samples} samples; keep at most {MAX_RETURNED_SAMPLES} "
+                f"(every >= {math.ceil(samples / MAX_RETURNED_SAMPLES)})",
+            )
     result = simulate(
         batch,
         fidelity=sim.fidelity,
@@ -1003,7 +1072,8 @@ def history_dataset(study_id: str, case: int, h: CaseHistory, every: int) -> xr.
 def netcdf_bytes(ds: xr.Dataset) -> bytes:
     with tempfile.TemporaryDirectory(prefix="isolab-") as tmp:
         path = Path(tmp) / "case.nc"
-        ds.to_netcdf(path, format="NETCDF4", engine="netcdf4")
+        with NETCDF_LOCK:
+            ds.to_netcdf(path, format="NETCDF4", engine="netcdf4")
         return path.read_bytes()
 
 
@@ -1017,6 +1087,7 @@ def netcdf_bytes(ds: xr.Dataset) -> bytes:
     summary="Time histories of one case (recomputed)",
 )
 async def get_timeseries(
+    request: Request,
     study_id: StudyId,
     case: Annotated[int, PathParam(description="case number (the `case` column of the table)")],
     format: Annotated[Literal["json", "netcdf"], Query()] = "json",
@@ -1025,16 +1096,16 @@ async def get_timeseries(
 ) -> Any:
     """Recompute one case from the stored definition with its histories recorded: time, c.g.
     displacement, base rotation, isolator forces and point displacements (SI, units in the answer)."""
-    study = await run_in_threadpool(_case_study, store, study_id, case)
-    h = await run_in_threadpool(case_history, study, case)
+    study = await run_heavy(request, _case_study, store, study_id, case)
+    h = await run_heavy(request, case_history, study, case, every)
     if format == "netcdf":
-        data = await run_in_threadpool(netcdf_bytes, history_dataset(study_id, case, h, every))
+        data = await run_heavy(request, netcdf_bytes, history_dataset(study_id, case, h, every))
         return Response(
             data,
             media_type="application/x-netcdf",
             headers={"Content-Disposition": f'attachment; filename="{study_id}-case{case}.nc"'},
         )
-    content = await run_in_threadpool(history_json, study_id, case, h, every)
+    content = await run_heavy(request, history_json, study_id, case, h, every)
     return JSONResponse(content)
 
 
@@ -1048,16 +1119,18 @@ PNG = {200: {"content": {"image/png": {}}, "description": "a PNG image"}}
     summary="Figures of one case (PNG)",
 )
 async def get_case_plot(
+    request: Request,
     study_id: StudyId,
     case: Annotated[int, PathParam(description="case number")],
     store: Store = Depends(study_store),
 ) -> Response:
     """C.g. translation (mm), base rotation (mrad) and isolator forces per axis (N) against time, stacked."""
-    study = await run_in_threadpool(_case_study, store, study_id, case)
-    h = await run_in_threadpool(case_history, study, case)
+    study = await run_heavy(request, _case_study, store, study_id, case)
+    h = await run_heavy(request, case_history, study, case)
     params = ", ".join(f"{k}={plots.format_value(v)}" for k, v in h.parameters.items())
     title = f"{study.name} case {case}" + (f" ({params})" if params else "")
-    png = await run_in_threadpool(
+    png = await run_heavy(
+        request,
         plots.case_png, h.time, h.displacement, h.rotation, h.isolator_force, h.isolator_names, title
     )
     return Response(png, media_type="image/png")
@@ -1070,6 +1143,7 @@ async def get_case_plot(
     summary="An output against one or two varied parameters (PNG)",
 )
 async def get_study_plot(
+    request: Request,
     study_id: StudyId,
     y: Annotated[str, Query(description="output column of the case table, e.g. peak_displacement_y")],
     x: Annotated[str, Query(description="a varied parameter, e.g. stage_y_acceleration")],
@@ -1108,7 +1182,8 @@ async def get_study_plot(
         "isolator_type" if "isolator_type" in table.parameters and "isolator_type" not in (x, x2) else None
     )
     how = reduce or ("min" if y.startswith("min_") else "max")
-    png = await run_in_threadpool(
+    png = await run_heavy(
+        request,
         plots.study_png,
         y=plots.Series(y, table.data[y], table.units[y]),
         x=plots.Series(x, table.data[x], table.units[x]),
