@@ -277,8 +277,9 @@ def test_an_interrupted_study_resumes_without_recomputing(client: Client, tmp_pa
         np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=name)
     np.testing.assert_array_equal(a.stage_y_mass.values, np.arange(300.0, 1500.0, 150.0))
     assert (a.status == OK).all()
-    for name in b.data_vars:  # and both equal the engine run directly
-        np.testing.assert_array_equal(a[name].values, direct_dataset(study)[name].values, err_msg=name)
+    direct = direct_dataset(study)
+    for name in direct.data_vars:  # and both equal the engine run directly (estimates are the study's own)
+        np.testing.assert_array_equal(a[name].values, direct[name].values, err_msg=name)
 
 
 def test_a_study_whose_every_chunk_fails_is_marked_failed(client: Client, tmp_path: Path,
