@@ -74,13 +74,18 @@ def lti_forcing_numpy(P, t: np.ndarray) -> np.ndarray:
     return f
 
 
-def numpy_loop(P, n_steps: int) -> float:
-    """Peak |Y| of case 0 by RK4 on the LTI level, written as a plain numpy time loop (m)."""
+def _lti_system(P) -> tuple[np.ndarray, np.ndarray]:
+    """State matrix (12, 12), 1/s, and inverse mass matrix (6, 6) of case 0 on the LTI level."""
     A = np.zeros((12, 12))
     A[:6, 6:] = np.eye(6)
     A[6:, :6] = P.a21[0]
     A[6:, 6:] = P.a22[0]
-    Minv = P.minv[0]
+    return A, P.minv[0]
+
+
+def numpy_loop(P, n_steps: int) -> float:
+    """Peak |Y| of case 0 by RK4 on the LTI level, written as a plain numpy time loop (m)."""
+    A, Minv = _lti_system(P)
     h = DT
     t = np.arange(n_steps + 1) * h
     half = t + 0.5 * h
@@ -103,11 +108,7 @@ def numpy_loop(P, n_steps: int) -> float:
 
 def rk45(P, rtol: float) -> float:
     """Peak |Y| of case 0 on the LTI level by scipy's RK45 at ``rtol``, sampled every DT (m)."""
-    A = np.zeros((12, 12))
-    A[:6, 6:] = np.eye(6)
-    A[6:, :6] = P.a21[0]
-    A[6:, 6:] = P.a22[0]
-    Minv = P.minv[0]
+    A, Minv = _lti_system(P)
 
     def rhs(t, x):
         f = lti_forcing_numpy(P, np.array([t]))[0]
