@@ -189,6 +189,19 @@ def advance_pieces(P, c, t, idx, tol):
 
 
 @njit(cache=True)
+def next_breakpoint(P, c, idx, t_end, tol):
+    """End of the current pieces ``idx`` (m,): the earliest start of a next piece, s; ``t_end`` when none
+    starts before ``t_end - tol``. Fixed-step integrators end a sub-step there, so each sub-step sees one
+    polynomial piece of every profile (a jerk phase shorter than a step is integrated, not sampled)."""
+    nb = t_end
+    K = P.pt.shape[2]
+    for i in range(P.pt.shape[1]):
+        if idx[i] + 1 < K and P.pt[c, i, idx[i] + 1] < nb:
+            nb = P.pt[c, i, idx[i] + 1]
+    return t_end if nb >= t_end - tol else nb
+
+
+@njit(cache=True)
 def stage_state(P, c, t, idx, rho, vr, ar, jr):
     """Stage positions relative to the machine c.g. in the machine frame at time ``t`` (s).
 

@@ -122,6 +122,48 @@ def final_positions(b: SceneBatch) -> np.ndarray:
     return rho
 
 
+def travel_positions(b: SceneBatch, max_corners: int = 8) -> list[np.ndarray]:
+    """Stage placements (each (C, m, 3), m, relative to the machine c.g.) at the ends of their travel.
+
+    Each stage's travel runs between the least and the largest position its profile reaches at a piece
+    start. With ``2^m <= max_corners`` every combination of ends is listed; with more stages, all at one
+    end, all at the other, and each stage alone at either end. Empty when no stage travels. The mass and
+    stiffness of the time-varying levels change with these placements; the stability guard and the
+    tipping check look at each.
+    """
+    m = b.n_stages
+    if m == 0 or b.prof_s.shape[-1] == 0:
+        return []
+    s_lo = np.minimum(b.prof_s.min(axis=-1), 0.0)  # (C, m); a stage rests at 0 before its profile starts
+    s_hi = np.maximum(b.prof_s.max(axis=-1), 0.0)
+    if not np.any(s_hi - s_lo > 0):
+        return []
+    if 2**m <= max_corners:
+        picks = [[(k >> i) & 1 for i in range(m)] for k in range(2**m)]
+    else:
+        picks = [[0] * m, [1] * m]
+        for i in range(m):
+            for end in (0, 1):
+                pick = [None] * m
+                pick[i] = end
+                picks.append(pick)
+    _, rho_h, _ = relative_geometry(b)
+    e = b.stage_axis / np.linalg.norm(b.stage_axis, axis=-1, keepdims=True)
+    out = []
+    for pick in picks:
+        s = np.zeros(s_lo.shape)
+        for i, end in enumerate(pick):
+            if end is not None:
+                s[:, i] = (s_hi if end else s_lo)[:, i]
+        rho = rho_h + s[..., None] * e
+        for i in range(m):
+            p = int(b.stage_parent[i])
+            if p >= 0:
+                rho[:, i] += rho[:, p] - rho_h[:, p]
+        out.append(rho)
+    return out
+
+
 def static_offset(b: SceneBatch, fidelity: str) -> np.ndarray:
     """Static c.g. displacement and rotation (C, 6), m and rad, with the stages parked at their final
     positions: ``K q = (change of the weights' moment)``; the LTI level keeps its stiffness at home."""

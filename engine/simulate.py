@@ -27,6 +27,18 @@ def check_choice(fidelity: str, integrator: str) -> None:
                                        f"not {fidelity!r}")
 
 
+def _divergence_cause(integrator: str, step: float) -> str:
+    """Why a case that passed the stability guard still ran away (the message after "diverged at t")."""
+    where = (f"the base moved more than {peaks.DIVERGED_DISPLACEMENT:g} m or turned more than "
+             f"{peaks.DIVERGED_ROTATION:g} rad")
+    if integrator in ("exact", "reference"):
+        return (f"{where} with the {integrator} integrator, so the scene itself runs away (mounts too soft "
+                "for the load or the stage forces); stiffen or add mounts, or slow the stages")
+    return (f"{where} although the step ({step:.3g} s, {integrator}) is inside the stability limit with the "
+            "stages at home and at the ends of their travel; the scene itself likely runs away (mounts too "
+            "soft for the load or the stage forces): check it with the reference integrator")
+
+
 def simulate(batch: SceneBatch, fidelity: str = "ltv", integrator: str = "rk4", dt: float = 1e-3,
              auto_step: bool = True, record: list[int] | None = None) -> SimulationResult:
     """Simulate every case of ``batch``.
@@ -66,12 +78,26 @@ def simulate(batch: SceneBatch, fidelity: str = "ltv", integrator: str = "rk4", 
         message[c] = ("statically unstable: the rocking stiffness of the weights above the mounts "
                       "exceeds the mounts' own; widen the layout, lower the c.g. or stiffen the mounts")
 
+    # the time-varying levels change mass and gravity stiffness as the stages travel: the guards look at
+    # the stages at the ends of their travel too
+    placements = model.travel_positions(batch) if fidelity != "lti" else []
+    for rho in placements:
+        tips = modal.modes(model.mass_matrix(batch, rho), model.stiffness_matrix(batch, rho), C0).tipping
+        for c in np.flatnonzero(tips & (status == OK)):
+            status[c] = TIPPING
+            message[c] = ("statically unstable with the stages at the ends of their travel: the rocking "
+                          "stiffness of the weights above the mounts exceeds the mounts' own; widen the "
+                          "layout, lower the c.g., shorten the travel or stiffen the mounts")
+
     # stability guard (fixed-step integrators)
     steps = np.full(C, float(dt))
     n_div = np.ones(C, dtype=np.int64)
     if integrator in ("euler", "rk4"):
-        A = modal.state_matrix(M0, K0, C0)
-        n_div = stability.subdivisions(A, dt, integrator)
+        n_div = stability.subdivisions(modal.state_matrix(M0, K0, C0), dt, integrator)
+        for rho in placements:
+            A = modal.state_matrix(model.mass_matrix(batch, rho), model.stiffness_matrix(batch, rho), C0)
+            more = stability.subdivisions(A, dt, integrator)
+            n_div = np.where((n_div == 0) | (more == 0), 0, np.maximum(n_div, more))
         fastest = md.frequency.max(axis=1)
         for c in range(C):
             if status[c] != OK or n_div[c] == 1:
@@ -80,7 +106,7 @@ def simulate(batch: SceneBatch, fidelity: str = "ltv", integrator: str = "rk4", 
                 status[c] = UNSTABLE
                 need = "more than 4096 sub-steps" if n_div[c] == 0 else f"{n_div[c]} sub-steps"
                 message[c] = (f"dt = {dt:.4g} s is past the {integrator} stability limit of the fastest mode "
-                              f"({fastest[c]:.4g} Hz, needs {need}); "
+                              f"({fastest[c]:.4g} Hz at home, needs {need}); "
                               + ("use a smaller dt or the exact integrator" if n_div[c] else
                                  "use the exact integrator"))
                 n_div[c] = 1
@@ -110,11 +136,11 @@ def simulate(batch: SceneBatch, fidelity: str = "ltv", integrator: str = "rk4", 
             continue
         if run_status[c] == 1:
             status[c] = UNSTABLE
-            message[c] = (f"diverged at t = {O.diverged[c]:.4g} s (step {steps[c]:.3g} s, {integrator}); "
-                          "use a smaller dt or another integrator")
+            message[c] = f"diverged at t = {O.diverged[c]:.4g} s: " + _divergence_cause(integrator, steps[c])
         elif run_status[c] == 3:
             status[c] = FAILED
-            message[c] = message[c] or "the mass matrix lost positive definiteness"
+            message[c] = message[c] or ("the mass matrix lost positive definiteness (the base turned "
+                                        "beyond the range the model holds)")
 
     t_end = n_steps * steps
     t_last = batch.last_move_end()

@@ -82,6 +82,15 @@ def simulate(
         fid = fidelity or sim.fidelity
         integ = integrator or sim.integrator
         step = dt or sim.dt
+        reason = None
+        if sim.request is not None and not (fidelity and integrator and dt):
+            # the scene asks for an accuracy: measure the cheapest model that meets it on this scene
+            from studies.accuracy import choose
+            from studies.study import Study
+
+            choice = choose(Study.model_validate({"name": scene.stem, "scene": sc.model_dump(mode="json")}))
+            fid, integ = fidelity or choice.fidelity, integrator or choice.integrator
+            step, reason = dt or choice.dt, choice.reason
         t0 = time.perf_counter()
         result = run(batch, fid, integ, step, auto_step=sim.auto_step, record=[0] if plot else None)
         elapsed = time.perf_counter() - t0
@@ -92,6 +101,8 @@ def simulate(
         "scene": str(scene),
         "fidelity": fid,
         "integrator": integ,
+        "dt": float(step),
+        **({"accuracy": reason} if reason else {}),
         "duration": float(batch.duration[0]),
         "isolators": names["isolators"],
         "points": names["points"],

@@ -29,19 +29,10 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 MAX_JSON_DEPTH = 32
 """Deepest nesting of objects and arrays accepted in a JSON body (a study needs about 8)."""
-MAX_QUANTITY_CHARS = 256
-"""Longest text accepted where a value is expected (``"1.2e6 N/m"``: a few characters)."""
-MAX_EXPONENT = 12.0
-"""Largest power (in magnitude) a quantity's text may raise a number or unit to."""
-MAX_POWERS = 4
-"""Most power operators in one quantity's text (``"kg m^2 s^-2"`` has two)."""
 FREE_TEXT_KEYS = frozenset({"description"})
 """Keys whose string values are prose, never read as quantities (no length or power rule)."""
 SAMPLED_DESIGNS = ("lhs", "sobol", "random")
 
-_POWER = re.compile(r"\*\*|\^")
-_EXPONENT = re.compile(r"\s*[-+]?\s*(\d+(?:\.\d*)?|\.\d+)(?:[eE][-+]?\d+)?")
-_BASE_END = re.compile(r"[A-Za-z0-9_.%µ]\s*$")
 
 
 # ---------------------------------------------------------------------------------------------- bodies
@@ -178,32 +169,11 @@ async def unreadable_body_is_422(request: Request, exc: StarletteHTTPException) 
 
 # ------------------------------------------------------------------------------------------ quantities
 def quantity_problem(text: str) -> str | None:
-    """Why the quantity text ``text`` is refused, or None when it is safe to hand to the units parser.
+    """Why the quantity text ``text`` is refused, or None when it is safe to hand to the units parser: the
+    rules of :func:`studies.units.quantity_text_problem`, and a value no 64-bit float holds (``10**999``)."""
+    from studies.units import quantity_text_problem
 
-    Refused: more than :data:`MAX_QUANTITY_CHARS` characters; more than :data:`MAX_POWERS` power
-    operators (``**`` or ``^``); a power whose exponent is not a plain number of at most
-    :data:`MAX_EXPONENT` in magnitude, is raised again (``9**9**9``) or applies to a bracket; a value
-    no 64-bit float holds (``10**999``).
-    """
-    if len(text) > MAX_QUANTITY_CHARS:
-        return f"longer than {MAX_QUANTITY_CHARS} characters"
-    powers = list(_POWER.finditer(text))
-    if not powers:
-        return None
-    if len(powers) > MAX_POWERS:
-        return f"more than {MAX_POWERS} powers (** or ^)"
-    for op in powers:
-        if not _BASE_END.search(text[: op.start()]):
-            return "a power must follow a number or a unit, not a bracket or an operator"
-        exponent = _EXPONENT.match(text, op.end())
-        if exponent is None:
-            return "an exponent must be a plain number (such as m/s^2 or 10**6)"
-        value = float(exponent.group(0).replace(" ", ""))
-        if abs(value) > MAX_EXPONENT:
-            return f"exponent {exponent.group(0).strip()} is larger than {MAX_EXPONENT:g} in magnitude"
-        if _POWER.match(text[exponent.end() :].lstrip()):
-            return "a power cannot be raised to a power again"
-    return _magnitude_problem(text)
+    return quantity_text_problem(text) or _magnitude_problem(text)
 
 
 def _magnitude_problem(text: str) -> str | None:

@@ -112,8 +112,10 @@ class StudySummary(BaseModel):
     error: str | None = Field(None, description="why the study failed")
     parameters: list[str] = Field(description="names of the varied parameters")
     isolator_types: list[str]
-    fidelity: str | None = None
+    fidelity: str | None = Field(None, description="model fidelity the cases run at (chosen by the runner "
+                                                    "for an accuracy request; null until then)")
     integrator: str | None = None
+    dt: float | None = Field(None, description="integration step the cases run at, s")
     links: StudyLinks
 
 

@@ -430,6 +430,22 @@ def resolved_simulation(study: Any, choice: Choice | None = None) -> Simulation:
     return Simulation.model_validate(data)
 
 
+def resolved_study(study: Any, choice: Choice | None = None) -> Any:
+    """``study`` as it runs: itself when its simulation block is explicit, else the same study with the
+    choice (default: :func:`choose`) written into its simulation block."""
+    if study.simulation.request is None:
+        return study
+    return type(study).model_validate(resolved_definition(study, choice or choose(study)))
+
+
+def recorded_choice(study: Any, fidelity: str | None, integrator: str | None,
+                    dt: float | None) -> Choice | None:
+    """The choice a runner recorded for ``study`` (catalog columns), or None when there is none yet."""
+    if study.simulation.request is None or not (fidelity and integrator and dt):
+        return None
+    return Choice(study.simulation.request, fidelity, integrator, float(dt), reason="recorded by the runner")
+
+
 # ------------------------------------------------------------------------------------------- estimates
 def error_sample(study: Any, n: int = ERROR_SAMPLE, seed: int = 0,
                  limit: int = ERROR_SAMPLE_LIMIT) -> list[int]:

@@ -158,6 +158,7 @@ def run_study(
         study_id = store.create(
             definition, name=study.name, n_cases=n_cases, parameters=list(design.names),
             isolator_types=isolator_types(study), fidelity=sim.fidelity, integrator=sim.integrator,
+            dt=sim.dt,
         )
     row = store.get(study_id)  # exists, and the id is valid
     store.update(study_id, status="running", started=row["started"] or utc_now(), finished=None, error=None)
@@ -172,7 +173,7 @@ def run_study(
         else:
             run_json = json.dumps(resolved_definition(study, choice))
             run = type(study).model_validate(json.loads(run_json))
-            store.update(study_id, fidelity=choice.fidelity, integrator=choice.integrator)
+            store.update(study_id, fidelity=choice.fidelity, integrator=choice.integrator, dt=choice.dt)
         chunks = store.load_chunk_plan(study_id)
         if chunks is None or int(sum(len(c) for c in chunks)) != n_cases:
             store.clear_chunks(study_id)

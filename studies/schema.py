@@ -80,6 +80,12 @@ MIN_SPAN, MAX_SPAN = 0.05, 20.0
 """Distance between the mounts of a layout, m."""
 MAX_MOUNT_HEIGHT = 5.0
 """How far the c.g. may sit above (or below, negative) the mounts of a layout, m."""
+MAX_COORDINATE = 100.0
+"""Largest |coordinate| of a position, m. A machine, its mounts, stages and points sit within 100 m of the
+floor origin; beyond that only typos (mm read as m) reach, and float64 positions lose the sub-micrometre
+resolution the peaks are reported at."""
+MAX_FLOOR_DISPLACEMENT = 0.1
+"""Largest floor displacement (amplitude or sample), m."""
 MAX_STAGE_MASS_RATIO = 1.0
 """The stages together weigh at most this many times the machine base. Stages are point masses: a base
 lighter than its stages leaves the composite body almost without rotational inertia, its rocking modes
@@ -89,17 +95,21 @@ reach kHz, and they shift with the stages' positions faster than the stability g
 
 
 
-def _tested_range(low: float, high: float, unit: str) -> AfterValidator:
-    """Refuse a value outside [low, high] (SI): the range tests/engine/test_extremes.py covers."""
+def _within(low: float, high: float, unit: str, why: str) -> AfterValidator:
+    """Refuse a value outside [low, high] (SI), saying ``why`` the range is what it is."""
 
     def check(value: float) -> float:
         if not low <= value <= high:
             u = f" {unit}" if unit else ""
-            raise ValueError(f"must lie between {low:g}{u} and {high:g}{u} (the range the engine is tested "
-                             f"over), got {value:.6g}{u}")
+            raise ValueError(f"must lie between {low:g}{u} and {high:g}{u} ({why}), got {value:.6g}{u}")
         return value
 
     return AfterValidator(check)
+
+
+def _tested_range(low: float, high: float, unit: str) -> AfterValidator:
+    """Refuse a value outside [low, high] (SI): the range tests/engine/test_extremes.py covers."""
+    return _within(low, high, unit, "the range the engine is tested over")
 
 
 PresetName = Literal["active", "air", "elastomer"]
@@ -128,8 +138,15 @@ NonNegativeDamping = Annotated[Damping, Field(ge=0)]
 PositiveDensity = Annotated[Density, Field(gt=0)]
 PositiveInertia = Annotated[Inertia, Field(gt=0)]
 DampingRatio = Annotated[Dimensionless, Field(ge=0), _tested_range(0.0, MAX_DAMPING_RATIO, "")]
-Vec3 = tuple[Length, Length, Length]
-"""A position or displacement [x, y, z], m."""
+Coordinate = Annotated[
+    Length, _within(-MAX_COORDINATE, MAX_COORDINATE, "m", "coordinates of a machine on its floor")
+]
+Position = tuple[Coordinate, Coordinate, Coordinate]
+"""A position [x, y, z] in the floor frame, m, each coordinate within :data:`MAX_COORDINATE`."""
+FloorDisplacement = Annotated[
+    Length,
+    _within(-MAX_FLOOR_DISPLACEMENT, MAX_FLOOR_DISPLACEMENT, "m", "a floor vibration, not an earthquake"),
+]
 
 
 class _Model(BaseModel):
@@ -155,7 +172,7 @@ class Block(_Model):
 
     size: tuple[BaseSize, BaseSize, BaseSize] = Field(description="[lx, ly, lz], m")
     density: PositiveDensity = Field(description="kg/m^3 (granite: about 2700)")
-    corner: Vec3 = Field((0.0, 0.0, 0.0), description="position of the block's minimum corner, m")
+    corner: Position = Field((0.0, 0.0, 0.0), description="position of the block's minimum corner, m")
 
     def properties(self) -> tuple[float, np.ndarray, np.ndarray]:
         """Mass (kg), inertia about the c.g. (3, 3) kg m^2 and c.g. (3,) m of the block."""
@@ -177,7 +194,7 @@ class Machine(_Model):
     inertia_diagonal: tuple[PositiveInertia, PositiveInertia, PositiveInertia] | None = Field(
         None, description="[Ixx, Iyy, Izz] about the c.g., kg m^2"
     )
-    cg: Vec3 | None = Field(None, description="c.g. position, m")
+    cg: Position | None = Field(None, description="c.g. position, m")
     block: Block | None = None
 
     @field_validator("inertia")
@@ -317,7 +334,7 @@ class Mount(_Model):
     then its overrides, then its own ``preset``; without a preset of its own it takes the group's
     overrides and preset."""
 
-    position: Vec3 = Field(description="point of action, m")
+    position: Position = Field(description="point of action, m")
     preset: PresetName | None = None
     f_vertical: MountFrequency | None = None
     f_horizontal: MountFrequency | None = None
@@ -481,7 +498,7 @@ class Stage(_Model):
 
     name: Name
     mass: StageMass = Field(description="moving mass, kg")
-    home: Vec3 = Field(description="the stage's c.g. at home, floor frame, m")
+    home: Position = Field(description="the stage's c.g. at home, floor frame, m")
     axis: tuple[Dimensionless, Dimensionless, Dimensionless] = Field(description="travel direction")
     parent: Name | None = Field(None, description="the stage this one rides on (listed earlier)")
     profile: Profile
@@ -502,7 +519,7 @@ class Stage(_Model):
 class SineFloor(_Model):
     """Floor displacement amplitude_i sin(2 pi frequency_i t + phase_i) along each floor axis."""
 
-    amplitude: Vec3 = Field(description="m")
+    amplitude: tuple[FloorDisplacement, FloorDisplacement, FloorDisplacement] = Field(description="m")
     frequency: tuple[NonNegativeFrequency, NonNegativeFrequency, NonNegativeFrequency] = Field(
         description="Hz"
     )
@@ -512,9 +529,9 @@ class SineFloor(_Model):
 class RecordedDisplacement(_Model):
     """Sampled floor displacement per axis, m (an axis left out does not move)."""
 
-    x: list[Length] | None = None
-    y: list[Length] | None = None
-    z: list[Length] | None = None
+    x: list[FloorDisplacement] | None = None
+    y: list[FloorDisplacement] | None = None
+    z: list[FloorDisplacement] | None = None
 
     @model_validator(mode="after")
     def _equal_lengths(self) -> RecordedDisplacement:
@@ -726,7 +743,9 @@ class Scene(_Model):
     machine: Machine
     isolators: Isolators
     stages: list[Stage] = Field(default_factory=list)
-    points: dict[Name, Vec3] = Field(default_factory=dict, description="material points of the machine, m")
+    points: dict[Name, Position] = Field(
+        default_factory=dict, description="material points of the machine, m"
+    )
     floor: Floor | None = None
     simulation: Simulation = Field(default_factory=Simulation)
 

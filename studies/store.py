@@ -47,7 +47,7 @@ _ID = re.compile(r"[0-9a-f]{32}")
 _JSON_COLUMNS = ("parameters", "isolator_types", "definition")
 _COLUMNS = (
     "id", "name", "status", "created", "started", "finished", "n_cases", "n_done", "n_failed",
-    "parameters", "isolator_types", "fidelity", "integrator", "error", "definition",
+    "parameters", "isolator_types", "fidelity", "integrator", "dt", "error", "definition",
 )
 _UPDATABLE = frozenset(_COLUMNS) - {"id", "created"}
 
@@ -66,6 +66,7 @@ CREATE TABLE IF NOT EXISTS studies (
     isolator_types TEXT NOT NULL DEFAULT '[]',
     fidelity TEXT,
     integrator TEXT,
+    dt REAL,
     error TEXT,
     definition TEXT NOT NULL
 );
@@ -170,6 +171,9 @@ class Store:
         with self._connect() as con:
             con.execute("PRAGMA journal_mode=WAL")
             con.executescript(_SCHEMA)
+            have = {r["name"] for r in con.execute("PRAGMA table_info(studies)")}
+            if "dt" not in have:  # a catalog written before the step was recorded
+                con.execute("ALTER TABLE studies ADD COLUMN dt REAL")
 
     # ------------------------------------------------------------------------------------- catalog
     @contextlib.contextmanager
@@ -192,6 +196,7 @@ class Store:
         isolator_types: Sequence[str] = (),
         fidelity: str | None = None,
         integrator: str | None = None,
+        dt: float | None = None,
         status: str = "queued",
         created: str | _dt.datetime | None = None,
     ) -> str:
@@ -203,7 +208,8 @@ class Store:
             n_cases: number of cases, >= 0.
             parameters: names of the varied parameters.
             isolator_types: isolator types the study involves.
-            fidelity, integrator: the simulation settings, for filtering.
+            fidelity, integrator, dt: the simulation settings (dt in s); for a study that asks for an
+                accuracy instead, None until the runner has chosen them.
             status: initial status (one of STATUSES).
             created: creation time (default now), ISO 8601 or datetime; naive times are UTC.
         """
@@ -224,6 +230,7 @@ class Store:
             "isolator_types": json.dumps(list(isolator_types)),
             "fidelity": fidelity,
             "integrator": integrator,
+            "dt": None if dt is None else float(dt),
             "definition": (
                 definition if isinstance(definition, str) else json.dumps(definition)
             ),

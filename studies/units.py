@@ -44,6 +44,16 @@ DIMENSIONS: dict[str, tuple[str, str, str]] = {
     "dimensionless": ("", "", "5 %"),
 }
 
+MAX_QUANTITY_CHARS = 256
+"""Longest text accepted where a value is expected (``"1.2e6 N/m"``: a few characters)."""
+MAX_EXPONENT = 12.0
+"""Largest power (in magnitude) a quantity's text may raise a number or unit to."""
+MAX_POWERS = 4
+"""Most power operators in one quantity's text (``"kg m^2 s^-2"`` has two)."""
+
+_POWER = re.compile(r"\*\*|\^")
+_EXPONENT = re.compile(r"\s*[-+]?\s*(\d+(?:\.\d*)?|\.\d+)(?:[eE][-+]?\d+)?")
+_BASE_END = re.compile(r"[A-Za-z0-9_.%µ]\s*$")
 _PINT_DIMENSIONALITY = {name: UREG.get_dimensionality(spec[1]) for name, spec in DIMENSIONS.items()}
 _GRAVITY_TOKEN = re.compile(r"(?<![A-Za-z_])(gn|g)(?![A-Za-z_0-9])")
 
@@ -63,6 +73,35 @@ def _finite(x: float, field: str, value: Any) -> float:
     if not math.isfinite(x):
         raise ValueError(f"{field}: must be a finite number, got {value!r}")
     return x
+
+
+def quantity_text_problem(text: str) -> str | None:
+    """Why the quantity text ``text`` is refused before the units parser reads it, or None.
+
+    The parser computes integer powers exactly, so ``"9**9**9 kg"`` would run for hours. Refused: more than
+    :data:`MAX_QUANTITY_CHARS` characters; more than :data:`MAX_POWERS` power operators (``**`` or ``^``);
+    a power whose exponent is not a plain number of at most :data:`MAX_EXPONENT` in magnitude, is raised
+    again (``9**9**9``) or applies to a bracket.
+    """
+    if len(text) > MAX_QUANTITY_CHARS:
+        return f"longer than {MAX_QUANTITY_CHARS} characters"
+    powers = list(_POWER.finditer(text))
+    if not powers:
+        return None
+    if len(powers) > MAX_POWERS:
+        return f"more than {MAX_POWERS} powers (** or ^)"
+    for op in powers:
+        if not _BASE_END.search(text[: op.start()]):
+            return "a power must follow a number or a unit, not a bracket or an operator"
+        exponent = _EXPONENT.match(text, op.end())
+        if exponent is None:
+            return "an exponent must be a plain number (such as m/s^2 or 10**6)"
+        value = float(exponent.group(0).replace(" ", ""))
+        if abs(value) > MAX_EXPONENT:
+            return f"exponent {exponent.group(0).strip()} is larger than {MAX_EXPONENT:g} in magnitude"
+        if _POWER.match(text[exponent.end() :].lstrip()):
+            return "a power cannot be raised to a power again"
+    return None
 
 
 def _describe(dimension: str) -> str:
@@ -101,6 +140,9 @@ def to_si(value: Any, dimension: str, field: str) -> float:
             plain = None
         if plain is not None:
             return _finite(plain, field, value)
+        problem = quantity_text_problem(text)
+        if problem is not None:
+            raise ValueError(f"{field}: cannot read {value!r} as {_describe(dimension)}: {problem}")
         if dimension in ("acceleration", "jerk"):
             text = _GRAVITY_TOKEN.sub("standard_gravity", text)
         try:
@@ -111,14 +153,19 @@ def to_si(value: Any, dimension: str, field: str) -> float:
         q = value
     else:
         raise ValueError(f"{field}: expected {_describe(dimension)}, got {type(value).__name__} {value!r}")
-    if not isinstance(q, pint.Quantity):  # a bare number such as "2*3"
-        return _finite(float(q), field, value)
     try:
+        if not isinstance(q, pint.Quantity):  # a bare number such as "2*3"
+            return _finite(float(q), field, value)
         magnitude = float(np.asarray(q.magnitude, dtype=float))
-    except (TypeError, ValueError):
+        _finite(magnitude, field, value)
+        base = q.to_base_units()
+        float(np.asarray(base.magnitude, dtype=float))
+    except OverflowError:
+        raise ValueError(f"{field}: {value!r} is too large for a 64-bit float") from None
+    except (TypeError, ValueError) as err:
+        if str(err).startswith(f"{field}:"):
+            raise
         raise ValueError(f"{field}: {value!r} is not a single number") from None
-    _finite(magnitude, field, value)
-    base = q.to_base_units()
     angle_power = dict(base.unit_items()).get("radian", 0)
     expected = _PINT_DIMENSIONALITY[dimension]
     if q.dimensionality != expected:

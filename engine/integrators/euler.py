@@ -2,7 +2,9 @@
 
 Velocities are updated with the accelerations of the old state, positions with the new velocities. First
 order; for an undamped mode stable while ``w dt < 2``, and with damping ratio ``zeta`` while
-``w dt < 2 (sqrt(1 + zeta^2) - zeta)`` (see ``engine.stability``).
+``w dt < 2 (sqrt(1 + zeta^2) - zeta)`` (see ``engine.stability``). A step that contains breakpoints of
+the stage profiles is split there, so each sub-step starts on the piece it spans (a jerk phase shorter
+than a step is not skipped).
 """
 
 from __future__ import annotations
@@ -10,11 +12,29 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from engine.dynamics import NONLINEAR, accel, advance_pieces, kernel_struct, quat_step
+from engine.dynamics import NONLINEAR, accel, advance_pieces, kernel_struct, next_breakpoint, quat_step
 from engine.peaks import observe
 
 ORDER = 1
 LEVELS = ("lti", "ltv", "nonlinear")
+
+
+@njit(cache=True)
+def _step(P, c, level, t, h, x, idx, W, off):
+    """One semi-implicit Euler step of ``h`` s from ``t`` on the pieces ``idx``; False when a mass matrix
+    is singular."""
+    if not accel(P, c, level, t, x, idx, W):
+        return False
+    for i in range(6):
+        x[off + i] += h * W.acc[i]
+    for i in range(3):
+        x[i] += h * x[off + i]
+    if level == NONLINEAR:
+        quat_step(x[3:7], x[off + 3], x[off + 4], x[off + 5], h)
+    else:
+        for i in range(3):
+            x[3 + i] += h * x[off + 3 + i]
+    return True
 
 
 @njit(cache=True, nogil=True)
@@ -38,20 +58,20 @@ def _run(P, level, dt, n_steps, O, W, status):
         tol = 1e-6 * h
         observe(P, c, level, 0.0, x, W, O, 0)
         for k in range(n_steps[c]):
-            t = k * h
-            advance_pieces(P, c, t, idx, tol)
-            if not accel(P, c, level, t, x, idx, W):
+            t_end = (k + 1) * h
+            ta = k * h
+            advance_pieces(P, c, ta, idx, tol)
+            ok = True
+            while True:
+                tb = next_breakpoint(P, c, idx, t_end, tol)
+                ok = _step(P, c, level, ta, tb - ta, x, idx, W, off)
+                if not ok or tb == t_end:
+                    break
+                ta = tb
+                advance_pieces(P, c, ta, idx, tol)
+            if not ok:
                 status[c] = 3
                 break
-            for i in range(6):
-                x[off + i] += h * W.acc[i]
-            for i in range(3):
-                x[i] += h * x[off + i]
-            if level == NONLINEAR:
-                quat_step(x[3:7], x[off + 3], x[off + 4], x[off + 5], h)
-            else:
-                for i in range(3):
-                    x[3 + i] += h * x[off + 3 + i]
             if not observe(P, c, level, (k + 1) * h, x, W, O, k + 1):
                 status[c] = 1
                 break

@@ -1,7 +1,9 @@
 """Classical fourth-order Runge-Kutta at a fixed step.
 
-Each step evaluates the stage profiles on the piece that holds at the step's start, so steps that land
-on the profile's breakpoints keep fourth order. Stable for an undamped mode while ``w dt < 2 sqrt(2)``.
+A step that contains breakpoints of the stage profiles is split there into sub-steps, each on one
+polynomial piece: the forcing is smooth inside every sub-step, so the method keeps fourth order, and a jerk
+phase shorter than the step is integrated over the time it lasts instead of being sampled. Stable for an
+undamped mode while ``w dt < 2 sqrt(2)`` (the sub-steps are shorter, so no less stable).
 """
 
 from __future__ import annotations
@@ -9,11 +11,36 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from engine.dynamics import NONLINEAR, advance_pieces, derivative, kernel_struct
+from engine.dynamics import NONLINEAR, advance_pieces, derivative, kernel_struct, next_breakpoint
 from engine.peaks import observe
 
 ORDER = 4
 LEVELS = ("lti", "ltv", "nonlinear")
+
+
+@njit(cache=True)
+def _step(P, c, level, t, h, x, xs, k1, k2, k3, k4, idx, W):
+    """One RK4 step of ``h`` s from ``t`` on the pieces ``idx``; False when a mass matrix is singular."""
+    nx = x.shape[0]
+    ok = derivative(P, c, level, t, x, idx, W, k1)
+    for i in range(nx):
+        xs[i] = x[i] + 0.5 * h * k1[i]
+    ok &= derivative(P, c, level, t + 0.5 * h, xs, idx, W, k2)
+    for i in range(nx):
+        xs[i] = x[i] + 0.5 * h * k2[i]
+    ok &= derivative(P, c, level, t + 0.5 * h, xs, idx, W, k3)
+    for i in range(nx):
+        xs[i] = x[i] + h * k3[i]
+    ok &= derivative(P, c, level, t + h, xs, idx, W, k4)
+    if not ok:
+        return False
+    for i in range(nx):
+        x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+    if level == NONLINEAR:
+        n = np.sqrt(x[3] ** 2 + x[4] ** 2 + x[5] ** 2 + x[6] ** 2)
+        for i in range(3, 7):
+            x[i] /= n
+    return True
 
 
 @njit(cache=True, nogil=True)
@@ -41,27 +68,20 @@ def _run(P, level, dt, n_steps, O, W, status):
         tol = 1e-6 * h
         observe(P, c, level, 0.0, x, W, O, 0)
         for k in range(n_steps[c]):
-            t = k * h
-            advance_pieces(P, c, t, idx, tol)
-            ok = derivative(P, c, level, t, x, idx, W, k1)
-            for i in range(nx):
-                xs[i] = x[i] + 0.5 * h * k1[i]
-            ok &= derivative(P, c, level, t + 0.5 * h, xs, idx, W, k2)
-            for i in range(nx):
-                xs[i] = x[i] + 0.5 * h * k2[i]
-            ok &= derivative(P, c, level, t + 0.5 * h, xs, idx, W, k3)
-            for i in range(nx):
-                xs[i] = x[i] + h * k3[i]
-            ok &= derivative(P, c, level, t + h, xs, idx, W, k4)
+            t_end = (k + 1) * h
+            ta = k * h
+            advance_pieces(P, c, ta, idx, tol)
+            ok = True
+            while True:
+                tb = next_breakpoint(P, c, idx, t_end, tol)
+                ok = _step(P, c, level, ta, tb - ta, x, xs, k1, k2, k3, k4, idx, W)
+                if not ok or tb == t_end:
+                    break
+                ta = tb
+                advance_pieces(P, c, ta, idx, tol)
             if not ok:
                 status[c] = 3
                 break
-            for i in range(nx):
-                x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
-            if level == NONLINEAR:
-                n = np.sqrt(x[3] ** 2 + x[4] ** 2 + x[5] ** 2 + x[6] ** 2)
-                for i in range(3, 7):
-                    x[i] /= n
             if not observe(P, c, level, (k + 1) * h, x, W, O, k + 1):
                 status[c] = 1
                 break

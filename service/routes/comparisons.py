@@ -19,6 +19,7 @@ from service.request_limits import screen_definition
 from service.routes import run_heavy
 from service.routes.studies import CaseColumns, case_table, invalid, validation_details
 from service.schemas import EXAMPLE_COMPARISON, Comparison, ComparisonRequest, ValidationErrorBody
+from studies.accuracy import resolved_study
 
 router = APIRouter(prefix="/comparisons", tags=["comparisons"])
 
@@ -165,6 +166,8 @@ async def compare(
     displacement and rotation per axis, peak isolator force, smallest isolator load and lift-off,
     settling time and natural frequencies, with the best type per column in ``best``."""
     study = await run_heavy(http, comparison_study, request)
+    # an accuracy request runs (and the answer reports) the model chosen for it
+    study = await run_heavy(http, resolved_study, study)
     try:
         table = await run_heavy(http, run_comparison, study)
     except ValueError as err:  # a scene the engine refuses under one of the types

@@ -170,6 +170,7 @@ def summary(row: dict[str, Any]) -> dict[str, Any]:
         "isolator_types": row["isolator_types"] or [],
         "fidelity": row["fidelity"],
         "integrator": row["integrator"],
+        "dt": row["dt"],
         "links": links(row["id"]),
     }
 
@@ -725,6 +726,7 @@ def accept_study(
         isolator_types=isolator_types(study),
         fidelity=sim.fidelity,
         integrator=sim.integrator,
+        dt=sim.dt,
     )
     try:
         jobs.submit(study_id)
@@ -967,12 +969,26 @@ def case_history(study: Any, case: int, every: int = 1) -> CaseHistory:
 
 
 def _case_study(store: Store, study_id: str, case: int) -> Any:
+    """The study as its cases run (an accuracy request resolved to the model the runner chose)."""
     row = _row(store, study_id)
     if not 0 <= case < row["n_cases"]:
         raise HTTPException(
             status_code=404, detail=f"study {study_id} has no case {case} (cases 0..{row['n_cases'] - 1})"
         )
-    return study_of(row)
+    from studies.accuracy import recorded_choice
+
+    study = study_of(row)
+    if study.simulation.request is None:
+        return study
+    choice = recorded_choice(study, row["fidelity"], row["integrator"], row["dt"])
+    return _resolved(json.dumps(row["definition"], sort_keys=True), choice)
+
+
+@functools.lru_cache(maxsize=16)
+def _resolved(definition: str, choice: Any) -> Any:
+    from studies.accuracy import resolved_study
+
+    return resolved_study(_study_from_json(definition), choice)
 
 
 def _series(a: np.ndarray) -> list[float | None]:

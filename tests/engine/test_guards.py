@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from scenes import mount, pieces_array, scene, vertical_stage, y_stage
+from scenes import mount, pieces_array, scene, trapezoid_pieces, vertical_stage, y_stage
 
 from engine import GRAVITY, SceneError, model, peaks, simulate
 from engine.dynamics import LTI
@@ -61,6 +61,48 @@ def test_guard_refuses_or_subdivides_a_step_past_the_limit(integrator: str, sub_
     np.testing.assert_allclose(ok.min_isolator_load, ref.min_isolator_load, rtol=1e-3)
     # (the tiny, ringing-dominated outputs are not: at w h ~ 1.3 to 2 Euler inflates and RK4 damps the
     # 1 %-damped ringing; roll is off by +72 % / -87 %. A stable step is not an accurate one.)
+
+
+def _stage_to_the_centre():
+    """A 5 t stage on a light (1 t) base travels 2 m in Y from y = 2 m to the c.g.: the inertia in roll
+    falls from 20,000 to 90 kg m^2, so the fastest mode rises from 11 Hz (stage at home) to 34 Hz (at the
+    end of its travel)."""
+    stage = {"mass": 5000.0, "home": (0.0, 2.0, 0.0), "axis": (0.0, -1.0, 0.0),
+             "pieces": trapezoid_pieces(2.0, 1.0, 2.0)}
+    return scene(mass=1000.0, size=(1.0, 1.0, 0.2), span=(0.5, 2.0), k=(1e6, 1e6, 1e6), c=(1e3, 1e3, 1e3),
+                 stages=[stage], duration=5.0)
+
+
+def test_guard_looks_at_the_stages_at_the_ends_of_their_travel() -> None:
+    b = _stage_to_the_centre()
+    assert len(model.travel_positions(b)) == 2  # the stage at either end of its travel
+    A_home = state_matrix(model.mass_matrix(b), model.stiffness_matrix(b), model.damping_matrix(b))
+    assert spectral_radius(step_matrix(A_home, np.array([0.03]), "rk4"))[0] <= 1.0  # stable at home
+    ref = simulate(b, "ltv", "reference", dt=0.03)
+    for integrator, dt in (("rk4", 0.03), ("euler", 0.01)):
+        r = simulate(b, "ltv", integrator, dt=dt)
+        # without the check at the travel's end the run diverged at t = 1.9 s (rk4) and 2.3 s (euler)
+        assert r.status[0] == OK, r.message[0]
+        assert r.dt[0] < dt
+        assert r.peak_rotation[0, 0] == pytest.approx(ref.peak_rotation[0, 0], rel=1e-3)
+    lti = simulate(b, "lti", "rk4", dt=0.03)  # the frozen-mass level keeps the stage at home
+    assert lti.status[0] == OK and lti.dt[0] == 0.03
+
+
+def test_a_stage_that_climbs_too_high_tips_the_time_varying_levels() -> None:
+    # 1 t climbing 2 m on 0.4 m square of soft mounts: weight x height (24.5 kN m at 2.5 m) exceeds the
+    # mounts' rocking stiffness (16 kN m/rad) at the top, not at home (4.9 kN m at 0.5 m)
+    def climb(travel: float):
+        stage = {"mass": 1000.0, "home": (0.0, 0.0, 0.5), "axis": (0.0, 0.0, 1.0),
+                 "pieces": trapezoid_pieces(travel, 1.0, 2.0)}
+        return scene(span=(0.4, 0.4), k=(1e5, 1e5, 1e5), c=(1e3, 1e3, 1e3), stages=[stage], duration=4.0)
+
+    for fidelity, integrator in (("ltv", "rk4"), ("nonlinear", "euler"), ("ltv", "reference")):
+        r = simulate(climb(2.0), fidelity, integrator, dt=1e-3)
+        assert r.status[0] == TIPPING and "ends of their travel" in r.message[0]
+        assert np.isnan(r.peak_displacement[0]).all()
+        assert simulate(climb(0.5), fidelity, integrator, dt=1e-3).status[0] == OK  # 1.0 m: 9.8 kN m
+    assert simulate(climb(2.0), "lti", "exact", dt=1e-3).status[0] == OK  # frozen at home
 
 
 def test_exact_needs_no_guard() -> None:

@@ -216,6 +216,18 @@ CATALOGUE: list[tuple[str, dict, list, str]] = [
         ["body", "scene", "machine", "inertia_diagonal"],
         "triangle inequality",
     ),
+    (
+        "cg-a-kilometre-away",
+        edit(machine(cg=["1.3 km", "2.1 m", "0.17 m"])),
+        ["body", "scene", "machine", "cg", 0],
+        "between -100 m and 100 m",
+    ),
+    (
+        "mount-at-1e300-m",
+        edit(mounts((0.2, 0.3), (2.4, 0.3), (1e300, 3.9))),
+        ["body", "scene", "isolators", "list", 2, "position", 0],
+        "between -100 m and 100 m",
+    ),
     # isolators
     ("two-isolators", edit(mounts((0.2, 0.3), (2.4, 3.9))), ["body", "scene", "isolators"], "at least 3"),
     (

@@ -318,6 +318,36 @@ def test_timeseries_recomputes_the_case(
         assert list(ts.isolator.values) == ["mount_0", "mount_1", "mount_2", "mount_3"]
 
 
+def test_a_study_asking_for_an_accuracy_recomputes_its_cases_with_the_chosen_model(
+    http: TestClient, tmp_path: Path
+) -> None:
+    s = scene(duration="1.5 s")
+    s["simulation"] = {"accuracy": "fast", "duration": "1.5 s"}
+    study = {"name": "api-accuracy", "scene": s,
+             "parameters": [{"path": "isolators.preset", "values": ["air", "elastomer"]}]}
+    r = http.post("/studies", json=study)
+    assert r.status_code == 202, r.text
+    info = wait_done(http, r.json()["id"], timeout=120)
+    assert info["status"] == "done", info
+    assert info["fidelity"] in ("lti", "ltv", "nonlinear") and info["integrator"] and info["dt"] > 0
+    (tmp_path / "a.nc").write_bytes(http.get(f"/studies/{info['id']}/dataset").content)
+    with xr.open_dataset(tmp_path / "a.nc") as ds:
+        assert (ds.attrs["fidelity"], ds.attrs["integrator"]) == (info["fidelity"], info["integrator"])
+        peak_y = float(ds.peak_displacement.sel(isolator_type="elastomer", axis="y"))
+    body = http.get(f"/studies/{info['id']}/cases/1/timeseries").json()
+    assert body["status"] == "ok", body["message"]
+    t = np.array(body["time"])
+    assert np.allclose(np.diff(t), info["dt"])
+    # the recomputed trace is the stored case: same model, same step, same peak
+    assert np.abs(body["displacement"]["y"]).max() == pytest.approx(peak_y, rel=1e-9)
+    # a comparison asking for an accuracy reports and runs the model chosen for it
+    r = http.post("/comparisons", json={"scene": s, "isolator_types": ["air", "elastomer"]})
+    assert r.status_code == 200, r.text
+    sim = r.json()["simulation"]
+    assert sim["fidelity"] in ("lti", "ltv", "nonlinear") and sim["accuracy"] is None and sim["dt"] > 0
+    assert {row["status"] for row in r.json()["rows"].values()} == {"ok"}
+
+
 def test_case_plot_is_a_real_png(http: TestClient, grid: dict) -> None:
     r = http.get(f"/studies/{grid['id']}/cases/2/plot.png")
     assert r.status_code == 200 and r.headers["content-type"] == "image/png"
