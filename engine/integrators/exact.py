@@ -6,6 +6,11 @@ derivatives ``F0..F3`` (and, for a sine floor motion, a harmonic oscillator per 
 whole system autonomous, so one matrix exponential of the augmented matrix gives the exact step map:
 a zero-order hold for a trapezoid (piecewise-constant acceleration), a first-order or higher hold for an
 S-curve. A breakpoint inside a step splits that step. Unconditionally stable; no step-size error.
+
+Inside a piece the forcing derivatives are not recomputed from the stage kinematics at every step: they
+are carried to the next step by the exact Taylor shift of the polynomial (``F0 <- F0 + F1 h + ...``), and
+rebuilt from the kinematics only where a piece begins (and at every step under a recorded floor motion,
+whose samples are breakpoints of their own).
 """
 
 from __future__ import annotations
@@ -14,7 +19,15 @@ import numpy as np
 import scipy.linalg
 from numba import njit
 
-from engine.dynamics import _cross, advance_pieces, kernel_struct, lti_forcing, recorded_floor, stage_state
+from engine.dynamics import (
+    _cross,
+    advance_pieces,
+    kernel_struct,
+    lti_forcing,
+    next_breakpoint,
+    recorded_floor,
+    stage_state,
+)
 from engine.peaks import observe
 
 ORDER = None  # exact
@@ -70,12 +83,37 @@ def augmented(P) -> tuple[np.ndarray, int, int]:
     return Z, deg, osc
 
 
-def step_maps(Z: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """Rows of ``expm(Z h)`` that advance the base's state: (..., 12, N). ``h`` broadcasts over cases."""
+def _expm(Z: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """``expm(Z h)`` (..., N, N); ``h`` broadcasts over the leading axes."""
     A = Z * np.asarray(h)[..., None, None]
     N = A.shape[-1]
-    E = scipy.linalg.expm(A.reshape(-1, N, N)).reshape(A.shape)  # one flat batch: much faster than nd
-    return np.ascontiguousarray(E[..., :12, :])
+    return scipy.linalg.expm(A.reshape(-1, N, N)).reshape(A.shape)  # one flat batch: much faster than nd
+
+
+def _top(E: np.ndarray) -> np.ndarray:
+    """The rows of a step map that advance the base's state, transposed for the kernel: (..., N, 12)."""
+    return np.ascontiguousarray(np.swapaxes(E[..., :12, :], -1, -2))
+
+
+def step_maps(Z: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """The rows of ``expm(Z h)`` that advance the base's state, transposed: (..., N, 12). ``h`` broadcasts
+    over cases."""
+    return _top(_expm(Z, h))
+
+
+def _rest_of_step(E_full: np.ndarray, E_before: np.ndarray) -> np.ndarray:
+    """``expm(Z (h - b)) = expm(Z h) expm(Z b)^-1`` from the full step's map (C, N, N) and the maps of
+    its first parts ``b`` (C, E, N, N): one block-triangular inverse instead of a second exponential.
+
+    The augmented matrix is block upper triangular, ``[[A, G], [0, J]]``, and so are its exponentials:
+    ``[[P, Q], [0, S]]^-1 = [[P^-1, -P^-1 Q S^-1], [0, S^-1]]`` with ``P`` (12, 12) the base's own map."""
+    P_inv = np.linalg.inv(E_before[..., :12, :12])
+    S_inv = np.linalg.inv(E_before[..., 12:, 12:])
+    inv = np.zeros_like(E_before)
+    inv[..., :12, :12] = P_inv
+    inv[..., :12, 12:] = -P_inv @ E_before[..., :12, 12:] @ S_inv
+    inv[..., 12:, 12:] = S_inv
+    return E_full[:, None, :12, :] @ inv
 
 
 def breakpoints(P, dt: np.ndarray, duration: np.ndarray) -> np.ndarray:
@@ -99,13 +137,19 @@ def breakpoints(P, dt: np.ndarray, duration: np.ndarray) -> np.ndarray:
 
 
 def prepare(P, dt: np.ndarray, duration: np.ndarray):
-    """Step maps for the full step and for the split steps around each breakpoint."""
+    """Step maps for the full step and for the split steps around each breakpoint.
+
+    Per breakpoint ``t`` in step ``[k h, (k + 1) h]``: the map from the previous breakpoint of the step (or
+    the step's start) to ``t``, and the map from ``t`` to the step's end, ``expm(Z h) expm(Z (t - k h))^-1``
+    (see :func:`_rest_of_step`). Where ``t`` is the step's only breakpoint both use one exponential.
+    """
     Z, deg, osc = augmented(P)
-    full = step_maps(Z, dt)
+    E_full = _expm(Z, dt)
+    full = _top(E_full)
     ev = breakpoints(P, dt, duration)
     C, E = ev.shape
     before = np.zeros((C, E))
-    after = np.zeros((C, E))
+    offset = np.zeros((C, E))  # from the step's start
     for c in range(C):
         h = dt[c]
         prev = -np.inf
@@ -116,10 +160,16 @@ def prepare(P, dt: np.ndarray, duration: np.ndarray):
             k = np.floor(t / h + 1e-9)
             start = max(k * h, prev)
             before[c, e] = t - start
-            after[c, e] = (k + 1) * h - t
+            offset[c, e] = t - k * h
             prev = t
-    sub_b = step_maps(Z[:, None], before)
-    sub_a = step_maps(Z[:, None], after)
+    E_offset = _expm(Z[:, None], offset)
+    sub_a = _top(_rest_of_step(E_full, E_offset))
+    E_before = E_offset
+    cs, es = np.nonzero(before != offset)  # a second breakpoint in the same step
+    if cs.size:
+        E_before = E_offset.copy()
+        E_before[cs, es] = _expm(Z[cs], before[cs, es])
+    sub_b = _top(E_before)
     return full, ev, sub_b, sub_a, deg, osc
 
 
@@ -179,42 +229,65 @@ def _forcing_poly(P, c, t, idx, W, deg, Fv):
 
 
 @njit(cache=True)
-def _apply(E, x, Fv, osc_on, t, P, c, xn):
-    """``xn = E [x, F, oscillator(t)]`` for one (sub)step map ``E`` (12, N)."""
-    nF = Fv.shape[0]
+def _shift(Fv, deg, h):
+    """Carry the forcing derivatives ``F0..F_deg`` (6 each) of a polynomial piece forward by ``h`` s."""
+    for i in range(6):
+        if deg >= 1:
+            f1 = Fv[6 + i]
+            if deg >= 2:
+                f2 = Fv[12 + i]
+                if deg >= 3:
+                    f3 = Fv[18 + i]
+                    Fv[i] += h * (f1 + h * (0.5 * f2 + h * f3 / 6.0))
+                    Fv[6 + i] = f1 + h * (f2 + 0.5 * h * f3)
+                    Fv[12 + i] = f2 + h * f3
+                else:
+                    Fv[i] += h * (f1 + 0.5 * h * f2)
+                    Fv[6 + i] = f1 + h * f2
+            else:
+                Fv[i] += h * f1
+
+
+@njit(cache=True)
+def _apply(ET, z, osc_on, t, P, c, xn):
+    """``xn = E [x, F, oscillator(t)]`` for one (sub)step map given transposed, ``ET`` (N, 12); ``z``
+    holds ``[x, F]``. Column by column, so the inner loop runs over 12 contiguous numbers (vectorised)."""
+    nz = z.shape[0]
     for i in range(12):
-        s = 0.0
-        for j in range(12):
-            s += E[i, j] * x[j]
-        for j in range(nF):
-            s += E[i, 12 + j] * Fv[j]
-        xn[i] = s
+        xn[i] = 0.0
+    for j in range(nz):
+        zj = z[j]
+        for i in range(12):
+            xn[i] += ET[j, i] * zj
     if osc_on:
-        o = 12 + nF
         for a in range(3):
             arg = P.fomega[c, a] * t + P.fphase[c, a]
             sa, ca = np.sin(arg), np.cos(arg)
             for i in range(12):
-                xn[i] += E[i, o + 2 * a] * sa + E[i, o + 2 * a + 1] * ca
+                xn[i] += ET[nz + 2 * a, i] * sa + ET[nz + 2 * a + 1, i] * ca
 
 
 @njit(cache=True, nogil=True)
 def run_exact(P, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc_on):
     C = dt.shape[0]
     m = P.sm.shape[1]
-    x = np.zeros(12)
+    nF = 6 * (deg + 1)
+    z = np.zeros(12 + nF)  # [x, F0..F_deg]
+    x = z[:12]
+    Fv = z[12:]
     xn = np.zeros(12)
-    Fv = np.zeros(6 * (deg + 1))
     idx = np.zeros(m, dtype=np.int64)
     ne = ev.shape[1]
+    recorded = P.ft.shape[0] > 0
     for c in range(C):
         if status[c] != 0:
             continue
-        x[:] = 0.0
+        z[:] = 0.0
         idx[:] = -1
         h = dt[c]
         tol = 1e-6 * h
         e = 0
+        piece_end = -1.0  # the forcing polynomial in Fv holds until then (s)
         observe(P, c, 0, 0.0, x, W, O, 0)
         for k in range(n_steps[c]):
             t0 = k * h
@@ -224,18 +297,21 @@ def run_exact(P, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc_on)
             while e < ne and ev[c, e] < t1 - tol:
                 advance_pieces(P, c, cur, idx, tol)
                 _forcing_poly(P, c, cur, idx, W, deg, Fv)
-                _apply(sub_b[c, e], x, Fv, osc_on, cur, P, c, xn)
+                _apply(sub_b[c, e], z, osc_on, cur, P, c, xn)
                 x[:] = xn
                 cur = ev[c, e]
                 e += 1
                 split = True
-            advance_pieces(P, c, cur, idx, tol)
-            _forcing_poly(P, c, cur, idx, W, deg, Fv)
+            if split or recorded or cur >= piece_end - tol:
+                advance_pieces(P, c, cur, idx, tol)
+                _forcing_poly(P, c, cur, idx, W, deg, Fv)
+                piece_end = next_breakpoint(P, c, idx, np.inf, tol)
             if split:
-                _apply(sub_a[c, e - 1], x, Fv, osc_on, cur, P, c, xn)
+                _apply(sub_a[c, e - 1], z, osc_on, cur, P, c, xn)
             else:
-                _apply(full[c], x, Fv, osc_on, cur, P, c, xn)
+                _apply(full[c], z, osc_on, cur, P, c, xn)
             x[:] = xn
+            _shift(Fv, deg, t1 - cur)
             if not observe(P, c, 0, t1, x, W, O, k + 1):
                 status[c] = 1
                 break
