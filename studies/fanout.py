@@ -142,13 +142,19 @@ def _study_from_json(definition_json: str):
     return Study.model_validate(json.loads(definition_json))
 
 
-def run_chunk(definition_json: str, indices: Sequence[int] | np.ndarray) -> dict[str, np.ndarray]:
+def run_chunk(definition_json: str, indices: Sequence[int] | np.ndarray, store_root: str | None = None,
+              study_id: str | None = None, chunk_index: int | None = None) -> dict[str, np.ndarray]:
     """Run the cases ``indices`` of the study defined by ``definition_json`` (the worker task).
 
     The engine runs on consecutive batches of at most ``ENGINE_BATCH_CASES`` cases. Deterministic given
     its inputs, so Dask may rerun it elsewhere if a worker dies. Returns the result arrays of
     :func:`studies.dataset.result_arrays` plus ``indices``, and the task's own timings under ``"timing"``
     (float64, in the order of ``TASK_TIMING_FIELDS``).
+
+    With ``store_root``, ``study_id`` and ``chunk_index``, and when this worker sees that store (the study's
+    chunk split is saved there), the task saves the chunk itself (atomically) and returns only
+    ``indices``, ``status`` and ``saved``: the results never travel through the process that runs the
+    study. A worker that does not see the store returns the whole arrays, as without those arguments.
     """
     from engine import simulate
 
@@ -179,6 +185,13 @@ def run_chunk(definition_json: str, indices: Sequence[int] | np.ndarray) -> dict
     arrays = parts[0] if len(parts) == 1 else {name: np.concatenate([p[name] for p in parts])
                                                for name in parts[0]}
     arrays["indices"] = idx
+    if store_root is not None and study_id is not None and chunk_index is not None:
+        from studies.store import Store
+
+        store = Store(store_root, catalog=False)
+        if store.has_chunk_plan(study_id):
+            store.save_chunk(study_id, int(chunk_index), arrays)
+            arrays = {"indices": idx, "status": arrays["status"], "saved": np.array(True)}
     pack += time.perf_counter() - t0
     arrays["timing"] = np.array([task_start, time.time(), prepare, engine_wall, engine_cpu, pack,
                                  float(os.getpid())])
@@ -248,7 +261,8 @@ def run_chunks(
     cancel: threading.Event | None = None,
     *,
     key_prefix: str = "isolab",
-    task: Callable[[str, np.ndarray], dict[str, np.ndarray]] = run_chunk,
+    task: Callable[..., dict[str, np.ndarray]] = run_chunk,
+    store_target: tuple[str, str] | None = None,
 ) -> FanoutReport:
     """Run every chunk not in ``skip`` on ``client`` and hand back each chunk's arrays as it arrives.
 
@@ -257,13 +271,15 @@ def run_chunks(
         definition_json: the study definition as a JSON string.
         chunks: case indices of each chunk (see :func:`plan_chunks`).
         skip: chunk indices already done (not submitted; counted as done for progress).
-        on_chunk: called as ``on_chunk(k, arrays)`` in the calling thread for each finished chunk. A chunk
-            whose task raised (after ``TASK_RETRIES`` retries) arrives as all cases FAILED with the error
-            text as message.
+        on_chunk: called as ``on_chunk(k, arrays)`` in the calling thread for each finished chunk
+            (``arrays`` holds ``saved`` when a worker saved the chunk itself). A chunk whose task raised
+            (after ``TASK_RETRIES`` retries) arrives as all cases FAILED with the error text as message.
         progress: called as ``progress(done_cases, total_cases)`` at the start and after each chunk.
         cancel: when set, outstanding tasks are cancelled and the run returns with ``cancelled`` True.
         key_prefix: Dask task keys are ``<key_prefix>-chunk-<k>-<token>`` (e.g. the study id).
         task: the worker function (default :func:`run_chunk`).
+        store_target: ``(store root, study id)``: workers that see that store save their chunks there
+            themselves, and hand back only the case statuses with ``saved`` set (see :func:`run_chunk`).
 
     Raises:
         FanoutError: every submitted chunk failed.
@@ -289,10 +305,12 @@ def run_chunks(
     futures = {}
     # one call for every chunk (the scheduler queues them all, none waits in a busy worker's own queue),
     # at a priority that puts studies with fewer chunks to run first (see the module docstring)
+    args = [[definition_json] * len(todo), [np.asarray(chunks[k], dtype=np.int64) for k in todo]]
+    if store_target is not None:
+        args += [[str(store_target[0])] * len(todo), [str(store_target[1])] * len(todo), list(todo)]
     submitted = client.map(
-        task, [definition_json] * len(todo), [np.asarray(chunks[k], dtype=np.int64) for k in todo],
-        key=[f"{key_prefix}-chunk-{k}-{token}" for k in todo], pure=False, retries=TASK_RETRIES,
-        priority=-len(todo),
+        task, *args, key=[f"{key_prefix}-chunk-{k}-{token}" for k in todo], pure=False,
+        retries=TASK_RETRIES, priority=-len(todo),
     )
     for k, fut in zip(todo, submitted, strict=True):
         futures[fut] = k

@@ -48,7 +48,7 @@ from studies.accuracy import (
     resolved_definition,
 )
 from studies.dataset import add_error_estimate, from_chunks, result_arrays, to_dataset
-from studies.fanout import choose_chunk_size, plan_chunks, run_chunks
+from studies.fanout import TASK_RETRIES, choose_chunk_size, plan_chunks, run_chunks
 from studies.store import Store, copy_atomic, utc_now
 
 log = logging.getLogger(__name__)
@@ -187,7 +187,8 @@ def run_study(
         counts = {k: _counts(saved[k]) for k in skip}
 
         def on_chunk(k: int, arrays: dict[str, np.ndarray]) -> None:
-            store.save_chunk(study_id, k, arrays)
+            if "saved" not in arrays:  # a worker that does not see the store, or a failed chunk
+                store.save_chunk(study_id, k, arrays)
             counts[k] = _counts(arrays)
             store.update(study_id, n_done=sum(c[0] for c in counts.values()),
                          n_failed=sum(c[1] for c in counts.values()))
@@ -197,15 +198,12 @@ def run_study(
         if skip:
             log.info("study %s: resuming, %d of %d chunks already done", study_id, len(skip), len(chunks))
         report = run_chunks(client, run_json, chunks, skip=skip, on_chunk=on_chunk,
-                            progress=progress, cancel=cancel, key_prefix=f"isolab-{study_id}")
+                            progress=progress, cancel=cancel, key_prefix=f"isolab-{study_id}",
+                            store_target=(str(store.root), study_id))
         if report.cancelled:
             store.update(study_id, status="cancelled", finished=utc_now())
             return study_id
 
-        iso_names, point_names = study_labels(study)
-        result = from_chunks(store.load_chunks(study_id), chunks, n_isolators=len(iso_names),
-                             n_points=len(point_names))
-        estimate = _error_estimate(client, run, run_json, result, f"isolab-{study_id}")
         attrs = {
             "title": f"isolab study {study.name}",
             "study": definition_json,
@@ -215,14 +213,19 @@ def run_study(
             **choice.attrs(),
             "auto_step": bool(sim.auto_step),
         }
-        ds = to_dataset(result, design, isolator_names=iso_names, point_names=point_names, attrs=attrs)
-        ds = add_error_estimate(ds, estimate.values, worst_case=estimate.worst_case, cases=estimate.cases,
-                                excluded=estimate.excluded, method=estimate.method,
-                                meaning=OUTPUT_MEANING, units=OUTPUT_UNITS)
-        store.write_dataset(study_id, ds)
+        # the dataset is assembled and written on a worker that sees the store (the results, the error
+        # estimate's reruns and the netCDF compression stay out of this process), else here
+        future = client.submit(finish_study, str(store.root), study_id, run_json, json.dumps(attrs),
+                               pure=False, retries=TASK_RETRIES,
+                               key=f"isolab-{study_id}-finish-{uuid.uuid4().hex[:8]}")
+        n_failed = _wait(client, future, cancel)
+        if cancel is not None and cancel.is_set():
+            store.update(study_id, status="cancelled", finished=utc_now())
+            return study_id
+        if n_failed is None:
+            n_failed = assemble_dataset(store, study_id, run_json, attrs, client)
         store.clear_chunks(study_id)
-        n_failed = int(np.count_nonzero(result.status != 0))
-        store.update(study_id, status="done", finished=utc_now(), n_done=n_cases, n_failed=n_failed)
+        store.update(study_id, status="done", finished=utc_now(), n_done=n_cases, n_failed=int(n_failed))
         return study_id
     except BaseException as err:
         text = f"{type(err).__name__}: {err}"
@@ -231,6 +234,37 @@ def run_study(
         except Exception:  # the catalog itself failed: report the original error
             log.exception("study %s: could not mark the study failed", study_id)
         raise
+
+
+def assemble_dataset(store: Store, study_id: str, run_json: str, attrs: dict[str, Any], client: Any) -> int:
+    """Build a study's dataset from its saved chunks, add the error estimate (reference reruns on
+    ``client``) and write it atomically; the number of cases that did not end OK."""
+    from studies.fanout import _study_from_json
+
+    run = _study_from_json(run_json)
+    iso_names, point_names = study_labels(run)
+    chunks = store.load_chunk_plan(study_id)
+    result = from_chunks(store.load_chunks(study_id), chunks, n_isolators=len(iso_names),
+                         n_points=len(point_names))
+    estimate = _error_estimate(client, run, run_json, result, f"isolab-{study_id}")
+    ds = to_dataset(result, run.design(), isolator_names=iso_names, point_names=point_names, attrs=attrs)
+    ds = add_error_estimate(ds, estimate.values, worst_case=estimate.worst_case, cases=estimate.cases,
+                            excluded=estimate.excluded, method=estimate.method,
+                            meaning=OUTPUT_MEANING, units=OUTPUT_UNITS)
+    store.write_dataset(study_id, ds)
+    return int(np.count_nonzero(result.status != 0))
+
+
+def finish_study(store_root: str, study_id: str, run_json: str, attrs_json: str) -> int | None:
+    """The Dask task that finishes a study on a worker (:func:`assemble_dataset`, its reference reruns
+    submitted from the task); None when this worker does not see the store, so the runner finishes."""
+    from dask.distributed import worker_client
+
+    store = Store(store_root, catalog=False)
+    if not store.has_chunk_plan(study_id):
+        return None
+    with worker_client() as client:
+        return assemble_dataset(store, study_id, run_json, json.loads(attrs_json), client)
 
 
 def _wait(client: Any, future: Any, cancel: threading.Event | None) -> Any:

@@ -163,11 +163,16 @@ def copy_atomic(source: str | Path, target: str | Path) -> Path:
 class Store:
     """netCDF files and the SQLite catalog under ``root`` (created if missing)."""
 
-    def __init__(self, root: str | Path):
+    def __init__(self, root: str | Path, *, catalog: bool = True):
+        """Open (or create) the store under ``root``. With ``catalog=False`` only the files are used (a
+        Dask worker that saves chunks and writes datasets): nothing is created, the catalog is not
+        opened."""
         self.root = Path(root).resolve()
         self.studies_dir = self.root / "studies"
-        self.studies_dir.mkdir(parents=True, exist_ok=True)
         self.catalog_path = self.root / "catalog.sqlite"
+        if not catalog:
+            return
+        self.studies_dir.mkdir(parents=True, exist_ok=True)
         with self._connect() as con:
             con.execute("PRAGMA journal_mode=WAL")
             con.executescript(_SCHEMA)
@@ -420,6 +425,11 @@ class Store:
         """Save how a study's cases are split into chunks (so a resumed run splits them the same way)."""
         _save_npz(self.chunk_dir(study_id) / "plan.npz",
                   {f"c{k}": np.asarray(c, dtype=np.int64) for k, c in enumerate(chunks)})
+
+    def has_chunk_plan(self, study_id: str) -> bool:
+        """Whether this process sees the saved chunk split of a study: a Dask worker that does shares the
+        store with the runner, and saves chunks and writes the dataset itself."""
+        return (self.chunk_dir(study_id) / "plan.npz").is_file()
 
     def load_chunk_plan(self, study_id: str) -> list[np.ndarray] | None:
         """The saved chunk split of a study, or None."""

@@ -100,9 +100,19 @@ def test_a_worker_killed_mid_chunk_is_replaced_and_the_study_completes(app_clien
 
 # study definitions that pass validation and fail when the chunks run
 ENGINE_REFUSES = {
-    "a point farther than the engine's 100 m": {
-        "name": "far-point",
-        "scene": quick_scene() | {"points": {"tool": [1.3, 0.6, 0.6], "far": ["150 m", 0, 0]}},
+    "mounts farther than the engine's 100 m": {
+        # every position given is within the schema's 100 m; the mounts the layout puts around the
+        # block's c.g. (x = 99.3 m +- 1.1 m) are not
+        "name": "far-mounts",
+        "scene": quick_scene() | {
+            "machine": {"block": {"size": ["2.6 m", "4.2 m", "0.34 m"], "density": "2700 kg/m^3",
+                                  "corner": ["98 m", 0, 0]}},
+            "stages": [{"name": "y", "mass": "1000 kg", "home": ["99.3 m", "0.6 m", "0.47 m"],
+                        "axis": [0, 1, 0],
+                        "profile": {"type": "trapezoid", "travel": "3 m", "velocity": "2 m/s",
+                                    "acceleration": "2 g"}}],
+            "points": {"tool": ["99.3 m", 0.6, 0.6]},
+        },
     },
     "combinations no mount can carry (above the dry-run size)": {
         "name": "combinations",

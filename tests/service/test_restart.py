@@ -56,7 +56,8 @@ def test_restart_mid_study_resumes_and_loses_nothing(tmp_path: Path) -> None:
     saved = store.load_chunks(sid)
     plan = store.load_chunk_plan(sid)
     assert saved and plan is not None and len(saved) < len(plan)
-    assert 0 < row["n_done"] == sum(len(a["status"]) for a in saved.values()) < N
+    # (workers save their chunks themselves: one running at the shutdown may land after the last count)
+    assert 0 < row["n_done"] <= sum(len(a["status"]) for a in saved.values()) < N
     # mark the saved chunks: a resumed run keeps them, a rerun from scratch would overwrite the mark
     kept = []
     for k, arrays in saved.items():
