@@ -56,10 +56,14 @@ log = logging.getLogger(__name__)
 Progress = Callable[[int, int], None]
 
 # Engine cost model for the chunk size: seconds per case = fixed cost + steps x cost per step, measured
-# on one core for a 4-mount, 1-stage scene (rk4 ~8 us/step, exact ~2 us/step, fidelity matters little).
+# on one core for the article's scene (`python -m benchmarks kernels`: euler 0.6-1.0 us/step, rk4 1.9-3.0,
+# exact 0.4 plus ~1 ms per case for its step maps); fidelity matters little.
 _CASE_OVERHEAD_S = 1e-3
-_STEP_COST_S = {"euler": 3e-6, "rk4": 8e-6, "exact": 2e-6, "reference": 25e-6}
+_STEP_COST_S = {"euler": 0.9e-6, "rk4": 2.7e-6, "exact": 0.5e-6, "reference": 25e-6}
 _FIDELITY_FACTOR = {"lti": 1.0, "ltv": 1.0, "nonlinear": 1.2}
+FINISH_ON_WORKER_CASES = 2000
+"""Studies of at least this many cases are assembled and written by a worker that sees the store; smaller
+ones here (a few milliseconds, and one task fewer to wait for behind a large study's chunks)."""
 
 
 def estimate_seconds_per_case(study: Any) -> float:
@@ -213,15 +217,17 @@ def run_study(
             **choice.attrs(),
             "auto_step": bool(sim.auto_step),
         }
-        # the dataset is assembled and written on a worker that sees the store (the results, the error
-        # estimate's reruns and the netCDF compression stay out of this process), else here
-        future = client.submit(finish_study, str(store.root), study_id, run_json, json.dumps(attrs),
-                               pure=False, retries=TASK_RETRIES,
-                               key=f"isolab-{study_id}-finish-{uuid.uuid4().hex[:8]}")
-        n_failed = _wait(client, future, cancel)
-        if cancel is not None and cancel.is_set():
-            store.update(study_id, status="cancelled", finished=utc_now())
-            return study_id
+        # a large study's dataset is assembled and written on a worker that sees the store (the results,
+        # the error estimate's reruns and the netCDF compression stay out of this process), else here
+        n_failed = None
+        if n_cases >= FINISH_ON_WORKER_CASES:
+            future = client.submit(finish_study, str(store.root), study_id, run_json, json.dumps(attrs),
+                                   pure=False, retries=TASK_RETRIES,
+                                   key=f"isolab-{study_id}-finish-{uuid.uuid4().hex[:8]}")
+            n_failed = _wait(client, future, cancel)
+            if cancel is not None and cancel.is_set():
+                store.update(study_id, status="cancelled", finished=utc_now())
+                return study_id
         if n_failed is None:
             n_failed = assemble_dataset(store, study_id, run_json, attrs, client)
         store.clear_chunks(study_id)

@@ -26,9 +26,10 @@ from studies.fanout import (
     FanoutError,
     choose_chunk_size,
     plan_chunks,
+    run_chunk,
     run_chunks,
 )
-from studies.runner import make_client, run_local, run_study, study_labels
+from studies.runner import finish_study, make_client, run_local, run_study, study_labels
 from studies.store import Store
 from studies.study import load_study
 
@@ -75,11 +76,11 @@ def test_plan_chunks_is_deterministic_and_covers_every_case_once() -> None:
 
 
 @pytest.mark.parametrize(("n", "workers", "spc", "size"), [
-    (1_000_000, 2, 1e-3, 30_000),  # huge study: capped at 30 s of work per chunk
+    (1_000_000, 2, 1e-3, 5_000),   # huge study: capped at 5 s of work per chunk
     (1000, 2, 0.01, 125),          # 10 s of work: 8 chunks of 1.25 s (4 per worker)
     (400, 2, 0.01, 100),           # 4 s: 1 s chunks, 4 of them (2 per worker)
     (10, 2, 0.01, 5),              # 0.1 s: one chunk per worker
-    (100, 2, 0.5, 12),             # 50 s: 9 chunks of 6 s
+    (100, 2, 0.5, 10),             # 50 s: 10 chunks of 5 s (the cap)
     (5, 8, 100.0, 1),              # fewer cases than workers: one case per chunk
 ])
 def test_chunk_size_rule(n: int, workers: int, spc: float, size: int) -> None:
@@ -329,3 +330,43 @@ def test_run_local_writes_the_dataset_file(tmp_path: Path) -> None:
     f1 = back.natural_frequency.sel(mode=1, stage_y_mass=500)
     assert float(f1.sel(isolator_type="active")) < float(f1.sel(isolator_type="air")) < float(
         f1.sel(isolator_type="elastomer"))
+
+
+def test_a_worker_saves_its_chunk_only_where_it_sees_the_store(tmp_path: Path) -> None:
+    # a worker on another machine (no such store there) hands the whole result back, as without a store
+    study = load_study(small_study(integrator="exact", duration="1 s"))
+    definition_json = json.dumps(study.model_dump(mode="json"))
+    store = Store(tmp_path)
+    sid = store.create(study.model_dump(mode="json"), name="s", n_cases=study.n_cases)
+    idx = np.array([0, 1], dtype=np.int64)
+    unseen = run_chunk(definition_json, idx, str(tmp_path / "elsewhere"), sid, 0)
+    assert "saved" not in unseen and "peak_displacement" in unseen
+    assert run_chunk(definition_json, idx, str(tmp_path), sid, 0).keys() == unseen.keys()  # no plan yet
+    assert not store.done_chunks(sid)
+    # with the split saved, the worker writes the chunk and returns the statuses only
+    store.save_chunk_plan(sid, [idx, np.arange(2, study.n_cases)])
+    seen = run_chunk(definition_json, idx, str(tmp_path), sid, 0)
+    assert set(seen) == {"indices", "status", "saved", "timing"} and bool(seen["saved"])
+    on_disk = store.load_chunks(sid)[0]
+    for name in unseen:
+        if name != "timing":
+            np.testing.assert_array_equal(on_disk[name], unseen[name], err_msg=name)
+    assert finish_study(str(tmp_path / "elsewhere"), sid, definition_json, "{}") is None
+
+
+def test_a_large_study_is_finished_by_a_worker(client: Client, tmp_path: Path, monkeypatch) -> None:
+    # the threshold lowered to this small study; finishing here would fail, so the dataset comes from a
+    # worker (another process, which the patch does not reach), and it equals the engine's direct run
+    monkeypatch.setattr(runner, "FINISH_ON_WORKER_CASES", 1)
+    monkeypatch.setattr(runner, "assemble_dataset", lambda *a, **k: pytest.fail("finished in the runner"))
+    study = load_study(small_study(integrator="exact", duration="1 s"))
+    store = Store(tmp_path)
+    sid = run_study(study, store, client, chunk_size=2)
+    row = store.get(sid)
+    assert (row["status"], row["n_done"]) == ("done", study.n_cases)
+    assert not store.chunk_dir(sid).exists()
+    ds, direct = store.open_dataset(sid), direct_dataset(study)
+    for name in direct.data_vars:
+        np.testing.assert_array_equal(ds[name].values, direct[name].values, err_msg=name)
+    # the error estimate's reference reruns ran from the worker's task too
+    assert json.loads(ds.attrs["error_estimate_cases"]) and "DOP853" in ds.attrs["error_estimate_method"]
