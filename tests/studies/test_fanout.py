@@ -351,13 +351,12 @@ def test_a_worker_saves_its_chunk_only_where_it_sees_the_store(tmp_path: Path) -
     for name in unseen:
         if name != "timing":
             np.testing.assert_array_equal(on_disk[name], unseen[name], err_msg=name)
-    assert finish_study(str(tmp_path / "elsewhere"), sid, definition_json, "{}") is None
+    assert finish_study(str(tmp_path / "elsewhere"), sid, definition_json, "{}", None) is None
 
 
-def test_a_large_study_is_finished_by_a_worker(client: Client, tmp_path: Path, monkeypatch) -> None:
-    # the threshold lowered to this small study; finishing here would fail, so the dataset comes from a
-    # worker (another process, which the patch does not reach), and it equals the engine's direct run
-    monkeypatch.setattr(runner, "FINISH_ON_WORKER_CASES", 1)
+def test_a_study_is_finished_by_a_worker(client: Client, tmp_path: Path, monkeypatch) -> None:
+    # finishing here would fail, so the dataset comes from a worker (another process, which the patch
+    # does not reach), and it equals the engine's direct run
     monkeypatch.setattr(runner, "assemble_dataset", lambda *a, **k: pytest.fail("finished in the runner"))
     study = load_study(small_study(integrator="exact", duration="1 s"))
     store = Store(tmp_path)
