@@ -32,6 +32,8 @@ from engine.peaks import observe
 
 ORDER = None  # exact
 LEVELS = ("lti",)
+PREPARE_BLOCK = 256
+"""Cases whose full split-step exponentials are held at once while the step maps are prepared."""
 
 
 def _degree(P) -> int:
@@ -162,14 +164,17 @@ def prepare(P, dt: np.ndarray, duration: np.ndarray):
             before[c, e] = t - start
             offset[c, e] = t - k * h
             prev = t
-    E_offset = _expm(Z[:, None], offset)
-    sub_a = _top(_rest_of_step(E_full, E_offset))
-    E_before = E_offset
-    cs, es = np.nonzero(before != offset)  # a second breakpoint in the same step
-    if cs.size:
-        E_before = E_offset.copy()
-        E_before[cs, es] = _expm(Z[cs], before[cs, es])
-    sub_b = _top(E_before)
+    N = Z.shape[-1]
+    sub_b = np.empty((C, E, N, 12))
+    sub_a = np.empty((C, E, N, 12))
+    for lo in range(0, C, PREPARE_BLOCK):  # the full (N, N) maps only for a block of cases at a time
+        blk = slice(lo, min(lo + PREPARE_BLOCK, C))
+        E_offset = _expm(Z[blk, None], offset[blk])
+        sub_a[blk] = _top(_rest_of_step(E_full[blk], E_offset))
+        cs, es = np.nonzero(before[blk] != offset[blk])  # a second breakpoint in the same step
+        if cs.size:
+            E_offset[cs, es] = _expm(Z[blk][cs], before[blk][cs, es])
+        sub_b[blk] = _top(E_offset)
     return full, ev, sub_b, sub_a, deg, osc
 
 

@@ -297,3 +297,19 @@ def test_a_jerk_phase_shorter_than_the_step_is_integrated_not_sampled(integrator
     got = simulate(b, level, integrator, dt=5e-3).peak_displacement[0, 1]
     # rk4 is fourth order inside each piece; euler is first order on the 5 ms step after the move
     assert got == pytest.approx(ref, rel={"rk4": 1e-6, "exact": 1e-8, "euler": 2e-3}[integrator])
+
+
+def test_exact_step_maps_are_prepared_in_blocks_without_changing_a_case() -> None:
+    # more cases than one preparation block, with several breakpoints inside one step: every case of the
+    # batch gets the numbers it gets alone
+    from engine import concat
+    from engine.integrators import exact
+
+    stage = {"mass": 1000.0, "home": (0.0, -1.5, 0.3), "axis": (0.0, 1.0, 0.0),
+             "pieces": pieces_array(scurve(1e-3, 1.9, 8.0, 25_000.0))}
+    one = scene(stages=[stage], duration=0.5)
+    alone = simulate(one, "lti", "exact", dt=5e-3)
+    many = simulate(concat([one] * (exact.PREPARE_BLOCK + 7)), "lti", "exact", dt=5e-3)
+    for name in ("peak_displacement", "peak_rotation", "peak_isolator_force", "settling_time"):
+        got, want = getattr(many, name), getattr(alone, name)
+        np.testing.assert_array_equal(got, np.repeat(want, exact.PREPARE_BLOCK + 7, axis=0), err_msg=name)
