@@ -49,13 +49,13 @@ CANDIDATE_PAIRS = (
 """Fidelity/integrator pairs the chooser tries, cheapest level first (the order breaks cost ties)."""
 REFERENCE_PAIR = ("nonlinear", "reference")
 STEP_COST: dict[tuple[str, str], float] = {
-    ("lti", "euler"): 0.57e-6,
-    ("lti", "exact"): 0.72e-6,
-    ("lti", "rk4"): 1.7e-6,
-    ("ltv", "euler"): 0.76e-6,
-    ("ltv", "rk4"): 2.6e-6,
-    ("nonlinear", "euler"): 0.83e-6,
-    ("nonlinear", "rk4"): 2.7e-6,
+    ("lti", "euler"): 0.65e-6,
+    ("lti", "exact"): 0.47e-6,
+    ("lti", "rk4"): 2.24e-6,
+    ("ltv", "euler"): 1.05e-6,
+    ("ltv", "rk4"): 3.28e-6,
+    ("nonlinear", "euler"): 1.10e-6,
+    ("nonlinear", "rk4"): 3.19e-6,
 }
 """Engine time per step of one case, s, batched, on the article scene (``isolab bench accuracy`` prints the
 current figures). Only the ranking of candidates depends on it."""
