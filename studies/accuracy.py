@@ -61,8 +61,9 @@ STEP_COST: dict[tuple[str, str], float] = {
 current figures). Only the ranking of candidates depends on it."""
 PILOT_MARGIN = 0.5
 """A candidate must meet this fraction of the tolerance on the pilot cases: the other cases of a study
-can err more (on the isolator-comparison example, balanced without a margin erred 0.79 % on a case the
-pilot did not hold, 0.39 % on those it did)."""
+can err more (on the isolator-comparison example, before the fixed-step integrators split steps at profile
+breakpoints, balanced without a margin erred 0.79 % on a case the pilot did not hold, 0.39 % on those it
+did)."""
 PILOT_LIMIT = 4
 """Most pilot cases the chooser measures on."""
 SCREEN_LIMIT = 48
