@@ -27,7 +27,7 @@ test: $(STAMP)
 	$(PY) -m pytest -q
 
 # The performance figures (docs/performance.md): the engine on one core against a numpy loop and solve_ivp,
-# then 10,000- and 100,000-case studies through a real `isolab serve` (about 10 minutes on an idle machine).
+# then 10,000- and 100,000-case studies through a real `isolab serve` (about 15 minutes on an idle machine).
 bench: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m benchmarks kernels
 	$(PY) -m benchmarks endtoend

@@ -149,7 +149,7 @@ def main(argv: list[str]) -> None:
 
     ap = argparse.ArgumentParser(prog="python -m benchmarks kernels")
     ap.add_argument("--big", type=int, default=10_000, help="cases in the large batch of lti/exact")
-    ap.add_argument("--others", type=int, default=1000, help="cases in the large batch of the other pairs")
+    ap.add_argument("--others", type=int, default=10_000, help="cases in the large batch of the other pairs")
     ap.add_argument("--repeat", type=int, default=3)
     a = ap.parse_args(argv)
     one = article_batch()

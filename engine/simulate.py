@@ -80,10 +80,10 @@ def simulate(batch: SceneBatch, fidelity: str = "ltv", integrator: str = "rk4", 
 
     # the time-varying levels change mass and gravity stiffness as the stages travel: the guards look at
     # the stages at the ends of their travel too
-    placements = model.travel_positions(batch) if fidelity != "lti" else []
-    for rho in placements:
-        tips = modal.modes(model.mass_matrix(batch, rho), model.stiffness_matrix(batch, rho), C0).tipping
-        for c in np.flatnonzero(tips & (status == OK)):
+    placed = [(model.mass_matrix(batch, rho), model.stiffness_matrix(batch, rho))
+              for rho in (model.travel_positions(batch) if fidelity != "lti" else [])]
+    for M, K in placed:
+        for c in np.flatnonzero(modal.modes(M, K, C0).tipping & (status == OK)):
             status[c] = TIPPING
             message[c] = ("statically unstable with the stages at the ends of their travel: the rocking "
                           "stiffness of the weights above the mounts exceeds the mounts' own; widen the "
@@ -94,9 +94,8 @@ def simulate(batch: SceneBatch, fidelity: str = "ltv", integrator: str = "rk4", 
     n_div = np.ones(C, dtype=np.int64)
     if integrator in ("euler", "rk4"):
         n_div = stability.subdivisions(modal.state_matrix(M0, K0, C0), dt, integrator)
-        for rho in placements:
-            A = modal.state_matrix(model.mass_matrix(batch, rho), model.stiffness_matrix(batch, rho), C0)
-            more = stability.subdivisions(A, dt, integrator)
+        for M, K in placed:
+            more = stability.subdivisions(modal.state_matrix(M, K, C0), dt, integrator)
             n_div = np.where((n_div == 0) | (more == 0), 0, np.maximum(n_div, more))
         fastest = md.frequency.max(axis=1)
         for c in range(C):
