@@ -16,6 +16,7 @@ import httpx
 import numpy as np
 import pytest
 import xarray as xr
+from dask.distributed import WorkerPlugin
 from fastapi.testclient import TestClient
 from live_service import ServiceProcess, quick_scene, wait_finished
 
@@ -95,6 +96,44 @@ def test_a_worker_killed_mid_chunk_is_replaced_and_the_study_completes(app_clien
     assert pid not in after.values() and len(after) == 2  # the nanny started a new worker process
     ds = Store(data).open_dataset(sid)
     check_every_case_once(ds, definition, [0, N // 3, N - 1])
+    assert not Store(data).chunk_dir(sid).exists()
+
+
+class KillOnFinish(WorkerPlugin):
+    """Kills its worker process (SIGKILL) when the worker starts a study's finishing task, once: the marker
+    file says it happened (the nanny's new worker gets the plugin too, and must let the rerun through)."""
+
+    name = "kill-on-finish"
+
+    def __init__(self, marker: str):
+        self.marker = marker
+
+    def transition(self, key, start, finish, **kwargs) -> None:
+        if finish == "executing" and "-finish-" in str(key) and not os.path.exists(self.marker):
+            Path(self.marker).write_text(str(key))
+            os.kill(os.getpid(), signal.SIGKILL)
+
+
+def test_a_worker_killed_as_it_finishes_a_study_is_replaced_and_the_study_completes(app_client,
+                                                                                    tmp_path: Path) -> None:
+    # the dataset is assembled and written by a worker: kill that worker as the task starts
+    app, http, data = app_client
+    dask = app.state.dask
+    before = set(dask.run(os.getpid).values())
+    marker = tmp_path / "killed"
+    dask.register_plugin(KillOnFinish(str(marker)))
+    try:
+        definition = long_chunks()
+        sid = http.post("/studies", json=definition).json()["id"]
+        info = wait_finished(http, sid, timeout=120)
+    finally:
+        dask.unregister_worker_plugin(KillOnFinish.name)
+    assert marker.read_text().startswith(f"isolab-{sid}-finish-")  # the kill happened, in that task
+    assert info["status"] == "done", info
+    assert info["progress"] == {"done": N, "total": N, "failed": 0}
+    after = set(dask.run(os.getpid).values())
+    assert len(after) == 2 and len(after - before) == 1  # the nanny replaced the killed worker
+    check_every_case_once(Store(data).open_dataset(sid), definition, [0, N // 2, N - 1])
     assert not Store(data).chunk_dir(sid).exists()
 
 
