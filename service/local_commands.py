@@ -123,6 +123,8 @@ def simulate(
         typer.echo(json.dumps(out, indent=2))
         return
     typer.echo(f"{scene}: {out['status']} ({fid}/{integ}, dt {result.dt[0]:.3g} s, {elapsed:.2f} s wall)")
+    if reason:
+        typer.echo(f"  chosen for the accuracy asked: {reason}")
     if out["message"]:
         typer.echo(f"  {out['message']}")
     if out["status"] != "ok":

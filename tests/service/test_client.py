@@ -191,3 +191,32 @@ def test_cli_submit_status_fetch(url: str, study_file: Path, done: dict, tmp_pat
     result = runner.invoke(cli_app, ["fetch", "f" * 32, "-o", str(tmp_path / "x.nc"), "--url", url])
     assert result.exit_code == 1 and "404" in result.output
     assert not (tmp_path / "x.nc").exists()
+
+
+def test_cli_simulate_a_scene_explicit_or_by_accuracy(tmp_path: Path) -> None:
+    # the article's scene as shipped (ltv/rk4), and the same scene asking for an accuracy: the second
+    # reports the model chosen for it and why, and its peak agrees with the first within the tolerance
+    import json
+
+    runner = CliRunner()
+    example = Path(__file__).resolve().parents[2] / "studies" / "examples" / "article-scriber.yaml"
+    scene = yaml.safe_load(example.read_text())
+    scene["simulation"] = {"duration": "6 s"}
+    explicit = tmp_path / "explicit.yaml"
+    explicit.write_text(yaml.safe_dump(scene | {"simulation": {"fidelity": "nonlinear", "integrator": "rk4",
+                                                               "dt": "1 ms", "duration": "6 s"}}))
+    asked = tmp_path / "asked.yaml"
+    asked.write_text(yaml.safe_dump(scene | {"simulation": {"accuracy": "fast", "duration": "6 s"}}))
+    r = runner.invoke(cli_app, ["simulate", str(explicit), "--json"])
+    assert r.exit_code == 0, r.output
+    ref = json.loads(r.output)
+    assert (ref["fidelity"], ref["integrator"], ref["dt"]) == ("nonlinear", "rk4", 0.001)
+    assert "accuracy" not in ref
+    r = runner.invoke(cli_app, ["simulate", str(asked), "--json"])
+    assert r.exit_code == 0, r.output
+    got = json.loads(r.output)
+    assert got["fidelity"] in ("lti", "ltv", "nonlinear") and got["integrator"] and got["dt"] > 0
+    assert "tolerance 5 %" in got["accuracy"]
+    assert got["peak_displacement"]["y"] == pytest.approx(ref["peak_displacement"]["y"], rel=0.05)
+    r = runner.invoke(cli_app, ["simulate", str(asked)])
+    assert r.exit_code == 0 and "chosen for the accuracy asked" in r.output
