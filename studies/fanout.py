@@ -3,8 +3,9 @@
 A study is split into chunks of consecutive cases (:func:`plan_chunks`). Each chunk is one Dask task,
 :func:`run_chunk`, that rebuilds the study from its JSON definition on the worker, builds the chunk's
 scene batch and runs the engine: tasks carry a JSON string and a few indices in, plain numpy arrays out.
-:func:`run_chunks` hands each chunk's arrays to the caller as soon as it arrives, so the caller can persist
-it and a study that is interrupted resumes from its finished chunks.
+Given the study's store, a worker that sees it saves the chunk there itself and hands back only the case
+statuses. :func:`run_chunks` hands each chunk's arrays (or statuses) to the caller as soon as it arrives,
+so every finished chunk is persisted and a study that is interrupted resumes from them.
 
 Chunk size rule (:func:`choose_chunk_size`):
 

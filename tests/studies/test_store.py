@@ -338,3 +338,20 @@ def test_chunks_persist_and_reload(store: Store) -> None:
     assert store.done_chunks(sid) == {0, 2}  # the plan is not a chunk
     store.clear_chunks(sid)
     assert store.done_chunks(sid) == set() and not store.chunk_dir(sid).exists()
+
+
+def test_a_catalog_from_before_the_step_column_is_migrated(tmp_path: Path) -> None:
+    # a catalog written before `dt` was recorded: opening it adds the column, old rows read None
+    from studies import store as store_module
+
+    old_schema = store_module._SCHEMA.replace("    dt REAL,\n", "")
+    assert "dt REAL" not in old_schema
+    with sqlite3.connect(tmp_path / "catalog.sqlite") as con:
+        con.executescript(old_schema)
+        con.execute("INSERT INTO studies (id, name, status, created, n_cases, definition) VALUES "
+                    "(?, 'old', 'done', '2026-01-01T00:00:00.000000+00:00', 3, '{}')", ("a" * 32,))
+    s = Store(tmp_path)
+    assert s.get("a" * 32)["dt"] is None
+    sid = s.create({}, name="new", n_cases=1, fidelity="lti", integrator="exact", dt=0.002)
+    s.update("a" * 32, dt=0.001)
+    assert s.get(sid)["dt"] == 0.002 and s.get("a" * 32)["dt"] == 0.001
