@@ -41,25 +41,17 @@ from typing import Any
 
 import httpx
 
+from service.schemas import EXAMPLE_SCENE
+
 TARGET_P99_S = 0.100
 CLIENT_NICENESS = 5
 PROBE_PERIOD_S = 0.020
 
 SCENE: dict[str, Any] = {
-    "machine": {"block": {"size": ["2.6 m", "4.2 m", "0.34 m"], "density": "2700 kg/m^3"}},
-    "isolators": {"preset": "air", "layout": {"span_x": "2.2 m", "span_y": "3.6 m", "height": "0.5 m"}},
-    "stages": [
-        {
-            "name": "y",
-            "mass": "1000 kg",
-            "home": ["1.3 m", "0.6 m", "0.47 m"],
-            "axis": [0, 1, 0],
-            "profile": {"type": "trapezoid", "travel": "3 m", "velocity": "2 m/s", "acceleration": "2 g"},
-        }
-    ],
-    "points": {"tool": ["1.3 m", "0.6 m", "0.6 m"]},
+    **copy.deepcopy(EXAMPLE_SCENE),
     "simulation": {"fidelity": "lti", "integrator": "exact", "dt": "2 ms", "duration": "1 s"},
 }
+"""The API's example scene (the article's scriber with its Y stage), simulated for 1 s."""
 
 
 def small_study(n: int) -> dict[str, Any]:
