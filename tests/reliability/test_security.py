@@ -184,8 +184,18 @@ def raw_get(url: str, raw_path: str, method: str = "GET") -> tuple[int, bytes]:
         conn.close()
 
 
+def wait_until_idle(api: httpx.Client, timeout: float = 90.0) -> None:
+    """Wait until no study of the module's service is queued or running (their files appear meanwhile)."""
+    deadline = time.monotonic() + timeout
+    while any(api.get("/studies", params={"status": s}).json()["total"] for s in ("queued", "running")):
+        assert time.monotonic() < deadline, "studies still running"
+        time.sleep(0.1)
+
+
 @pytest.mark.parametrize(("method", "path"), [k for k in ROUTES if "{study_id}" in k[1]])
-def test_study_ids_name_no_path_outside_the_store(server: dict, done: str, method: str, path: str) -> None:
+def test_study_ids_name_no_path_outside_the_store(server: dict, api: httpx.Client, done: str, method: str,
+                                                  path: str) -> None:
+    wait_until_idle(api)  # the studies earlier tests submitted write their datasets when they end
     spec = ROUTES[(method, path)]
     query = "&".join(f"{k}={v}" for k, v in spec.get("params", {}).items())
     before = sorted(p.relative_to(server["root"]) for p in server["root"].rglob("*"))
