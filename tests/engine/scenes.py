@@ -111,3 +111,37 @@ def vertical_stage(mass: float, accel: float, home=(0.0, 0.0, 0.0)) -> dict:
 def pieces_array(p) -> np.ndarray:
     """The first case of an ``engine.profiles.Pieces`` as the (5, K) array ``scene`` takes."""
     return np.stack([np.asarray(x, dtype=float)[0] for x in (p.t, p.s, p.v, p.a, p.j)])
+
+
+ONE_MODE_BASE, ONE_MODE_PUSH, ONE_MODE_W = 1000.0, 10.0, 1000.0
+"""The one-mode system: base mass (kg), pushing stage mass (kg) and heave angular frequency (rad/s)."""
+
+
+def one_mode(zeta: float, n_cases: int = 1) -> SceneBatch:
+    """Heave is the one excited mode and the fastest by far (mounts near the c.g. under a wide base, soft
+    horizontally): a vertical force through the c.g. from a stage accelerating at 1 m/s^2; heave at
+    :data:`ONE_MODE_W` rad/s with damping ratio ``zeta``."""
+    mt = ONE_MODE_BASE + ONE_MODE_PUSH
+    kz = mt * ONE_MODE_W**2 / 4
+    cz = 2 * zeta * np.sqrt(kz * mt / 4)
+    return scene(n_cases=n_cases, mass=ONE_MODE_BASE, size=(2.0, 2.0, 0.5), span=(0.4, 0.4),
+                 k=(kz / 100, kz / 100, kz), c=(cz / 100, cz / 100, cz),
+                 stages=[vertical_stage(ONE_MODE_PUSH, 1.0)], duration=1.0)
+
+
+def run_unguarded(b: SceneBatch, integrator: str, steps: np.ndarray,
+                  n_steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """Run an integrator's kernel directly on the LTI level (no stability guard) at per-case ``steps`` (s):
+    (status, peak |u| m)."""
+    from engine import model, peaks
+    from engine.dynamics import LTI
+    from engine.integrators import INTEGRATORS
+
+    C = b.n_cases
+    P, W = model.params(b), model.work(b)
+    O = peaks.allocate(C, b.n_points, b.n_isolators, model.static_offset(b, "lti"), b.last_move_end(),
+                       b.settle_tol, None, 0)
+    status = np.zeros(C, dtype=np.int8)
+    INTEGRATORS[integrator].run(P, LTI, np.asarray(steps, dtype=float), np.full(C, n_steps, dtype=np.int64),
+                                O, W, status)
+    return status, O.u

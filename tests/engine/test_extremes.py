@@ -9,11 +9,17 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pydantic import ValidationError
-from scenes import pieces_array, scene, vertical_stage
+from scenes import (
+    ONE_MODE_BASE,
+    ONE_MODE_PUSH,
+    ONE_MODE_W,
+    one_mode,
+    pieces_array,
+    run_unguarded,
+    scene,
+)
 
-from engine import GRAVITY, SceneError, model, peaks, simulate
-from engine.dynamics import LTI
-from engine.integrators import INTEGRATORS
+from engine import GRAVITY, SceneError, model, simulate
 from engine.modal import state_matrix
 from engine.profiles import Pieces, evaluate, scurve
 from engine.results import FAILED, OK, TIPPING, UNSTABLE
@@ -24,8 +30,8 @@ from studies.study import load_scene, scene_batch
 
 # ------------------------------------------------------------------------ stability limits across damping
 ZETAS = (0.0, 0.1, 0.5, 0.9)
-W = 1000.0  # rad/s, the heave mode
-M_BASE, M_PUSH = 1000.0, 10.0
+W = ONE_MODE_W  # rad/s, the heave mode
+M_BASE, M_PUSH = ONE_MODE_BASE, ONE_MODE_PUSH
 
 
 def euler_formula(zeta: float) -> float:
@@ -54,29 +60,6 @@ def rk4_formula(zeta: float) -> float:
     return lo
 
 
-def one_mode(zeta: float, n_cases: int):
-    """Heave is the one excited mode and the fastest by far (mounts near the c.g. under a wide base, soft
-    horizontally): a vertical force through the c.g. from a stage accelerating at 1 m/s^2."""
-    mt = M_BASE + M_PUSH
-    kz = mt * W**2 / 4
-    cz = 2 * zeta * np.sqrt(kz * mt / 4)
-    return scene(n_cases=n_cases, mass=M_BASE, size=(2.0, 2.0, 0.5), span=(0.4, 0.4),
-                 k=(kz / 100, kz / 100, kz), c=(cz / 100, cz / 100, cz), stages=[vertical_stage(M_PUSH, 1.0)],
-                 duration=1.0)
-
-
-def run_kernel(b, integrator: str, steps: np.ndarray, n_steps: int) -> tuple[np.ndarray, np.ndarray]:
-    """The integrator's kernel without the guard, per-case steps (s): (status, peak |u| m)."""
-    C = b.n_cases
-    P, Wk = model.params(b), model.work(b)
-    O = peaks.allocate(C, b.n_points, b.n_isolators, model.static_offset(b, "lti"), b.last_move_end(),
-                       b.settle_tol, None, 0)
-    status = np.zeros(C, dtype=np.int8)
-    INTEGRATORS[integrator].run(P, LTI, np.asarray(steps, dtype=float), np.full(C, n_steps, dtype=np.int64),
-                                O, Wk, status)
-    return status, O.u
-
-
 @pytest.mark.parametrize("zeta", ZETAS)
 def test_the_limit_formulas_hold_across_damping(zeta: float) -> None:
     assert euler_limit(zeta) == pytest.approx(euler_formula(zeta), rel=1e-12)
@@ -97,7 +80,7 @@ def test_measured_largest_stable_step_matches_the_formula(integrator: str, zeta:
     # the 1 m divergence bound
     rho = spectral_radius(step_matrix(S[:1], np.array([1.02 * limit / W]), integrator))[0]
     n = int(np.ceil(np.log(1e9) / np.log(rho))) + 200
-    status, u = run_kernel(b, integrator, factors * limit / W, n)
+    status, u = run_unguarded(b, integrator, factors * limit / W, n)
     stable = status == 0
     # the measured largest stable step lies within 2 % of the formula
     assert stable[factors < 1].all() and not stable[factors > 1].any(), (status, n)

@@ -8,11 +8,18 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from scenes import mount, pieces_array, scene, trapezoid_pieces, vertical_stage, y_stage
+from scenes import (
+    ONE_MODE_W,
+    mount,
+    one_mode,
+    pieces_array,
+    run_unguarded,
+    scene,
+    trapezoid_pieces,
+    y_stage,
+)
 
-from engine import GRAVITY, SceneError, model, peaks, simulate
-from engine.dynamics import LTI
-from engine.integrators import INTEGRATORS
+from engine import GRAVITY, SceneError, model, simulate
 from engine.modal import state_matrix
 from engine.profiles import scurve
 from engine.results import OK, TIPPING, UNSTABLE
@@ -118,37 +125,12 @@ def test_exact_needs_no_guard() -> None:
 
 
 # ----------------------------------------------------------------------------- the limits themselves
-M_ONE = 1000.0
-M_PUSH = 10.0
-W_HEAVE = 1000.0  # rad/s
+W_HEAVE = ONE_MODE_W  # rad/s
 ZETA = 0.05
 
 
-def _one_mode_scene(n_cases: int = 1):
-    """Heave is the only mode excited (a vertical force through the c.g.) and the fastest by far (mounts
-    close to the c.g. under a wide base; soft horizontally): a one-mode system for the integrators."""
-    mt = M_ONE + M_PUSH
-    kz = mt * W_HEAVE**2 / 4
-    cz = 2 * ZETA * np.sqrt(kz * mt / 4)
-    return scene(n_cases=n_cases, mass=M_ONE, size=(2.0, 2.0, 0.5), span=(0.4, 0.4),
-                 k=(kz / 100, kz / 100, kz), c=(cz / 100, cz / 100, cz), stages=[vertical_stage(M_PUSH, 1.0)],
-                 duration=1.0)
-
-
-def _run_unguarded(b, integrator: str, steps: np.ndarray, n_steps: int) -> tuple[np.ndarray, np.ndarray]:
-    """Run an integrator's kernel directly (no guard) at per-case ``steps`` (s): (status, peak |u| m)."""
-    C = b.n_cases
-    P, W = model.params(b), model.work(b)
-    O = peaks.allocate(C, b.n_points, b.n_isolators, model.static_offset(b, "lti"), b.last_move_end(),
-                       b.settle_tol, None, 0)
-    status = np.zeros(C, dtype=np.int8)
-    INTEGRATORS[integrator].run(P, LTI, np.asarray(steps, dtype=float), np.full(C, n_steps, dtype=np.int64),
-                                O, W, status)
-    return status, O.u
-
-
 def test_one_mode_is_the_fastest_and_has_the_expected_damping() -> None:
-    r = simulate(_one_mode_scene(), "lti", "exact", dt=1e-3)
+    r = simulate(one_mode(ZETA), "lti", "exact", dt=1e-3)
     j = int(np.argmax(r.natural_frequency[0]))
     assert r.mode_energy[0, j, 2] > 1 - 1e-9
     assert r.natural_frequency[0, j] == pytest.approx(W_HEAVE / (2 * np.pi), rel=1e-9)
@@ -159,10 +141,10 @@ def test_one_mode_is_the_fastest_and_has_the_expected_damping() -> None:
 @pytest.mark.parametrize(("integrator", "limit"), [("euler", euler_limit(ZETA)), ("rk4", rk4_limit(ZETA))])
 def test_measured_stability_limit_of_one_mode(integrator: str, limit: float) -> None:
     h_lim = limit / W_HEAVE
-    b = _one_mode_scene(n_cases=2)
+    b = one_mode(ZETA, n_cases=2)
     # integrate 3000 steps 2 % below and 2 % above the limit: above it the mode grows by >= 10 % per step
     # and passes the divergence bound (1 m) from its 1e-8 m start within ~200 steps
-    status, u = _run_unguarded(b, integrator, np.array([0.98, 1.02]) * h_lim, 3000)
+    status, u = run_unguarded(b, integrator, np.array([0.98, 1.02]) * h_lim, 3000)
     assert status[0] == 0 and np.isfinite(u[0]).all() and u[0, 2] < 1e-6
     assert status[1] == 1
     # the one-step map of the linear model: spectral radius 1 at the limit, to a part in a thousand
