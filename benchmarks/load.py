@@ -181,6 +181,25 @@ class Tally:
     turnaround: list[float] = field(default_factory=list)
 
 
+async def timed(tally: Tally, what: str, latencies: list[float], expected: int,
+                request: Any) -> httpx.Response | None:
+    """Await ``request``, count it, and keep its latency (s) in ``latencies``; None (and the error
+    tallied under ``what``) when it fails or answers another status than ``expected``."""
+    t0 = time.perf_counter()
+    try:
+        r = await request
+    except httpx.HTTPError as err:
+        tally.requests += 1
+        tally.errors.append(f"{what}: {type(err).__name__}: {err}")
+        return None
+    tally.requests += 1
+    latencies.append(time.perf_counter() - t0)
+    if r.status_code != expected:
+        tally.errors.append(f"{what}: {r.status_code} {r.text[:200]}")
+        return None
+    return r
+
+
 async def client(n: int, http: httpx.AsyncClient, tally: Tally, window_end: float, drain_end: float,
                  poll: float) -> None:
     # engineers do not start their clients in the same millisecond: each starts at a random moment of
@@ -190,34 +209,18 @@ async def client(n: int, http: httpx.AsyncClient, tally: Tally, window_end: floa
     k = 0
     while time.monotonic() < window_end:
         k += 1
-        t0 = time.perf_counter()
-        try:
-            r = await http.post("/studies", json=small_study(n * 1000 + k))
-        except httpx.HTTPError as err:
-            tally.requests += 1
-            tally.errors.append(f"POST /studies: {type(err).__name__}: {err}")
-            continue
-        tally.requests += 1
-        tally.post_latency.append(time.perf_counter() - t0)
-        if r.status_code != 202:
-            tally.errors.append(f"POST /studies: {r.status_code} {r.text[:200]}")
+        t0 = time.perf_counter()  # the study's turnaround starts with its POST
+        r = await timed(tally, "POST /studies", tally.post_latency, 202,
+                        http.post("/studies", json=small_study(n * 1000 + k)))
+        if r is None:
             continue
         tally.submitted += 1
         sid = r.json()["id"]
         status = "queued"
         while time.monotonic() < drain_end:
             await asyncio.sleep(poll * rng.uniform(0.9, 1.1))
-            t1 = time.perf_counter()
-            try:
-                r = await http.get(f"/studies/{sid}")
-            except httpx.HTTPError as err:
-                tally.requests += 1
-                tally.errors.append(f"GET /studies/{{id}}: {type(err).__name__}: {err}")
-                continue
-            tally.requests += 1
-            tally.get_latency.append(time.perf_counter() - t1)
-            if r.status_code != 200:
-                tally.errors.append(f"GET /studies/{{id}}: {r.status_code} {r.text[:200]}")
+            r = await timed(tally, "GET /studies/{id}", tally.get_latency, 200, http.get(f"/studies/{sid}"))
+            if r is None:
                 continue
             status = r.json()["status"]
             if status in ("done", "failed", "cancelled"):
