@@ -55,7 +55,7 @@ ONE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THRE
 def study_definition(n_cases: int, integrator: str, duration: float, name: str | None = None) -> dict:
     """The LHS example study with ``n_cases`` samples, its scene inlined, at ``integrator`` and
     ``duration`` (s) of simulated time."""
-    from service.client import read_study_file
+    from isolab.service.client import read_study_file
 
     d = read_study_file(EXAMPLE)
     d["name"] = name or f"endtoend-{integrator}-{n_cases}"
@@ -71,9 +71,9 @@ def kernel_reference(definition: dict, n_cases: int) -> dict[str, float]:
 
     Run it where BLAS is limited to one thread (see :func:`measure_kernel`). Returns seconds per case of
     wall and CPU time and the number of cases."""
-    from engine import simulate
-    from studies.fanout import ENGINE_BATCH_CASES
-    from studies.study import Study
+    from isolab.engine import simulate
+    from isolab.studies.fanout import ENGINE_BATCH_CASES
+    from isolab.studies.study import Study
 
     study = Study.model_validate(definition)
     sim = study.simulation
@@ -129,7 +129,7 @@ class Service:
         port = free_port()
         data, journal, log = workdir / "data", workdir / "timings.jsonl", workdir / "service.log"
         script = Path(sys.executable).with_name("isolab")
-        cmd = [str(script)] if script.exists() else [sys.executable, "-c", "from service.cli import app; app()"]
+        cmd = [str(script)] if script.exists() else [sys.executable, "-c", "from isolab.service.cli import app; app()"]
         cmd += ["serve", "--host", "127.0.0.1", "--port", str(port), "--data", str(data), "--workers", str(workers)]
         env = {**os.environ, "ISOLAB_TIMINGS": str(journal)}
         for name in ("ISOLAB_API_TOKEN", "DASK_SCHEDULER_ADDRESS", "ISOLAB_DATA_DIR"):
@@ -303,7 +303,7 @@ def _unix(iso: str | None) -> float:
 def run_study(svc: Service, definition: dict, poll: float = 0.2,
               timeout: float = 3600.0) -> tuple[str, dict[str, Any], float, float]:
     """Submit ``definition``, poll until it finishes; returns (id, final row, POST time, done-seen time)."""
-    from service.client import Client
+    from isolab.service.client import Client
 
     with Client(svc.url, timeout=600.0) as api:
         t_post = time.time()

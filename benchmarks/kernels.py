@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from engine import concat, simulate
-from engine import model as engine_model
-from engine.integrators import exact
-from studies.study import load_scene, scene_batch
+from isolab.engine import concat, simulate
+from isolab.engine import model as engine_model
+from isolab.engine.integrators import exact
+from isolab.studies.study import load_scene, scene_batch
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "studies" / "examples" / "article-scriber.yaml"
 DURATION = 5.0

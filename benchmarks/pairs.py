@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from engine import concat, simulate
-from studies.study import load_scene, scene_batch
+from isolab.engine import concat, simulate
+from isolab.studies.study import load_scene, scene_batch
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "studies" / "examples" / "article-scriber.yaml"
 PAIRS = [

@@ -11,8 +11,8 @@ from collections import namedtuple
 import numpy as np
 from numba.experimental import structref
 
-from engine.dynamics import KernelWork, Params, WorkType
-from engine.scene import SceneBatch
+from isolab.engine.dynamics import KernelWork, Params, WorkType
+from isolab.engine.scene import SceneBatch
 
 Work = namedtuple("Work", ["rho", "vr", "ar", "jr", "xf", "vf", "acc", "f", "M", "R", "F", "x1", "k1", "k2"])
 structref.define_proxy(KernelWork, WorkType, list(Work._fields))

@@ -11,7 +11,7 @@ import numpy as np
 from numba import njit
 from numba.experimental import structref
 
-from engine.dynamics import (
+from isolab.engine.dynamics import (
     NONLINEAR,
     KernelPeaks,
     PeaksType,

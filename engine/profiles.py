@@ -30,7 +30,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
-from engine.scene import SceneError
+from isolab.engine.scene import SceneError
 
 TRAPEZOID_PIECES = 4
 """Pieces of a trapezoidal move: accelerate, cruise, decelerate, rest."""

@@ -18,6 +18,10 @@ STATUS_NAMES = ("ok", "unstable", "tipping", "failed")
 
 DOF_NAMES = ("x", "y", "z", "rx", "ry", "rz")
 """Degrees of freedom of the base: c.g. translation, then rotation about X (pitch), Y (roll), Z (yaw)."""
+AXES = DOF_NAMES[:3]
+"""Names of the translation axes (the ``axis`` dimension of stored results)."""
+ROTATIONS = DOF_NAMES[3:]
+"""Names of the rotations about X, Y, Z (the ``rotation`` dimension of stored results)."""
 
 
 @dataclass

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine import modal, model, peaks, stability
-from engine.dynamics import FIDELITIES
-from engine.integrators import INTEGRATORS
-from engine.results import FAILED, OK, TIPPING, UNSTABLE, SimulationResult
-from engine.scene import SceneBatch, SceneError
-from engine.validation import validate
+from isolab.engine import modal, model, peaks, stability
+from isolab.engine.dynamics import FIDELITIES
+from isolab.engine.integrators import INTEGRATORS
+from isolab.engine.results import FAILED, OK, TIPPING, UNSTABLE, SimulationResult
+from isolab.engine.scene import SceneBatch, SceneError
+from isolab.engine.validation import validate
 
 MAX_STEPS = 20_000_000
 """Largest number of steps one case may take (a guard against a step far too small for its duration)."""

@@ -6,7 +6,7 @@ from dataclasses import fields
 
 import numpy as np
 
-from engine.scene import SceneBatch, SceneError
+from isolab.engine.scene import SceneBatch, SceneError
 
 MAX_LENGTH = 100.0
 """Largest coordinate (m) any machine this tool models may have."""

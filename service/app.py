@@ -20,7 +20,6 @@ import socket
 import sys
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
-from importlib.metadata import PackageNotFoundError, version
 
 import dask
 from anyio import to_thread
@@ -30,11 +29,11 @@ from fastapi.middleware.cors import CORSMiddleware
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from service.jobs import RUNNING_STUDIES, JobQueue
-from service.request_limits import RequestLimits, unreadable_body_is_422
-from service.routes import comparisons, health, heavy_work_limiter, studies
-from service.settings import Settings, load_settings
-from service.worker_priority import LowerPriority
+from isolab.service.jobs import RUNNING_STUDIES, JobQueue
+from isolab.service.request_limits import RequestLimits, unreadable_body_is_422
+from isolab.service.routes import comparisons, health, heavy_work_limiter, studies
+from isolab.service.settings import Settings, load_settings
+from isolab.service.worker_priority import LowerPriority
 
 #: Port of the Dask dashboard of the in-process LocalCluster, when free.
 DASHBOARD_PORT = 8787
@@ -48,10 +47,9 @@ log = logging.getLogger(__name__)
 
 def service_version() -> str:
     """Installed version of the isolab package."""
-    try:
-        return version("isolab")
-    except PackageNotFoundError:
-        return "0+unknown"
+    from isolab.studies import __version__
+
+    return __version__
 
 
 def free_dashboard_address(port: int = DASHBOARD_PORT) -> str | None:

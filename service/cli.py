@@ -11,7 +11,7 @@ from typing import Annotated
 
 import typer
 
-from service.settings import SettingsError, load_settings
+from isolab.service.settings import SettingsError, load_settings
 
 app = typer.Typer(
     name="isolab",
@@ -23,7 +23,7 @@ app = typer.Typer(
 
 def _print_version(value: bool) -> None:
     if value:
-        from service.app import service_version
+        from isolab.service.app import service_version
 
         typer.echo(f"isolab {service_version()}")
         raise typer.Exit()
@@ -58,7 +58,7 @@ def serve(
     """Run the HTTP API (one uvicorn process holding one Dask client)."""
     import uvicorn
 
-    from service.app import create_app
+    from isolab.service.app import create_app
 
     overrides = {"workers": workers, "data_dir": data, "scheduler_address": scheduler}
     try:
@@ -71,61 +71,13 @@ def serve(
 
 app.command("serve")(serve)
 
-from service.local_commands import run_study_command, simulate  # noqa: E402
+from isolab.service.local_commands import run_study_command, simulate  # noqa: E402
 
 app.command("simulate")(simulate)
 app.command("run")(run_study_command)
 
-from service.client import fetch_command, status_command, submit_command  # noqa: E402
+from isolab.service.client import fetch_command, status_command, submit_command  # noqa: E402
 
 app.command("submit")(submit_command)
 app.command("status")(status_command)
 app.command("fetch")(fetch_command)
-
-# ------------------------------------------------------------------------------------------- benchmarks
-bench_app = typer.Typer(help="Measure the engine: time per case and error of its choices.",
-                        no_args_is_help=True)
-
-
-def _benchmarks():
-    """The ``benchmarks`` package of the source tree (it is not installed with the product)."""
-    import importlib
-    import sys
-
-    root = Path(__file__).resolve().parent.parent
-    if (root / "benchmarks" / "__init__.py").is_file() and str(root) not in sys.path:
-        sys.path.insert(0, str(root))
-    try:
-        return importlib.import_module("benchmarks")
-    except ImportError:
-        typer.echo("error: the benchmarks ship with the source tree; run isolab from a checkout", err=True)
-        raise typer.Exit(code=2) from None
-
-
-def bench_accuracy(
-    quick: Annotated[bool, typer.Option("--quick", help="Three steps, small batches, one run each.")] = False,
-    write: Annotated[bool, typer.Option("--write", help="Update docs/accuracy.md and accuracy.png.")] = False,
-) -> None:
-    """Time per case and error of every fidelity/integrator pair over a range of steps, on the article scene
-    and scenes at the extremes."""
-    _benchmarks()
-    from benchmarks import accuracy
-
-    accuracy.run(quick=quick, write=write)
-
-
-def bench_pairs(
-    scene: Annotated[Path | None, typer.Argument(help="Scene file (default: the article's scriber).")] = None,
-    dt: Annotated[float, typer.Option(help="Time step, s.")] = 1e-3,
-    cases: Annotated[int, typer.Option(min=1, help="Cases per batch.")] = 100,
-) -> None:
-    """Time per case and error of every fidelity/integrator pair at one step."""
-    _benchmarks()
-    from benchmarks import pairs
-
-    pairs.main([*([str(scene)] if scene else []), "--dt", str(dt), "--cases", str(cases)])
-
-
-bench_app.command("accuracy")(bench_accuracy)
-bench_app.command("pairs")(bench_pairs)
-app.add_typer(bench_app, name="bench")

@@ -1,6 +1,6 @@
 """Python client of the isolab REST API (on httpx).
 
-    from service.client import Client
+    from isolab.service.client import Client
 
     with Client("http://127.0.0.1:8000") as api:
         study_id = api.submit("studies/examples/isolator-comparison.yaml")["id"]

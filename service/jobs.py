@@ -20,7 +20,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from studies.store import Store, StudyNotFound, utc_now
+from isolab.studies.store import Store, StudyNotFound, utc_now
 
 log = logging.getLogger(__name__)
 
@@ -38,13 +38,13 @@ CATALOG = "catalog.sqlite"
 
 
 def _default_runner(study: Any, store: Store, client: Any, study_id: str, cancel: threading.Event) -> str:
-    from studies.runner import run_study
+    from isolab.studies.runner import run_study
 
     return run_study(study, store, client, study_id=study_id, cancel=cancel)
 
 
 def _default_loader(definition: Any) -> Any:
-    from studies.study import Study
+    from isolab.studies.study import Study
 
     return Study.model_validate(definition)  # never reads files: a stored definition has its scene inline
 

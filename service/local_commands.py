@@ -20,7 +20,7 @@ def _labelled(values, labels) -> dict:
 
 def case_outputs(result, case: int, isolators: list[str], points: list[str]) -> dict:
     """One case's outputs keyed by quantity and by axis, isolator, point or mode (SI units)."""
-    from engine.results import DOF_NAMES, STATUS_NAMES
+    from isolab.engine.results import DOF_NAMES, STATUS_NAMES
 
     r = result
     ok = int(r.status[case]) == 0
@@ -71,9 +71,9 @@ def simulate(
     plot: Annotated[Path | None, typer.Option(help="Write c.g., rotation and force traces to a PNG.")] = None,
 ) -> None:
     """Simulate one scene and print its peaks, loads, natural frequencies and settling time."""
-    from engine import SceneError
-    from engine import simulate as run
-    from studies.study import load_scene, scene_batch
+    from isolab.engine import SceneError
+    from isolab.engine import simulate as run
+    from isolab.studies.study import load_scene, scene_batch
 
     try:
         sc = load_scene(scene)
@@ -85,8 +85,8 @@ def simulate(
         reason = None
         if sim.request is not None and not (fidelity and integrator and dt):
             # the scene asks for an accuracy: measure the cheapest model that meets it on this scene
-            from studies.accuracy import choose
-            from studies.study import Study
+            from isolab.studies.accuracy import choose
+            from isolab.studies.study import Study
 
             choice = choose(Study.model_validate({"name": scene.stem, "scene": sc.model_dump(mode="json")}))
             fid, integ = fidelity or choice.fidelity, integrator or choice.integrator
@@ -111,7 +111,7 @@ def simulate(
         **case_outputs(result, 0, names["isolators"], names["points"]),
     }
     if plot:
-        from service.plots import case_png
+        from isolab.service.plots import case_png
 
         h = result.history
         n = int(h["n_samples"][0])
@@ -148,7 +148,7 @@ def run_study_command(
     """Run a study on a local Dask cluster with a progress bar and write its dataset."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from studies.runner import run_local
+    from isolab.studies.runner import run_local
 
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn()) as bar:

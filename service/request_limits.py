@@ -171,14 +171,14 @@ async def unreadable_body_is_422(request: Request, exc: StarletteHTTPException) 
 def quantity_problem(text: str) -> str | None:
     """Why the quantity text ``text`` is refused, or None when it is safe to hand to the units parser: the
     rules of :func:`studies.units.quantity_text_problem`, and a value no 64-bit float holds (``10**999``)."""
-    from studies.units import quantity_text_problem
+    from isolab.studies.units import quantity_text_problem
 
     return quantity_text_problem(text) or _magnitude_problem(text)
 
 
 def _magnitude_problem(text: str) -> str | None:
     """The units parser's reading of a screened text: None unless its number overflows a float."""
-    from studies.units import UREG
+    from isolab.studies.units import UREG
 
     try:
         q = UREG.Quantity(text)

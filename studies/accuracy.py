@@ -33,11 +33,11 @@ from typing import Any
 
 import numpy as np
 
-from engine import modal, model, simulate, stability
-from engine.results import OK, STATUS_NAMES
-from engine.scene import SceneBatch
-from studies.dataset import result_arrays
-from studies.schema import ACCURACY_LEVELS, DEFAULT_DT, Simulation, parse_tolerance
+from isolab.engine import modal, model, simulate, stability
+from isolab.engine.results import OK, STATUS_NAMES
+from isolab.engine.scene import SceneBatch
+from isolab.studies.dataset import result_arrays
+from isolab.studies.schema import ACCURACY_LEVELS, DEFAULT_DT, Simulation, parse_tolerance
 
 CANDIDATE_STEPS = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3)
 """Steps the chooser tries, s (those at or below a requested ``dt``)."""
@@ -406,7 +406,7 @@ def choose_from_json(definition_json: str) -> Choice:
 @functools.lru_cache(maxsize=8)
 def _study_from_json(definition_json: str) -> Any:
     """The validated study of a JSON definition (as data: no files are read), cached per process."""
-    from studies.study import Study
+    from isolab.studies.study import Study
 
     return Study.model_validate(json.loads(definition_json))
 

@@ -27,8 +27,8 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from engine.results import DOF_NAMES, FAILED, OK, STATUS_NAMES, SimulationResult
-from studies.designs import Design
+from isolab.engine.results import DOF_NAMES, FAILED, OK, STATUS_NAMES, SimulationResult
+from isolab.studies.designs import Design
 
 AXES = ("x", "y", "z")
 ROTATIONS = ("rx", "ry", "rz")

@@ -52,7 +52,7 @@ from typing import Any
 
 import numpy as np
 
-from studies.dataset import failed_arrays, result_arrays
+from isolab.studies.dataset import failed_arrays, result_arrays
 
 MIN_CHUNK_SECONDS = 1.0
 MAX_CHUNK_SECONDS = 5.0
@@ -139,7 +139,7 @@ def _study_from_json(definition_json: str):
     """The validated Study of a JSON definition, cached per worker process (chunks of one study share it).
 
     Validated as data (``Study.model_validate``): a worker never reads files named in a definition."""
-    from studies.study import Study
+    from isolab.studies.study import Study
 
     return Study.model_validate(json.loads(definition_json))
 
@@ -158,7 +158,7 @@ def run_chunk(definition_json: str, indices: Sequence[int] | np.ndarray, store_r
     ``indices``, ``status`` and ``saved``: the results never travel through the process that runs the
     study. A worker that does not see the store returns the whole arrays, as without those arguments.
     """
-    from engine import simulate
+    from isolab.engine import simulate
 
     task_start = time.time()
     t0 = time.perf_counter()
@@ -188,7 +188,7 @@ def run_chunk(definition_json: str, indices: Sequence[int] | np.ndarray, store_r
                                                for name in parts[0]}
     arrays["indices"] = idx
     if store_root is not None and study_id is not None and chunk_index is not None:
-        from studies.store import Store
+        from isolab.studies.store import Store
 
         store = Store(store_root, catalog=False)
         if store.has_chunk_plan(study_id):

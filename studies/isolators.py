@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from studies.units import STANDARD_GRAVITY
+from isolab.studies.units import STANDARD_GRAVITY
 
 
 @dataclass(frozen=True)

@@ -28,15 +28,15 @@ from typing import Any
 
 import numpy as np
 
-from studies.isolators import PRESETS
-from studies.schema import (
+from isolab.studies.isolators import PRESETS
+from isolab.studies.schema import (
     MoveSegment,
     ScanProfile,
     Scene,
     SCurveProfile,
     SequenceProfile,
 )
-from studies.units import si_unit
+from isolab.studies.units import si_unit
 
 AXES = ("x", "y", "z")
 CATEGORICAL = "categorical"

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from studies.accuracy import (
+from isolab.studies.accuracy import (
     ESTIMATED_OUTPUTS,
     OUTPUT_MEANING,
     OUTPUT_UNITS,
@@ -52,9 +52,9 @@ from studies.accuracy import (
     resolved_definition,
     sample_arrays,
 )
-from studies.dataset import add_error_estimate, from_chunks, to_dataset
-from studies.fanout import TASK_RETRIES, choose_chunk_size, plan_chunks, run_chunks
-from studies.store import Store, copy_atomic, utc_now
+from isolab.studies.dataset import add_error_estimate, from_chunks, to_dataset
+from isolab.studies.fanout import TASK_RETRIES, choose_chunk_size, plan_chunks, run_chunks
+from isolab.studies.store import Store, copy_atomic, utc_now
 
 log = logging.getLogger(__name__)
 
@@ -152,7 +152,7 @@ def run_study(
         Whatever stopped the run (the row is marked ``failed`` first), e.g. FanoutError when every chunk
         failed.
     """
-    from engine import __version__ as engine_version
+    from isolab.engine import __version__ as engine_version
 
     definition = study.model_dump(mode="json")
     # keys keep their order: the order of points in the definition is the order of the point labels
@@ -254,7 +254,7 @@ def assemble_dataset(store: Store, study_id: str, run_json: str, attrs: dict[str
                      estimate: ErrorEstimate) -> int:
     """Build a study's dataset from its saved chunks, add the error ``estimate`` and write it atomically;
     the number of cases that did not end OK."""
-    from studies.fanout import _study_from_json
+    from isolab.studies.fanout import _study_from_json
 
     run = _study_from_json(run_json)
     iso_names, point_names = study_labels(run)
@@ -394,7 +394,7 @@ def run_local(
     Returns the dataset (loaded in memory)."""
     from dask.distributed import Client, LocalCluster
 
-    from studies.study import load_study
+    from isolab.studies.study import load_study
 
     if int(workers) < 1:
         raise ValueError(f"workers: {workers} must be at least 1")

@@ -22,16 +22,16 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
-from engine import profiles
-from engine.scene import GRAVITY, SceneBatch, SceneError
-from studies.isolators import (
+from isolab.engine import profiles
+from isolab.engine.scene import GRAVITY, SceneBatch, SceneError
+from isolab.studies.isolators import (
     CollinearIsolatorsError,
     damping_from_ratio,
     load_share,
     stiffness_from_frequency,
 )
-from studies.parameters import check_leaf_values
-from studies.schema import (
+from isolab.studies.parameters import check_leaf_values
+from isolab.studies.schema import (
     AUTO_DURATION_CAP,
     AUTO_DURATION_DECAYS,
     AUTO_DURATION_MARGIN,
@@ -500,8 +500,8 @@ def build_batch(
 def slowest_decay_time(batch: SceneBatch) -> np.ndarray:
     """(C,) largest time constant ``1 / (zeta w)`` over the modes that have stiffness and damping, s
     (0 where none has both; a mode without damping never decays and is left to the cap)."""
-    from engine import modal
-    from engine import model as engine_model
+    from isolab.engine import modal
+    from isolab.engine import model as engine_model
 
     try:
         md = modal.modes(engine_model.mass_matrix(batch), engine_model.stiffness_matrix(batch),

@@ -31,9 +31,9 @@ from pydantic import (
     model_validator,
 )
 
-from engine.scene import SceneError
-from studies.isolators import PRESETS, CollinearIsolatorsError, IsolatorPreset, load_share
-from studies.units import (
+from isolab.engine.scene import SceneError
+from isolab.studies.isolators import PRESETS, CollinearIsolatorsError, IsolatorPreset, load_share
+from isolab.studies.units import (
     Acceleration,
     Angle,
     Damping,
@@ -798,7 +798,7 @@ class Scene(_Model):
     @model_validator(mode="after")
     def _physical(self) -> Scene:
         """What only the assembled scene shows: mounts that cannot carry the weight, moves off the base."""
-        from studies.scenes import build_batch
+        from isolab.studies.scenes import build_batch
 
         stages = sum(s.mass for s in self.stages)
         base = self.machine.properties()[0]

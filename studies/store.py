@@ -39,8 +39,8 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from studies.dataset import netcdf_encoding
-from studies.fanout import record_timing
+from isolab.studies.dataset import netcdf_encoding
+from isolab.studies.fanout import record_timing
 
 STATUSES = ("queued", "running", "done", "failed", "cancelled")
 _ID = re.compile(r"[0-9a-f]{32}")

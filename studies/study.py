@@ -22,13 +22,13 @@ import numpy as np
 import yaml
 from pydantic import Field, PrivateAttr, ValidationError, model_validator
 
-from engine.scene import SceneBatch, concat
-from studies import designs
-from studies.designs import Design, Factor
-from studies.parameters import Target, apply, resolve, scene_dict
-from studies.scenes import build_batch
-from studies.schema import DesignSpec, ParameterSpec, Scene, Simulation, _Model, error_messages
-from studies.units import to_si
+from isolab.engine.scene import SceneBatch, concat
+from isolab.studies import designs
+from isolab.studies.designs import Design, Factor
+from isolab.studies.parameters import Target, apply, resolve, scene_dict
+from isolab.studies.scenes import build_batch
+from isolab.studies.schema import DesignSpec, ParameterSpec, Scene, Simulation, _Model, error_messages
+from isolab.studies.units import to_si
 
 SAMPLED_TYPES = ("lhs", "sobol", "random")
 _EXTREME_CHECK_LEVELS = 16

@@ -14,9 +14,9 @@ from distributed import LocalCluster
 from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
-from service.app import create_app, free_dashboard_address
-from service.cli import app as cli_app
-from service.settings import ENV_VARS, Settings, SettingsError, load_settings
+from isolab.service.app import create_app, free_dashboard_address
+from isolab.service.cli import app as cli_app
+from isolab.service.settings import ENV_VARS, Settings, SettingsError, load_settings
 
 REPO = Path(__file__).resolve().parents[1]
 

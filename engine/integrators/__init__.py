@@ -6,6 +6,6 @@ case ``c`` over ``n_steps[c]`` steps of ``dt[c]`` s, updates the running peaks a
 (0 done, 1 diverged, 3 failed) instead of raising.
 """
 
-from engine.integrators import euler, exact, reference, rk4
+from isolab.engine.integrators import euler, exact, reference, rk4
 
 INTEGRATORS = {"euler": euler, "rk4": rk4, "exact": exact, "reference": reference}

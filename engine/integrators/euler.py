@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from engine.dynamics import NONLINEAR, accel, advance_pieces, kernel_struct, next_breakpoint, quat_step
-from engine.peaks import observe
+from isolab.engine.dynamics import NONLINEAR, accel, advance_pieces, kernel_struct, next_breakpoint, quat_step
+from isolab.engine.peaks import observe
 
 ORDER = 1
 LEVELS = ("lti", "ltv", "nonlinear")

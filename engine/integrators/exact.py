@@ -19,7 +19,7 @@ import numpy as np
 import scipy.linalg
 from numba import njit
 
-from engine.dynamics import (
+from isolab.engine.dynamics import (
     _cross,
     advance_pieces,
     kernel_struct,
@@ -28,7 +28,7 @@ from engine.dynamics import (
     recorded_floor,
     stage_state,
 )
-from engine.peaks import observe
+from isolab.engine.peaks import observe
 
 ORDER = None  # exact
 LEVELS = ("lti",)

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from engine.dynamics import NONLINEAR, advance_pieces, derivative, kernel_struct
-from engine.peaks import observe
+from isolab.engine.dynamics import NONLINEAR, advance_pieces, derivative, kernel_struct
+from isolab.engine.peaks import observe
 
 ORDER = None
 LEVELS = ("lti", "ltv", "nonlinear")

@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from engine.dynamics import NONLINEAR, advance_pieces, derivative, kernel_struct, next_breakpoint
-from engine.peaks import observe
+from isolab.engine.dynamics import NONLINEAR, advance_pieces, derivative, kernel_struct, next_breakpoint
+from isolab.engine.peaks import observe
 
 ORDER = 4
 LEVELS = ("lti", "ltv", "nonlinear")

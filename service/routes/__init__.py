@@ -14,7 +14,7 @@ from anyio import CapacityLimiter, to_thread
 from distributed import Client
 from fastapi import Request
 
-from service.settings import Settings
+from isolab.service.settings import Settings
 
 T = TypeVar("T")
 

@@ -15,11 +15,11 @@ import numpy as np
 from fastapi import APIRouter, Body, HTTPException, Request
 from pydantic import ValidationError
 
-from service.request_limits import screen_definition
-from service.routes import run_heavy
-from service.routes.studies import CaseColumns, case_table, invalid, validation_details
-from service.schemas import EXAMPLE_COMPARISON, Comparison, ComparisonRequest, ValidationErrorBody
-from studies.accuracy import resolved_study
+from isolab.service.request_limits import screen_definition
+from isolab.service.routes import run_heavy
+from isolab.service.routes.studies import CaseColumns, case_table, invalid, validation_details
+from isolab.service.schemas import EXAMPLE_COMPARISON, Comparison, ComparisonRequest, ValidationErrorBody
+from isolab.studies.accuracy import resolved_study
 
 router = APIRouter(prefix="/comparisons", tags=["comparisons"])
 
@@ -40,7 +40,7 @@ lift-off; the lowest natural frequencies (the softest suspension isolates best f
 
 def comparison_study(request: ComparisonRequest) -> Any:
     """The grid study behind a comparison; 422 naming the request field on bad input."""
-    from studies.study import Study
+    from isolab.studies.study import Study
 
     problems = screen_definition({"scene": request.scene, "simulation": request.simulation}, ["body"])
     if problems:
@@ -69,9 +69,9 @@ def comparison_study(request: ComparisonRequest) -> Any:
 
 def run_comparison(study: Any) -> CaseColumns:
     """Run every case of the comparison through the engine; the case table of the result."""
-    from engine import simulate
-    from studies.dataset import to_dataset
-    from studies.runner import study_labels
+    from isolab.engine import simulate
+    from isolab.studies.dataset import to_dataset
+    from isolab.studies.runner import study_labels
 
     sim = study.simulation
     result = simulate(
@@ -117,7 +117,7 @@ def best_of(values: dict[str, Any], rule: str, unit: str = "") -> str | None:
 
 
 def comparison_table(table: CaseColumns, study: Any) -> Comparison:
-    from service.routes.studies import json_values
+    from isolab.service.routes.studies import json_values
 
     types = [str(t) for t in table.data["isolator_type"]]
     columns = [c for c in table.default if criterion(c) is not None or c in ("settled", "status")]

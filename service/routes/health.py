@@ -10,8 +10,8 @@ from distributed import Client
 from fastapi import APIRouter, Depends, Request, Response
 from pydantic import BaseModel, Field
 
-from service.routes import app_settings
-from service.settings import Settings
+from isolab.service.routes import app_settings
+from isolab.service.settings import Settings
 
 #: Longest wait for the Dask scheduler to answer the health probe, in seconds.
 SCHEDULER_TIMEOUT_S = 5.0

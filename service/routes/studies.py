@@ -36,11 +36,11 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse, JSONResponse
 from pydantic import ValidationError
 
-from service import plots
-from service.jobs import JobQueue
-from service.request_limits import case_count_bound, quantity_problem, screen_definition
-from service.routes import app_settings, run_heavy
-from service.schemas import (
+from isolab.service import plots
+from isolab.service.jobs import JobQueue
+from isolab.service.request_limits import case_count_bound, quantity_problem, screen_definition
+from isolab.service.routes import app_settings, run_heavy
+from isolab.service.schemas import (
     EXAMPLE_LHS_STUDY,
     EXAMPLE_STUDY,
     CaseTable,
@@ -55,8 +55,8 @@ from service.schemas import (
     Timeseries,
     ValidationErrorBody,
 )
-from service.settings import Settings
-from studies.store import NETCDF_LOCK, Store, StudyNotFound, utc_now
+from isolab.service.settings import Settings
+from isolab.studies.store import NETCDF_LOCK, Store, StudyNotFound, utc_now
 
 router = APIRouter(prefix="/studies", tags=["studies"])
 
@@ -189,7 +189,7 @@ def validate_definition(body: dict[str, Any], max_cases: int | None = None) -> A
     Hostile values (:func:`service.request_limits.screen_definition`) are refused before validation, and
     so is a study whose case count, read from the raw definition, is above ``max_cases``: its design is
     never built."""
-    from studies.study import Study
+    from isolab.studies.study import Study
 
     if body.get("scene_file") is not None:
         raise invalid(
@@ -218,7 +218,7 @@ def stored_definition(study: Any) -> dict[str, Any]:
 
 @functools.lru_cache(maxsize=16)
 def _study_from_json(text: str) -> Any:
-    from studies.study import Study
+    from isolab.studies.study import Study
 
     return Study.model_validate(json.loads(text))
 
@@ -229,7 +229,7 @@ def study_of(row: dict[str, Any]) -> Any:
 
 
 def _labels(study: Any) -> tuple[list[str], list[str]]:
-    from studies.runner import study_labels
+    from isolab.studies.runner import study_labels
 
     return study_labels(study)
 
@@ -474,7 +474,7 @@ def _filter_value(table: CaseColumns, column: str, op: str, raw: str) -> Any:
     if _NUMBER.match(raw):
         return float(raw)
     if _QUANTITY.match(raw):
-        from studies.units import to_si
+        from isolab.studies.units import to_si
 
         problem = quantity_problem(raw)
         if problem is not None:
@@ -495,7 +495,7 @@ def _filter_value(table: CaseColumns, column: str, op: str, raw: str) -> Any:
 
 
 def _force(raw: str, where: str) -> float:
-    from studies.units import UREG
+    from isolab.studies.units import UREG
 
     try:
         q = UREG.Quantity(raw)
@@ -705,7 +705,7 @@ def accept_study(
     definition: dict[str, Any], settings: Settings, store: Store, jobs: JobQueue
 ) -> StudyAccepted:
     """Validate a study, store it in the catalog (status queued) and queue it (runs in a worker thread)."""
-    from studies.runner import isolator_types
+    from isolab.studies.runner import isolator_types
 
     study = validate_definition(definition, settings.max_cases)
     n_cases = int(study.n_cases)
@@ -922,7 +922,7 @@ def case_history(study: Any, case: int, every: int = 1) -> CaseHistory:
 
     Refused (422) when the case would record more than :data:`MAX_RECORDED_SAMPLES` samples, or return
     more than :data:`MAX_RETURNED_SAMPLES` with every ``every``-th kept."""
-    from engine import STATUS_NAMES, simulate
+    from isolab.engine import STATUS_NAMES, simulate
 
     sim = study.simulation
     try:
@@ -975,7 +975,7 @@ def _case_study(store: Store, study_id: str, case: int) -> Any:
         raise HTTPException(
             status_code=404, detail=f"study {study_id} has no case {case} (cases 0..{row['n_cases'] - 1})"
         )
-    from studies.accuracy import recorded_choice
+    from isolab.studies.accuracy import recorded_choice
 
     study = study_of(row)
     if study.simulation.request is None:
@@ -986,7 +986,7 @@ def _case_study(store: Store, study_id: str, case: int) -> Any:
 
 @functools.lru_cache(maxsize=16)
 def _resolved(definition: str, choice: Any) -> Any:
-    from studies.accuracy import resolved_study
+    from isolab.studies.accuracy import resolved_study
 
     return resolved_study(_study_from_json(definition), choice)
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.scene import GRAVITY, SceneBatch
+from isolab.engine.scene import GRAVITY, SceneBatch
 
 
 def box_inertia(mass: float, lx: float, ly: float, lz: float) -> np.ndarray:
@@ -133,9 +133,9 @@ def run_unguarded(b: SceneBatch, integrator: str, steps: np.ndarray,
                   n_steps: int) -> tuple[np.ndarray, np.ndarray]:
     """Run an integrator's kernel directly on the LTI level (no stability guard) at per-case ``steps`` (s):
     (status, peak |u| m)."""
-    from engine import model, peaks
-    from engine.dynamics import LTI
-    from engine.integrators import INTEGRATORS
+    from isolab.engine import model, peaks
+    from isolab.engine.dynamics import LTI
+    from isolab.engine.integrators import INTEGRATORS
 
     C = b.n_cases
     P, W = model.params(b), model.work(b)

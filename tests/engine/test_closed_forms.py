@@ -10,8 +10,8 @@ import pytest
 from scenes import box_inertia, mount, pieces_array, scene, vertical_stage, y_stage
 from scipy.spatial.transform import Rotation
 
-from engine import GRAVITY, concat, simulate
-from engine.profiles import Pieces, evaluate, trapezoid
+from isolab.engine import GRAVITY, concat, simulate
+from isolab.engine.profiles import Pieces, evaluate, trapezoid
 
 TWO_PI = 2 * np.pi
 M = 10_000.0

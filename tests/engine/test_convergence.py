@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from scenes import pieces_array, scene, trapezoid_pieces
 
-from engine import simulate
-from engine.profiles import scurve, trapezoid
+from isolab.engine import simulate
+from isolab.engine.profiles import scurve, trapezoid
 
 H0 = 1 / 128  # coarsest step, s (7.8 ms)
 LEVELS = 5  # H0 / 2^k for k = 0..4: 7.8 ms down to 0.49 ms

@@ -19,14 +19,14 @@ from scenes import (
     scene,
 )
 
-from engine import GRAVITY, SceneError, model, simulate
-from engine.modal import state_matrix
-from engine.profiles import Pieces, evaluate, scurve
-from engine.results import FAILED, OK, TIPPING, UNSTABLE
-from engine.stability import euler_limit, rk4_limit, spectral_radius, step_matrix
-from studies import schema
-from studies.schema import error_messages
-from studies.study import load_scene, scene_batch
+from isolab.engine import GRAVITY, SceneError, model, simulate
+from isolab.engine.modal import state_matrix
+from isolab.engine.profiles import Pieces, evaluate, scurve
+from isolab.engine.results import FAILED, OK, TIPPING, UNSTABLE
+from isolab.engine.stability import euler_limit, rk4_limit, spectral_radius, step_matrix
+from isolab.studies import schema
+from isolab.studies.schema import error_messages
+from isolab.studies.study import load_scene, scene_batch
 
 # ------------------------------------------------------------------------ stability limits across damping
 ZETAS = (0.0, 0.1, 0.5, 0.9)
@@ -285,8 +285,8 @@ def test_a_jerk_phase_shorter_than_the_step_is_integrated_not_sampled(integrator
 def test_exact_step_maps_are_prepared_in_blocks_without_changing_a_case() -> None:
     # more cases than one preparation block, with several breakpoints inside one step: every case of the
     # batch gets the numbers it gets alone
-    from engine import concat
-    from engine.integrators import exact
+    from isolab.engine import concat
+    from isolab.engine.integrators import exact
 
     stage = {"mass": 1000.0, "home": (0.0, -1.5, 0.3), "axis": (0.0, 1.0, 0.0),
              "pieces": pieces_array(scurve(1e-3, 1.9, 8.0, 25_000.0))}

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scenes import mount, scene, y_stage
 
-from engine import GRAVITY, simulate
+from isolab.engine import GRAVITY, simulate
 
 M = 10_000.0
 M_STAGE = 1000.0

@@ -19,11 +19,11 @@ from scenes import (
     y_stage,
 )
 
-from engine import GRAVITY, SceneError, model, simulate
-from engine.modal import state_matrix
-from engine.profiles import scurve
-from engine.results import OK, TIPPING, UNSTABLE
-from engine.stability import euler_limit, rk4_limit, spectral_radius, step_matrix
+from isolab.engine import GRAVITY, SceneError, model, simulate
+from isolab.engine.modal import state_matrix
+from isolab.engine.profiles import scurve
+from isolab.engine.results import OK, TIPPING, UNSTABLE
+from isolab.engine.stability import euler_limit, rk4_limit, spectral_radius, step_matrix
 
 # ------------------------------------------------------------------------------------ stability guard
 M_STIFF = 500.0

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import cumulative_trapezoid
 
-from engine.profiles import (
+from isolab.engine.profiles import (
     SCURVE_PIECES,
     TRAPEZOID_PIECES,
     Pieces,

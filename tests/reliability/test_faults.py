@@ -20,11 +20,11 @@ from dask.distributed import WorkerPlugin
 from fastapi.testclient import TestClient
 from live_service import ServiceProcess, quick_scene, wait_finished
 
-from engine import simulate
-from service.app import create_app
-from service.settings import Settings
-from studies.store import Store, write_netcdf
-from studies.study import Study
+from isolab.engine import simulate
+from isolab.service.app import create_app
+from isolab.service.settings import Settings
+from isolab.studies.store import Store, write_netcdf
+from isolab.studies.study import Study
 
 N = 240
 MARK = "saved before the service was killed"
@@ -242,7 +242,7 @@ WRITER = textwrap.dedent(
     import sys
     import numpy as np
     import xarray as xr
-    from studies.store import write_netcdf
+    from isolab.studies.store import write_netcdf
 
     target, rows = sys.argv[1], int(sys.argv[2])
     rng = np.random.default_rng(7)
@@ -330,7 +330,7 @@ def test_a_chunk_write_killed_half_way_is_not_taken_for_a_saved_chunk(tmp_path: 
     script = textwrap.dedent(
         f"""
         import numpy as np
-        from studies.store import Store
+        from isolab.studies.store import Store
         store = Store({str(tmp_path)!r})
         store.save_chunk({sid!r}, 0, {{"status": np.zeros(10, dtype=np.int8)}})
         print("saved", flush=True)
@@ -363,8 +363,8 @@ HAMMER = textwrap.dedent(
     """
     import sys, threading, time
     import numpy as np, xarray as xr
-    from service.routes.studies import netcdf_bytes
-    from studies.store import Store
+    from isolab.service.routes.studies import netcdf_bytes
+    from isolab.studies.store import Store
 
     store = Store(sys.argv[1])
     ids = [store.create({"n": i}, name=f"s{i}", n_cases=2000) for i in range(3)]

@@ -24,8 +24,8 @@ from schemathesis.checks import (
 )
 from starlette.types import Receive, Scope, Send
 
-from service.app import create_app
-from service.settings import Settings
+from isolab.service.app import create_app
+from isolab.service.settings import Settings
 
 MAX_EXAMPLES = 30
 

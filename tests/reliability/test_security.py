@@ -14,9 +14,9 @@ import httpx
 import pytest
 from live_service import quick_scene, thread_server
 
-from service.app import create_app
-from service.schemas import EXAMPLE_COMPARISON
-from service.settings import Settings
+from isolab.service.app import create_app
+from isolab.service.schemas import EXAMPLE_COMPARISON
+from isolab.service.settings import Settings
 
 TOKEN = "s3cret-token-of-the-lab"
 ALLOWED = "https://lab.example"

@@ -19,18 +19,18 @@ import pytest
 import xarray as xr
 from fastapi.testclient import TestClient
 
-from engine import simulate
-from service.app import create_app
-from service.routes.studies import (
+from isolab.engine import simulate
+from isolab.service.app import create_app
+from isolab.service.routes.studies import (
     CaseColumns,
     CaseQueryError,
     filter_mask,
     parse_filter,
     select_cases,
 )
-from service.schemas import EXAMPLE_SCENE
-from service.settings import Settings
-from studies.study import Study
+from isolab.service.schemas import EXAMPLE_SCENE
+from isolab.service.settings import Settings
+from isolab.studies.study import Study
 
 G = 9.80665
 MAX_CASES = 500

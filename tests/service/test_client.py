@@ -18,13 +18,13 @@ import xarray as xr
 import yaml
 from typer.testing import CliRunner
 
-from engine import simulate
-from service.app import create_app
-from service.cli import app as cli_app
-from service.client import Client, ClientError, read_study_file
-from service.schemas import EXAMPLE_SCENE
-from service.settings import Settings
-from studies.study import load_study
+from isolab.engine import simulate
+from isolab.service.app import create_app
+from isolab.service.cli import app as cli_app
+from isolab.service.client import Client, ClientError, read_study_file
+from isolab.service.schemas import EXAMPLE_SCENE
+from isolab.service.settings import Settings
+from isolab.studies.study import load_study
 
 G = 9.80665
 

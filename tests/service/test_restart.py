@@ -10,12 +10,12 @@ from pathlib import Path
 import numpy as np
 from fastapi.testclient import TestClient
 
-from engine import simulate
-from service.app import create_app
-from service.schemas import EXAMPLE_SCENE
-from service.settings import Settings
-from studies.store import Store
-from studies.study import Study
+from isolab.engine import simulate
+from isolab.service.app import create_app
+from isolab.service.schemas import EXAMPLE_SCENE
+from isolab.service.settings import Settings
+from isolab.studies.store import Store
+from isolab.studies.study import Study
 
 N = 480
 MARK = "kept from the first run"
@@ -102,7 +102,7 @@ def test_restart_mid_study_resumes_and_loses_nothing(tmp_path: Path) -> None:
 
 def test_job_queue_order_cancel_and_stop(tmp_path: Path) -> None:
     """The queue's own bookkeeping, with a runner that works until it is cancelled (no cluster)."""
-    from service.jobs import JobQueue
+    from isolab.service.jobs import JobQueue
 
     started: list[str] = []
 

@@ -13,10 +13,10 @@ import xarray as xr
 from dask.distributed import Client, LocalCluster
 from pydantic import ValidationError
 
-from engine import simulate
-from engine.results import OK
-from studies import accuracy
-from studies.accuracy import (
+from isolab.engine import simulate
+from isolab.engine.results import OK
+from isolab.studies import accuracy
+from isolab.studies.accuracy import (
     STEP_COST,
     choose,
     choose_for_batch,
@@ -26,10 +26,10 @@ from studies.accuracy import (
     resolved_simulation,
     sizing_error,
 )
-from studies.dataset import error_estimate
-from studies.schema import Simulation, error_messages, parse_tolerance
-from studies.store import Store
-from studies.study import Study, load_scene, load_study, scene_batch
+from isolab.studies.dataset import error_estimate
+from isolab.studies.schema import Simulation, error_messages, parse_tolerance
+from isolab.studies.store import Store
+from isolab.studies.study import Study, load_scene, load_study, scene_batch
 
 STEPS = (5e-4, 1e-3, 2e-3, 5e-3)  # a short ladder: the truth at 0.5 ms keeps the tests fast
 
@@ -264,7 +264,7 @@ def _open(store: Store, sid: str) -> xr.Dataset:
 
 
 def test_a_requested_study_records_its_choice_and_its_measured_error(client: Client, tmp_path: Path) -> None:
-    from studies.runner import run_study
+    from isolab.studies.runner import run_study
 
     study = load_study(_with_simulation({"accuracy": "balanced", "dt": "5 ms"}))
     store = Store(tmp_path)
@@ -288,7 +288,7 @@ def test_a_requested_study_records_its_choice_and_its_measured_error(client: Cli
 
 
 def test_every_stored_study_carries_its_measured_error(client: Client, tmp_path: Path) -> None:
-    from studies.runner import run_study
+    from isolab.studies.runner import run_study
 
     study = load_study(_with_simulation({"fidelity": "lti", "integrator": "exact", "dt": "2 ms"}))
     store = Store(tmp_path)

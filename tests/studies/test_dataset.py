@@ -9,9 +9,9 @@ import json
 import numpy as np
 import pytest
 
-from engine.results import DOF_NAMES, FAILED, OK, TIPPING, UNSTABLE, SimulationResult
-from studies.dataset import failed_arrays, from_chunks, result_arrays, to_dataset
-from studies.designs import Design
+from isolab.engine.results import DOF_NAMES, FAILED, OK, TIPPING, UNSTABLE, SimulationResult
+from isolab.studies.dataset import failed_arrays, from_chunks, result_arrays, to_dataset
+from isolab.studies.designs import Design
 
 FN = {"active": 1.0, "air": 3.0, "passive": 10.0}
 ISOLATORS = ["front_left", "front_right", "rear_left", "rear_right"]

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import yaml
 
-from studies import designs
-from studies.designs import Factor
-from studies.study import Study
+from isolab.studies import designs
+from isolab.studies.designs import Factor
+from isolab.studies.study import Study
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "studies" / "examples"
 G = 9.80665

@@ -16,12 +16,12 @@ import pytest
 import xarray as xr
 from distributed import Client, LocalCluster
 
-from engine import __version__ as engine_version
-from engine import simulate
-from engine.results import FAILED, OK, UNSTABLE
-from studies import fanout, runner
-from studies.dataset import to_dataset
-from studies.fanout import (
+from isolab.engine import __version__ as engine_version
+from isolab.engine import simulate
+from isolab.engine.results import FAILED, OK, UNSTABLE
+from isolab.studies import fanout, runner
+from isolab.studies.dataset import to_dataset
+from isolab.studies.fanout import (
     CHUNKS_PER_WORKER,
     FanoutError,
     choose_chunk_size,
@@ -29,9 +29,9 @@ from studies.fanout import (
     run_chunk,
     run_chunks,
 )
-from studies.runner import finish_study, make_client, run_local, run_study, study_labels
-from studies.store import Store
-from studies.study import load_study
+from isolab.studies.runner import finish_study, make_client, run_local, run_study, study_labels
+from isolab.studies.store import Store
+from isolab.studies.study import load_study
 
 # the tasks below are defined in this test module: ship them to the workers by value
 cloudpickle.register_pickle_by_value(sys.modules[__name__])

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 import yaml
 
-from engine import profiles
-from engine.model import preload
-from engine.scene import SceneError
-from studies.scenes import build_batch, slowest_decay_time
-from studies.schema import Scene, Simulation
-from studies.study import Study, load_study
+from isolab.engine import profiles
+from isolab.engine.model import preload
+from isolab.engine.scene import SceneError
+from isolab.studies.scenes import build_batch, slowest_decay_time
+from isolab.studies.schema import Scene, Simulation
+from isolab.studies.study import Study, load_study
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "studies" / "examples"
 G = 9.80665
@@ -85,7 +85,7 @@ def test_preset_gives_the_vertical_and_horizontal_natural_frequency(preset):
         m_total = b.mass[0] + b.stage_mass[0].sum()
         fz = math.sqrt(b.iso_k[0, :, 2].sum() / m_total) / (2 * math.pi)
         fx = math.sqrt(b.iso_k[0, :, 0].sum() / m_total) / (2 * math.pi)
-        from studies.isolators import PRESETS
+        from isolab.studies.isolators import PRESETS
 
         assert fz == pytest.approx(PRESETS[preset].f_vertical, rel=1e-12)
         assert fx == pytest.approx(PRESETS[preset].f_horizontal, rel=1e-12)
@@ -363,7 +363,7 @@ def test_study_reports_a_combination_that_unloads_a_mount_at_validation():
 
 
 def test_scene_batch_labels():
-    from studies.study import scene_batch
+    from isolab.studies.study import scene_batch
 
     b, names = scene_batch(Scene.model_validate(scriber()))
     assert names == {

@@ -12,11 +12,11 @@ import pytest
 import yaml
 from pydantic import ValidationError
 
-from studies.isolators import PRESETS, damping_from_ratio, load_share, stiffness_from_frequency
-from studies.parameters import resolve
-from studies.schema import Scene, error_messages
-from studies.study import Study, load_scene, load_study
-from studies.units import to_si
+from isolab.studies.isolators import PRESETS, damping_from_ratio, load_share, stiffness_from_frequency
+from isolab.studies.parameters import resolve
+from isolab.studies.schema import Scene, error_messages
+from isolab.studies.study import Study, load_scene, load_study
+from isolab.studies.units import to_si
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "studies" / "examples"
 G = 9.80665

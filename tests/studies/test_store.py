@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from engine.results import OK, UNSTABLE, SimulationResult
-from studies.dataset import to_dataset
-from studies.designs import Design
-from studies.store import Store, StudyNotFound, check_id, write_netcdf
+from isolab.engine.results import OK, UNSTABLE, SimulationResult
+from isolab.studies.dataset import to_dataset
+from isolab.studies.designs import Design
+from isolab.studies.store import Store, StudyNotFound, check_id, write_netcdf
 
 ISOLATORS = ["a", "b", "c", "d"]
 POINTS = ["tool"]
@@ -342,7 +342,7 @@ def test_chunks_persist_and_reload(store: Store) -> None:
 
 def test_a_catalog_from_before_the_step_column_is_migrated(tmp_path: Path) -> None:
     # a catalog written before `dt` was recorded: opening it adds the column, old rows read None
-    from studies import store as store_module
+    from isolab.studies import store as store_module
 
     old_schema = store_module._SCHEMA.replace("    dt REAL,\n", "")
     assert "dt REAL" not in old_schema
