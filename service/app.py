@@ -31,7 +31,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from isolab.service.jobs import RUNNING_STUDIES, JobQueue
 from isolab.service.request_limits import RequestLimits, unreadable_body_is_422
-from isolab.service.routes import comparisons, health, heavy_work_limiter, studies
+from isolab.service.routes import cases, comparisons, health, heavy_work_limiter, studies
 from isolab.service.settings import Settings, load_settings
 from isolab.service.worker_priority import LowerPriority
 
@@ -175,5 +175,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(health.router)
     guarded = [Depends(require_token)]
     app.include_router(studies.router, dependencies=guarded)
+    app.include_router(cases.router, dependencies=guarded)
     app.include_router(comparisons.router, dependencies=guarded)
     return app

@@ -44,9 +44,10 @@ def _default_runner(study: Any, store: Store, client: Any, study_id: str, cancel
 
 
 def _default_loader(definition: Any) -> Any:
-    from isolab.studies.study import Study
+    from isolab.studies.study import parse_study
 
-    return Study.model_validate(definition)  # never reads files: a stored definition has its scene inline
+    # parsed only: a stored definition was checked when it was submitted, and has its scene inline
+    return parse_study(definition)
 
 
 class JobQueue:

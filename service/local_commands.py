@@ -10,9 +10,6 @@ from typing import Annotated
 import numpy as np
 import typer
 
-AXES = ("x", "y", "z")
-ROTATIONS = ("rx", "ry", "rz")
-
 
 def _labelled(values, labels) -> dict:
     return {name: float(v) for name, v in zip(labels, values, strict=True)}
@@ -20,7 +17,7 @@ def _labelled(values, labels) -> dict:
 
 def case_outputs(result, case: int, isolators: list[str], points: list[str]) -> dict:
     """One case's outputs keyed by quantity and by axis, isolator, point or mode (SI units)."""
-    from isolab.engine.results import DOF_NAMES, STATUS_NAMES
+    from isolab.studies import AXES, DOF_NAMES, ROTATIONS, STATUS_NAMES
 
     r = result
     ok = int(r.status[case]) == 0
@@ -71,8 +68,8 @@ def simulate(
     plot: Annotated[Path | None, typer.Option(help="Write c.g., rotation and force traces to a PNG.")] = None,
 ) -> None:
     """Simulate one scene and print its peaks, loads, natural frequencies and settling time."""
-    from isolab.engine import SceneError
-    from isolab.engine import simulate as run
+    from isolab.studies import SceneError
+    from isolab.studies import simulate as run
     from isolab.studies.study import load_scene, scene_batch
 
     try:
@@ -131,6 +128,8 @@ def simulate(
         return
     pd = out["peak_displacement"]
     pr = out["peak_rotation"]
+    from isolab.studies import AXES, ROTATIONS
+
     typer.echo("  peak c.g. displacement  " + "  ".join(f"{a} {pd[a] * 1e3:.3f} mm" for a in AXES))
     typer.echo("  peak rotation           " + "  ".join(f"{a} {pr[a] * 1e3:.3f} mrad" for a in ROTATIONS))
     typer.echo("  natural frequencies     " + ", ".join(f"{f:.2f}" for f in out["natural_frequency"]) + " Hz")

@@ -19,8 +19,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-AXES = ("x", "y", "z")
-ROTATIONS = ("rx", "ry", "rz")
+from isolab.studies import AXES, ROTATIONS
+
 #: SI unit -> (unit drawn, factor from SI)
 DISPLAY_UNITS: dict[str, tuple[str, float]] = {"m": ("mm", 1e3), "rad": ("mrad", 1e3)}
 DPI = 100

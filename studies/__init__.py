@@ -1,8 +1,10 @@
 """What a study is, how its cases are drawn and fanned out, and how its results are stored.
 
-Imports :mod:`isolab.engine`; nothing here imports the web service.
+Imports :mod:`isolab.engine`; nothing here imports the web service. The service reaches the engine only
+through this package: the names below are the engine's, re-exported for it.
 """
 
-from isolab.engine import __version__
+from isolab.engine import STATUS_NAMES, SceneError, __version__, simulate
+from isolab.engine.results import AXES, DOF_NAMES, ROTATIONS
 
-__all__ = ["__version__"]
+__all__ = ["AXES", "DOF_NAMES", "ROTATIONS", "STATUS_NAMES", "SceneError", "__version__", "simulate"]

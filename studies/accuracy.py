@@ -23,7 +23,6 @@ keeps the largest error per output
 
 from __future__ import annotations
 
-import functools
 import json
 import math
 from collections.abc import Mapping, Sequence
@@ -38,6 +37,7 @@ from isolab.engine.results import OK, STATUS_NAMES
 from isolab.engine.scene import SceneBatch
 from isolab.studies.dataset import result_arrays
 from isolab.studies.schema import ACCURACY_LEVELS, DEFAULT_DT, Simulation, parse_tolerance
+from isolab.studies.study import study_from_json
 
 CANDIDATE_STEPS = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3)
 """Steps the chooser tries, s (those at or below a requested ``dt``)."""
@@ -400,15 +400,7 @@ def _choose(study: Any) -> Choice:
 
 def choose_from_json(definition_json: str) -> Choice:
     """:func:`choose` for a study given as its JSON definition (the Dask task)."""
-    return choose(_study_from_json(definition_json))
-
-
-@functools.lru_cache(maxsize=8)
-def _study_from_json(definition_json: str) -> Any:
-    """The validated study of a JSON definition (as data: no files are read), cached per process."""
-    from isolab.studies.study import Study
-
-    return Study.model_validate(json.loads(definition_json))
+    return choose(study_from_json(definition_json))
 
 
 def resolved_definition(study: Any, choice: Choice) -> dict[str, Any]:
@@ -467,7 +459,7 @@ def sample_arrays(definition_json: str, case: int) -> dict[str, dict[str, np.nda
     """One sampled case of a study (JSON definition) run twice (a Dask task): with the study's own model
     (``"ours"``, the numbers its chunk gives: a case's result does not depend on the batch it runs in)
     and at the reference level sampled at the step that run used (``"reference"``)."""
-    study = _study_from_json(definition_json)
+    study = study_from_json(definition_json)
     sim = study.simulation
     batch = study.batch(np.array([int(case)]))
     ours = result_arrays(simulate(batch, sim.fidelity, sim.integrator, dt=float(sim.dt),

@@ -33,14 +33,11 @@ Timings: each task measures itself (preparing the batch, the engine's wall and C
 result) and returns the figures with its arrays; :func:`run_chunks` adds when the chunk was submitted and
 when its result arrived and was fetched, keeps them in :attr:`FanoutReport.timings`, and, when the
 environment variable ``ISOLAB_TIMINGS`` names a file, appends one JSON line per event to it
-(:func:`record_timing`; the store records its reads and writes there too). ``python -m benchmarks endtoend``
-reads that journal from a running service.
+(:mod:`isolab.studies.timings`; the store records its reads and writes there too).
 """
 
 from __future__ import annotations
 
-import functools
-import json
 import math
 import os
 import threading
@@ -48,11 +45,12 @@ import time
 import uuid
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Any
 
 import numpy as np
 
 from isolab.studies.dataset import failed_arrays, result_arrays
+from isolab.studies.study import study_from_json
+from isolab.studies.timings import record_timing
 
 MIN_CHUNK_SECONDS = 1.0
 MAX_CHUNK_SECONDS = 5.0
@@ -60,44 +58,15 @@ CHUNKS_PER_WORKER = 4
 TASK_RETRIES = 2
 ENGINE_BATCH_CASES = 500
 """Most cases one engine call of a chunk simulates (bounds a worker's memory; see the module docstring)."""
-TIMINGS_ENV = "ISOLAB_TIMINGS"
-"""Environment variable naming the timing journal file (JSON lines); unset or empty: no journal."""
 TASK_TIMING_FIELDS = ("task_start", "task_end", "prepare_s", "engine_s", "engine_cpu_s", "pack_s", "pid")
 """Figures a chunk task returns under the key ``"timing"``: start and end (Unix time, s), time to rebuild
 the study and build the batches (s), engine wall and CPU time (s), time to pack the result arrays (s), and
 the worker's process id."""
 _POLL_SECONDS = 0.05
-_journal_lock = threading.Lock()
 
 
 class FanoutError(RuntimeError):
     """Every chunk of a run failed: nothing was computed."""
-
-
-def record_timing(event: str, **fields: Any) -> None:
-    """Append ``{"event": event, "t": <Unix time, s>, "pid": <process id>, **fields}`` as one JSON line to
-    the journal named by ``ISOLAB_TIMINGS``; does nothing when the variable is unset or empty.
-
-    Durations are in seconds, times are Unix times in seconds. A journal that cannot be written is skipped
-    silently: timings never stop a study."""
-    path = os.environ.get(TIMINGS_ENV, "")
-    if not path:
-        return
-    record = {"event": str(event), "t": time.time(), "pid": os.getpid(), **fields}
-    line = json.dumps(record, default=_json_number) + "\n"
-    try:
-        with _journal_lock, open(path, "a", encoding="utf-8") as f:
-            f.write(line)
-    except OSError:
-        pass
-
-
-def _json_number(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    return str(value)
 
 
 def plan_chunks(n_cases: int, chunk_size: int) -> list[np.ndarray]:
@@ -134,16 +103,6 @@ def choose_chunk_size(n_cases: int, n_workers: int, seconds_per_case_estimate: f
     return max(1, size)
 
 
-@functools.lru_cache(maxsize=8)
-def _study_from_json(definition_json: str):
-    """The validated Study of a JSON definition, cached per worker process (chunks of one study share it).
-
-    Validated as data (``Study.model_validate``): a worker never reads files named in a definition."""
-    from isolab.studies.study import Study
-
-    return Study.model_validate(json.loads(definition_json))
-
-
 def run_chunk(definition_json: str, indices: Sequence[int] | np.ndarray, store_root: str | None = None,
               study_id: str | None = None, chunk_index: int | None = None) -> dict[str, np.ndarray]:
     """Run the cases ``indices`` of the study defined by ``definition_json`` (the worker task).
@@ -163,7 +122,7 @@ def run_chunk(definition_json: str, indices: Sequence[int] | np.ndarray, store_r
     task_start = time.time()
     t0 = time.perf_counter()
     idx = np.asarray(indices, dtype=np.int64)
-    study = _study_from_json(definition_json)
+    study = study_from_json(definition_json)
     sim = study.simulation
     prepare = time.perf_counter() - t0
     engine_wall = engine_cpu = pack = 0.0

@@ -55,6 +55,7 @@ from isolab.studies.accuracy import (
 from isolab.studies.dataset import add_error_estimate, from_chunks, to_dataset
 from isolab.studies.fanout import TASK_RETRIES, choose_chunk_size, plan_chunks, run_chunks
 from isolab.studies.store import Store, copy_atomic, utc_now
+from isolab.studies.study import study_from_json
 
 log = logging.getLogger(__name__)
 
@@ -254,9 +255,8 @@ def assemble_dataset(store: Store, study_id: str, run_json: str, attrs: dict[str
                      estimate: ErrorEstimate) -> int:
     """Build a study's dataset from its saved chunks, add the error ``estimate`` and write it atomically;
     the number of cases that did not end OK."""
-    from isolab.studies.fanout import _study_from_json
 
-    run = _study_from_json(run_json)
+    run = study_from_json(run_json)
     iso_names, point_names = study_labels(run)
     chunks = store.load_chunk_plan(study_id)
     result = from_chunks(store.load_chunks(study_id), chunks, n_isolators=len(iso_names),

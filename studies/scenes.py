@@ -497,6 +497,18 @@ def build_batch(
     return batch
 
 
+def check_scene(scene: Scene) -> Scene:
+    """The check step for one parsed scene: build its batch once, so that what only the assembled scene
+    shows (collinear mounts, a mount that would carry no load, a travel off the base, a scene that tips)
+    is reported before anything runs. Returns ``scene``.
+
+    Raises:
+        SceneError (a ValueError): naming the input and the reason.
+    """
+    build_batch([scene])
+    return scene
+
+
 def slowest_decay_time(batch: SceneBatch) -> np.ndarray:
     """(C,) largest time constant ``1 / (zeta w)`` over the modes that have stiffness and damping, s
     (0 where none has both; a mode without damping never decays and is left to the cap)."""

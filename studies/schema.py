@@ -31,7 +31,6 @@ from pydantic import (
     model_validator,
 )
 
-from isolab.engine.scene import SceneError
 from isolab.studies.isolators import PRESETS, CollinearIsolatorsError, IsolatorPreset, load_share
 from isolab.studies.units import (
     Acceleration,
@@ -796,10 +795,10 @@ class Scene(_Model):
         return stages
 
     @model_validator(mode="after")
-    def _physical(self) -> Scene:
-        """What only the assembled scene shows: mounts that cannot carry the weight, moves off the base."""
-        from isolab.studies.scenes import build_batch
-
+    def _stage_mass(self) -> Scene:
+        """Stages heavier than the base are refused. What only the assembled scene shows (mounts that
+        cannot carry the weight, moves off the base) is the check step's, :func:`studies.scenes.check_scene`:
+        parsing builds nothing."""
         stages = sum(s.mass for s in self.stages)
         base = self.machine.properties()[0]
         if stages > MAX_STAGE_MASS_RATIO * base * (1.0 + 1e-12):
@@ -808,10 +807,6 @@ class Scene(_Model):
                 f"machine base ({base:.6g} kg); stages are point masses, and a base lighter than its stages "
                 "leaves the machine almost without rotational inertia"
             )
-        try:
-            build_batch([self])
-        except SceneError as err:
-            raise ValueError(str(err)) from None
         return self
 
     def total_mass(self) -> float:

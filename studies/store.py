@@ -16,7 +16,7 @@ The catalog opens a fresh connection per call, so one :class:`Store` can be shar
 listing and filtering run in SQL and never open a netCDF file.
 
 Writing and reading chunks and writing datasets record their durations in the timing journal when one is
-configured (see :func:`studies.fanout.record_timing`).
+configured (see :func:`isolab.studies.timings.record_timing`).
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ import numpy as np
 import xarray as xr
 
 from isolab.studies.dataset import netcdf_encoding
-from isolab.studies.fanout import record_timing
+from isolab.studies.timings import record_timing
 
 STATUSES = ("queued", "running", "done", "failed", "cancelled")
 _ID = re.compile(r"[0-9a-f]{32}")

@@ -12,6 +12,7 @@ break (a mount that would carry no load) is caught when the batch is built.
 
 from __future__ import annotations
 
+import functools
 import json
 import re
 from collections.abc import Mapping
@@ -26,7 +27,7 @@ from isolab.engine.scene import SceneBatch, concat
 from isolab.studies import designs
 from isolab.studies.designs import Design, Factor
 from isolab.studies.parameters import Target, apply, resolve, scene_dict
-from isolab.studies.scenes import build_batch
+from isolab.studies.scenes import build_batch, check_scene
 from isolab.studies.schema import DesignSpec, ParameterSpec, Scene, Simulation, _Model, error_messages
 from isolab.studies.units import to_si
 
@@ -96,8 +97,6 @@ class Study(_Model):
         self._targets = targets
         self._design = _make_design(self.design_spec, factors, targets)
         self._groups = {}
-        self._check_values()
-        self._check_cases()
         return self
 
     # -----------------------------------------------------------------------------------------------------
@@ -212,11 +211,16 @@ class Study(_Model):
                 vals = np.array([vals.min(), vals.max()])
             for v in vals:
                 try:
-                    Scene.model_validate(apply(base, [target], [v]))
+                    check_scene(Scene.model_validate(apply(base, [target], [v])))
                 except ValidationError as err:
                     raise ValueError(
                         f"parameters[{i}] ({name}): the value {_shown(v, target)} makes the scene invalid: "
                         + "; ".join(error_messages(err))
+                    ) from None
+                except ValueError as err:  # the check step's SceneError
+                    raise ValueError(
+                        f"parameters[{i}] ({name}): the value {_shown(v, target)} makes the scene invalid: "
+                        + str(err)
                     ) from None
 
 
@@ -322,12 +326,79 @@ def _read(source: str | Path, base_dir: str | Path | None = None) -> tuple[dict[
     return dict(data), here
 
 
+# ------------------------------------------------------------------------------ parse -> check -> build
+# Validation is three plain steps. Parse: pydantic reads the definition, checks each field and plans the
+# design (cheap; builds nothing). Check: what only built scenes show (the base scene's statics, each
+# parameter's levels or extremes applied alone, and, up to DRY_RUN_LIMIT cases, every case built once).
+# Build: ``Study.batch`` turns cases into engine batches. Whatever a user submits goes through parse and
+# check (``validate_study``, ``load_study``); a stored definition, checked when it was submitted, is
+# rebuilt with parse alone (``study_from_json``), so a worker never repeats the dry run.
+
+
+def _check_failed(err: ValueError, loc: tuple[str | int, ...], data: Any, title: str) -> ValidationError:
+    """A check-step failure in pydantic's shape (type ``value_error`` at ``loc``), so every caller handles
+    one kind of validation error."""
+    return ValidationError.from_exception_data(
+        title, [{"type": "value_error", "loc": loc, "input": data, "ctx": {"error": err}}]
+    )
+
+
+def check_study(study: Study, data: Any = None) -> Study:
+    """The check step of a parsed study: the base scene's statics, each parameter's values applied alone,
+    and the dry run of every case (up to ``DRY_RUN_LIMIT``). Returns ``study``.
+
+    Raises:
+        pydantic.ValidationError: at ``scene`` for the base scene, at the top for the parameters and cases,
+            with the message naming the field (``parameters[0] (...)``, ``case 3 (...)``).
+    """
+    if study.scene is not None:
+        try:
+            check_scene(study.scene)
+        except ValueError as err:
+            raise _check_failed(err, ("scene",), data, "Study") from None
+    try:
+        study._check_values()
+        study._check_cases()
+    except ValidationError:
+        raise
+    except ValueError as err:
+        raise _check_failed(err, (), data, "Study") from None
+    return study
+
+
+def parse_study(data: Any) -> Study:
+    """The parse step: the study read and planned by pydantic (fields, parameter paths, the design)."""
+    return Study.model_validate(data)
+
+
+def validate_study(data: Any) -> Study:
+    """Parse and check a study definition given as data (never reads files): what every submission goes
+    through. Raises pydantic.ValidationError naming the field."""
+    return check_study(parse_study(data), data)
+
+
+@functools.lru_cache(maxsize=16)
+def study_from_json(definition_json: str) -> Study:
+    """The study of a stored JSON definition, parsed only (it was checked when it was submitted), cached per
+    process: the chunks of one study on one worker share it. Never reads files."""
+    return parse_study(json.loads(definition_json))
+
+
+def validate_scene(data: Any) -> Scene:
+    """Parse and check one scene given as data. Raises pydantic.ValidationError naming the field."""
+    scene = Scene.model_validate(data)
+    try:
+        return check_scene(scene)
+    except ValueError as err:
+        raise _check_failed(err, (), data, "Scene") from None
+
+
 def load_scene(source: str | Path | Mapping[str, Any]) -> Scene:
     """A validated :class:`~studies.schema.Scene` from a YAML/JSON file, YAML/JSON text or a dict."""
     if isinstance(source, Mapping):
-        return Scene.model_validate(dict(source))
+        return validate_scene(dict(source))
     data, _ = _read(source)
-    return Scene.model_validate(data)
+    return validate_scene(data)
 
 
 def load_study(source: str | Path | Mapping[str, Any], base_dir: str | Path | None = None) -> Study:
@@ -337,7 +408,7 @@ def load_study(source: str | Path | Mapping[str, Any], base_dir: str | Path | No
     When the study has no inline ``scene``, its ``scene_file`` is read, relative to the study file (for
     text or a dict: relative to ``base_dir``, default the current directory), and becomes the inline
     scene. An inline scene wins over ``scene_file`` (a stored definition keeps both). Services that take
-    studies from the network validate with ``Study.model_validate`` instead, which never reads files.
+    studies from the network use :func:`validate_study` instead, which never reads files.
     """
     if isinstance(source, Mapping):
         data, here = dict(source), Path(base_dir) if base_dir is not None else Path.cwd()
@@ -348,7 +419,7 @@ def load_study(source: str | Path | Mapping[str, Any], base_dir: str | Path | No
         if not scene_path.is_file():
             raise FileNotFoundError(f"scene_file: no file {scene_path}")
         data["scene"], _ = _read(scene_path)
-    return Study.model_validate(data)
+    return validate_study(data)
 
 
 def isolator_names(scene: Scene) -> list[str]:

@@ -58,6 +58,14 @@ _PINT_DIMENSIONALITY = {name: UREG.get_dimensionality(spec[1]) for name, spec in
 _GRAVITY_TOKEN = re.compile(r"(?<![A-Za-z_])(gn|g)(?![A-Za-z_0-9])")
 
 
+def dimension_of(unit: str) -> str | None:
+    """The dimension whose SI unit is ``unit`` (``"m/s^2"`` -> ``"acceleration"``; ``"1"`` or ``""`` ->
+    ``"dimensionless"``), or None for a unit no dimension of :data:`DIMENSIONS` has (``"N"``)."""
+    if unit in ("", "1"):
+        return "dimensionless"
+    return next((name for name, spec in DIMENSIONS.items() if spec[0] == unit), None)
+
+
 def si_unit(dimension: str) -> str:
     """The SI unit string of ``dimension`` ("" for dimensionless)."""
     _check_dimension(dimension)
@@ -101,6 +109,27 @@ def quantity_text_problem(text: str) -> str | None:
             return f"exponent {exponent.group(0).strip()} is larger than {MAX_EXPONENT:g} in magnitude"
         if _POWER.match(text[exponent.end() :].lstrip()):
             return "a power cannot be raised to a power again"
+    return None
+
+
+def quantity_problem(text: str) -> str | None:
+    """Why the quantity text ``text`` is refused, or None when it is safe to hand to the units parser: the
+    rules of :func:`quantity_text_problem`, and a value no 64-bit float holds (``10**999``)."""
+    return quantity_text_problem(text) or _magnitude_problem(text)
+
+
+def _magnitude_problem(text: str) -> str | None:
+    """The units parser's reading of a screened text: None unless its number overflows a float."""
+    try:
+        q = UREG.Quantity(text)
+        magnitude = q.magnitude if hasattr(q, "magnitude") else q
+        float(np.asarray(magnitude, dtype=float))
+        if hasattr(q, "to_base_units"):
+            float(np.asarray(q.to_base_units().magnitude, dtype=float))
+    except OverflowError:
+        return "the number is too large for a 64-bit float"
+    except Exception:  # unreadable text: validation names the field and the reason
+        return None
     return None
 
 

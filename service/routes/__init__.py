@@ -12,9 +12,12 @@ from typing import Any, TypeVar
 
 from anyio import CapacityLimiter, to_thread
 from distributed import Client
-from fastapi import Request
+from fastapi import HTTPException, Request
 
+from isolab.service.jobs import JobQueue
+from isolab.service.schemas import MessageBody, ValidationErrorBody
 from isolab.service.settings import Settings
+from isolab.studies.store import Store, StudyNotFound
 
 T = TypeVar("T")
 
@@ -48,3 +51,60 @@ async def dask_client(request: Request) -> Client:
             "the Dask client is not running: serve the app made by create_app() with its lifespan"
         )
     return client
+
+
+async def study_store(request: Request) -> Store:
+    """FastAPI dependency: the app's study store (the job queue's; opened on first use)."""
+    return _jobs(request).store
+
+
+async def job_queue(request: Request) -> JobQueue:
+    """FastAPI dependency: the app's study queue (started by the lifespan)."""
+    return _jobs(request)
+
+
+# The dependencies are coroutines: they only read app state, and a plain function would cost every
+# request a round trip through the thread pool.
+def _jobs(request: Request) -> JobQueue:
+    jobs = getattr(request.app.state, "jobs", None)
+    if jobs is None:
+        raise RuntimeError(
+            "the job queue is not running: serve the app made by create_app() with its lifespan"
+        )
+    return jobs
+
+
+# ------------------------------------------------------------------------------ domain errors -> HTTP
+NOT_FOUND = {404: {"model": MessageBody, "description": "no study with this id (or a malformed id)"}}
+NOT_DONE = {409: {"model": MessageBody, "description": "the study is not done yet"}}
+INVALID = {422: {"model": ValidationErrorBody, "description": "invalid input; `loc` names the field"}}
+PNG = {200: {"content": {"image/png": {}}, "description": "a PNG image"}}
+
+
+def invalid(loc: list[str | int], msg: str, kind: str = "value_error") -> HTTPException:
+    """A 422 with FastAPI's error shape: ``{"detail": [{"loc": [...], "msg": ..., "type": ...}]}``."""
+    return HTTPException(status_code=422, detail=[{"loc": loc, "msg": msg, "type": kind}])
+
+
+def unprocessable(details: list[dict[str, Any]]) -> HTTPException:
+    """A 422 carrying the details of a :class:`~isolab.studies.definitions.DefinitionError`."""
+    return HTTPException(status_code=422, detail=details)
+
+
+def study_row(store: Store, study_id: str) -> dict[str, Any]:
+    """The catalog row of a study; 404 when there is none (or the id is malformed)."""
+    try:
+        return store.get(study_id)
+    except (StudyNotFound, ValueError):
+        raise HTTPException(status_code=404, detail=f"no study with id {study_id!r}") from None
+
+
+def require_done(row: dict[str, Any]) -> None:
+    """409 unless the study is done, saying where it is."""
+    if row["status"] != "done":
+        detail = f"study {row['id']} is {row['status']}"
+        if row["status"] in ("queued", "running"):
+            detail += f" ({row['n_done']} of {row['n_cases']} cases done)"
+        elif row.get("error"):
+            detail += f": {row['error']}"
+        raise HTTPException(status_code=409, detail=detail + "; its results exist once it is done")

@@ -363,7 +363,7 @@ HAMMER = textwrap.dedent(
     """
     import sys, threading, time
     import numpy as np, xarray as xr
-    from isolab.service.routes.studies import netcdf_bytes
+    from isolab.studies.history import netcdf_bytes
     from isolab.studies.store import Store
 
     store = Store(sys.argv[1])

@@ -23,9 +23,10 @@ MARK = "kept from the first run"
 
 def definition() -> dict:
     scene = copy.deepcopy(EXAMPLE_SCENE)
-    # about 25 ms of engine time per case: 480 cases in 8 chunks of about 1.5 s, so that most of the
-    # study is still to run when the service stops after the first chunk, even on a busy machine
-    scene["simulation"] = {"fidelity": "ltv", "integrator": "rk4", "dt": "1 ms", "duration": "2 s"}
+    # 4,000 RK4 steps a case: the runner sizes chunks of 85 cases (about 1 s each by its cost model), so
+    # 480 cases make 6 chunks and most of the study is still to run when the service stops after the first
+    # chunk (the two workers may finish the chunks they hold meanwhile), even on a quiet machine
+    scene["simulation"] = {"fidelity": "ltv", "integrator": "rk4", "dt": "1 ms", "duration": "4 s"}
     return {
         "name": "restart",
         "scene": scene,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from pathlib import Path
@@ -15,7 +16,7 @@ from isolab.engine.model import preload
 from isolab.engine.scene import SceneError
 from isolab.studies.scenes import build_batch, slowest_decay_time
 from isolab.studies.schema import Scene, Simulation
-from isolab.studies.study import Study, load_study
+from isolab.studies.study import Study, load_study, study_from_json, validate_study
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "studies" / "examples"
 G = 9.80665
@@ -357,10 +358,31 @@ def test_study_reports_a_combination_that_unloads_a_mount_at_validation():
         match=r"case 3 \(isolator_span_y, stage_y_mass = 0.6 m, 3000 kg\): isolators: "
         r"isolator \d would carry",
     ):
-        Study.model_validate(data)
+        validate_study(data)
     data["parameters"][1]["values"] = [100, "1 t"]  # each value alone, and every combination, is fine
-    assert Study.model_validate(data).n_cases == 4
+    assert validate_study(data).n_cases == 4
 
+
+
+def test_a_stored_definition_is_rebuilt_by_parsing_alone_and_the_build_still_refuses_a_bad_case():
+    """Parse -> check -> build: a worker rebuilds a stored definition without the check step (no dry run);
+    a case that is not a physical scene is still refused when it is built."""
+    data = {
+        "name": "t",
+        "scene": scriber(),
+        "parameters": [
+            {"path": "isolators.layout.span_y", "values": [3.6, "0.6 m"]},
+            {"path": "stages.y.mass", "values": [100, "3 t"]},
+        ],
+    }
+    with pytest.raises(ValueError, match="case 3"):
+        validate_study(data)
+    study = study_from_json(json.dumps(data))
+    assert study.n_cases == 4
+    assert study_from_json(json.dumps(data)) is study  # one parse per process and definition
+    assert study.batch([0, 1, 2]).n_cases == 3
+    with pytest.raises(ValueError, match=r"case 3 \(isolator_span_y, stage_y_mass = 0.6 m, 3000 kg\)"):
+        study.batch([3])
 
 def test_scene_batch_labels():
     from isolab.studies.study import scene_batch

@@ -15,7 +15,7 @@ from pydantic import ValidationError
 from isolab.studies.isolators import PRESETS, damping_from_ratio, load_share, stiffness_from_frequency
 from isolab.studies.parameters import resolve
 from isolab.studies.schema import Scene, error_messages
-from isolab.studies.study import Study, load_scene, load_study
+from isolab.studies.study import Study, load_scene, load_study, validate_scene, validate_study
 from isolab.studies.units import to_si
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "studies" / "examples"
@@ -27,8 +27,10 @@ def base_scene() -> dict:
 
 
 def errors(data: dict, model=Scene) -> list[str]:
+    """The messages of validating ``data`` as ``model`` through parse and check, as users submit it."""
+    validate = {Scene: validate_scene, Study: validate_study}[model]
     with pytest.raises(ValidationError) as info:
-        model.model_validate(data)
+        validate(data)
     return error_messages(info.value)
 
 

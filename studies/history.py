@@ -1,0 +1,230 @@
+"""Time histories of one case, recomputed from its stored definition.
+
+A study stores peaks, not traces: :func:`case_history` reruns one case through the engine with its
+histories recorded (c.g. displacement, base rotation, dynamic isolator forces about the preload, point
+displacements), with the model the study's cases ran with. :func:`history_json` and
+:func:`history_dataset` give them as JSON-able data and as a CF-described xarray dataset.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from isolab.engine import STATUS_NAMES, simulate
+from isolab.engine.results import AXES, ROTATIONS
+from isolab.studies.accuracy import recorded_choice, resolved_study
+from isolab.studies.cases import CaseQueryError
+from isolab.studies.definitions import study_of
+from isolab.studies.runner import study_labels
+from isolab.studies.store import NETCDF_LOCK
+from isolab.studies.study import Study, study_from_json
+
+MAX_RECORDED_SAMPLES = 2_000_000
+"""Longest time history (samples) a case is recomputed with: about 200 bytes a sample in memory."""
+MAX_RETURNED_SAMPLES = 200_000
+"""Most samples per series one answer holds (``every`` thins them)."""
+
+
+class CaseNotFound(LookupError):
+    """A study has no case of that number."""
+
+
+@dataclass
+class CaseHistory:
+    """Time histories of one case (SI): arrays trimmed to the samples the run produced."""
+
+    parameters: dict[str, Any]
+    status: str
+    message: str
+    time: np.ndarray  # (T,) s
+    displacement: np.ndarray  # (T, 3) m
+    rotation: np.ndarray  # (T, 3) rad
+    isolator_force: np.ndarray  # (T, n, 3) N
+    point_displacement: np.ndarray  # (T, p, 3) m
+    isolator_names: list[str]
+    point_names: list[str]
+
+
+def case_history(study: Any, case: int, every: int = 1) -> CaseHistory:
+    """Recompute one case with its time histories recorded (runs the engine: call it off the event loop).
+
+    Refused (:class:`~isolab.studies.cases.CaseQueryError`) when the case would record more than
+    :data:`MAX_RECORDED_SAMPLES` samples, or return more than :data:`MAX_RETURNED_SAMPLES` with every
+    ``every``-th kept."""
+    sim = study.simulation
+    try:
+        batch = study.batch([case])
+    except ValueError as err:  # a combination of values no scene can have
+        raise CaseQueryError("case", f"case {case} cannot be simulated: {err}", where="path") from None
+    if sim.dt is not None:
+        samples = int(math.ceil(float(batch.duration[0]) / float(sim.dt))) + 1
+        if samples > MAX_RECORDED_SAMPLES:
+            raise CaseQueryError(
+                "case",
+                f"case {case} runs {samples} time steps; time histories are recomputed only for cases of "
+                f"at most {MAX_RECORDED_SAMPLES} (a shorter duration or a longer step)",
+                where="path",
+            )
+        if math.ceil(samples / every) > MAX_RETURNED_SAMPLES:
+            raise CaseQueryError(
+                "every",
+                f"case {case} has {samples} samples; keep at most {MAX_RETURNED_SAMPLES} "
+                f"(every >= {math.ceil(samples / MAX_RETURNED_SAMPLES)})",
+            )
+    result = simulate(
+        batch,
+        fidelity=sim.fidelity,
+        integrator=sim.integrator,
+        dt=sim.dt,
+        auto_step=sim.auto_step,
+        record=[0],
+    )
+    h = result.history
+    n = int(h["n_samples"][0])
+    iso, pts = study_labels(study)
+    return CaseHistory(
+        parameters=study.case_values(case),
+        status=STATUS_NAMES[int(result.status[0])],
+        message=str(result.message[0]),
+        time=np.asarray(h["time"][0, :n]),
+        displacement=np.asarray(h["displacement"][0, :n]),
+        rotation=np.asarray(h["rotation"][0, :n]),
+        isolator_force=np.asarray(h["isolator_force"][0, :n]),
+        point_displacement=np.asarray(h["point_displacement"][0, :n]),
+        isolator_names=iso,
+        point_names=pts,
+    )
+
+
+def case_study(row: dict[str, Any], case: int) -> Study:
+    """The study of a catalog ``row`` as its case ``case`` runs: an accuracy request resolved to the model
+    the runner chose and recorded.
+
+    Raises:
+        CaseNotFound: the study has no such case.
+    """
+    if not 0 <= case < row["n_cases"]:
+        raise CaseNotFound(f"study {row['id']} has no case {case} (cases 0..{row['n_cases'] - 1})")
+    study = study_of(row)
+    if study.simulation.request is None:
+        return study
+    choice = recorded_choice(study, row["fidelity"], row["integrator"], row["dt"])
+    return _resolved(json.dumps(row["definition"], sort_keys=True), choice)
+
+
+@functools.lru_cache(maxsize=16)
+def _resolved(definition: str, choice: Any) -> Study:
+    return resolved_study(study_from_json(definition), choice)
+
+
+def _series(a: np.ndarray) -> list[float | None]:
+    return [v if math.isfinite(v) else None for v in np.asarray(a, dtype=np.float64).tolist()]
+
+
+def history_json(study_id: str, case: int, h: CaseHistory, every: int) -> dict[str, Any]:
+    """The histories as JSON-able data, every ``every``-th sample, SI units named under ``units``."""
+    s = slice(None, None, every)
+    axes, rots = AXES, ROTATIONS
+    return {
+        "study_id": study_id,
+        "case": case,
+        "parameters": h.parameters,
+        "status": h.status,
+        "message": h.message,
+        "units": {
+            "time": "s",
+            "displacement": "m",
+            "rotation": "rad",
+            "isolator_force": "N",
+            "point_displacement": "m",
+        },
+        "time": _series(h.time[s]),
+        "displacement": {a: _series(h.displacement[s, k]) for k, a in enumerate(axes)},
+        "rotation": {r: _series(h.rotation[s, k]) for k, r in enumerate(rots)},
+        "isolator_force": {
+            iso: {a: _series(h.isolator_force[s, j, k]) for k, a in enumerate(axes)}
+            for j, iso in enumerate(h.isolator_names)
+        },
+        "point_displacement": {
+            p: {a: _series(h.point_displacement[s, j, k]) for k, a in enumerate(axes)}
+            for j, p in enumerate(h.point_names)
+        },
+    }
+
+
+def history_dataset(study_id: str, case: int, h: CaseHistory, every: int) -> xr.Dataset:
+    """The histories as a CF-described dataset: ``displacement`` (time, axis), ``base_rotation``
+    (time, rotation), ``isolator_force`` (time, isolator, axis), ``point_displacement``
+    (time, point, axis)."""
+    s = slice(None, None, every)
+    ds = xr.Dataset(
+        {
+            "displacement": (
+                ("time", "axis"),
+                h.displacement[s],
+                {"units": "m", "long_name": "displacement of the machine c.g."},
+            ),
+            "base_rotation": (
+                ("time", "rotation"),
+                h.rotation[s],
+                {"units": "rad", "long_name": "rotation of the machine base"},
+            ),
+            "isolator_force": (
+                ("time", "isolator", "axis"),
+                h.isolator_force[s],
+                {"units": "N", "long_name": "dynamic isolator force"},
+            ),
+            "point_displacement": (
+                ("time", "point", "axis"),
+                h.point_displacement[s],
+                {"units": "m", "long_name": "displacement of a point of interest"},
+            ),
+        },
+        coords={
+            "time": ("time", h.time[s], {"units": "s", "long_name": "time"}),
+            "axis": ("axis", np.array(AXES), {"units": "1", "long_name": "floor axis (Z up)"}),
+            "rotation": (
+                "rotation",
+                np.array(ROTATIONS),
+                {"units": "1", "long_name": "rotation axis"},
+            ),
+            "isolator": (
+                "isolator",
+                np.array(h.isolator_names, dtype=str).reshape(-1),
+                {"units": "1", "long_name": "isolator"},
+            ),
+            "point": (
+                "point",
+                np.array(h.point_names, dtype=str).reshape(-1),
+                {"units": "1", "long_name": "point of interest"},
+            ),
+        },
+    )
+    ds.attrs = {
+        "Conventions": "CF-1.10",
+        "title": f"isolab study {study_id} case {case}",
+        "study_id": study_id,
+        "case": case,
+        "status": h.status,
+        "message": h.message,
+        "parameters": json.dumps(h.parameters, sort_keys=True),
+    }
+    return ds
+
+
+def netcdf_bytes(ds: xr.Dataset) -> bytes:
+    """``ds`` as the bytes of a netCDF4 file."""
+    with tempfile.TemporaryDirectory(prefix="isolab-") as tmp:
+        path = Path(tmp) / "case.nc"
+        with NETCDF_LOCK:
+            ds.to_netcdf(path, format="NETCDF4", engine="netcdf4")
+        return path.read_bytes()
