@@ -4,8 +4,12 @@ import sys
 
 from benchmarks import accuracy, endtoend, kernels, pairs
 
-COMMANDS = {"pairs": pairs.main, "kernels": kernels.main, "accuracy": accuracy.main,
-            "endtoend": endtoend.main}
+COMMANDS = {
+    "pairs": pairs.main,
+    "kernels": kernels.main,
+    "accuracy": accuracy.main,
+    "endtoend": endtoend.main,
+}
 
 if __name__ == "__main__":
     args = sys.argv[1:]

@@ -68,8 +68,13 @@ def _stiff_elastomer() -> dict:
     """The article's scriber on stiff, lightly damped elastomer pads: 15 Hz vertical, 20 Hz horizontal,
     2 % damping: the 2 g stage rings them for seconds."""
     s = _article()
-    s["isolators"] = {"preset": "elastomer", "f_vertical": "15 Hz", "f_horizontal": "20 Hz", "zeta": "2 %",
-                      "layout": s["isolators"]["layout"]}
+    s["isolators"] = {
+        "preset": "elastomer",
+        "f_vertical": "15 Hz",
+        "f_horizontal": "20 Hz",
+        "zeta": "2 %",
+        "layout": s["isolators"]["layout"],
+    }
     return s
 
 
@@ -78,8 +83,10 @@ def _cg_off_pattern() -> dict:
     composite c.g. (stage at home) sits 0.45 m from the rear pair in a 2.5 m long pattern."""
     s = _article()
     z = 0.17 - 0.8
-    s["isolators"] = {"preset": "air", "list": [{"position": [x, y, z]} for x, y in
-                                                ((0.2, 1.5), (2.4, 1.5), (2.4, 4.0), (0.2, 4.0))]}
+    s["isolators"] = {
+        "preset": "air",
+        "list": [{"position": [x, y, z]} for x, y in ((0.2, 1.5), (2.4, 1.5), (2.4, 4.0), (0.2, 4.0))],
+    }
     return s
 
 
@@ -88,10 +95,21 @@ def _long_heavy() -> dict:
     return {
         "machine": {"block": {"size": ["1.5 m", "5 m", "0.25 m"], "density": "2700 kg/m^3"}},
         "isolators": {"preset": "air", "layout": {"span_x": "1.3 m", "span_y": "4.6 m", "height": "0.4 m"}},
-        "stages": [{"name": "gantry", "mass": "3000 kg", "home": ["0.75 m", "0.4 m", "0.6 m"],
-                    "axis": [0, 1, 0],
-                    "profile": {"type": "scan", "travel": "4.2 m", "velocity": "1.5 m/s",
-                                "acceleration": "1 g", "dwell": "0.3 s"}}],
+        "stages": [
+            {
+                "name": "gantry",
+                "mass": "3000 kg",
+                "home": ["0.75 m", "0.4 m", "0.6 m"],
+                "axis": [0, 1, 0],
+                "profile": {
+                    "type": "scan",
+                    "travel": "4.2 m",
+                    "velocity": "1.5 m/s",
+                    "acceleration": "1 g",
+                    "dwell": "0.3 s",
+                },
+            }
+        ],
         "points": {"tool": ["0.75 m", "0.4 m", "0.9 m"]},
         "simulation": {"duration": "auto"},
     }
@@ -101,8 +119,10 @@ SCENES = {
     "article": ("the article's scriber (air mounts 3.5/5 Hz, 10 %; 1 t stage, 3 m at 2 g)", _article),
     "soft-active": ("active mounts 1 Hz, 40 % sky-hook, floor vibration", _soft_active),
     "stiff-elastomer": ("elastomer pads 15/20 Hz, 2 % damping", _stiff_elastomer),
-    "cg-off-pattern": ("c.g. 0.8 m above mounts, 0.45 m from the rear pair of a 2.5 m pattern",
-                       _cg_off_pattern),
+    "cg-off-pattern": (
+        "c.g. 0.8 m above mounts, 0.45 m from the rear pair of a 2.5 m pattern",
+        _cg_off_pattern,
+    ),
     "long-heavy": ("5 t bed, 3 t gantry scanning 4.2 m at 1 g", _long_heavy),
 }
 
@@ -135,15 +155,18 @@ def _median_time(fn, repeats: int) -> float:
     return float(np.median(times))
 
 
-def measure_scene(name: str, scene: dict, steps: tuple[float, ...], repeats: int = 3,
-                  max_copies: int = MAX_COPIES) -> list[Row]:
+def measure_scene(
+    name: str, scene: dict, steps: tuple[float, ...], repeats: int = 3, max_copies: int = MAX_COPIES
+) -> list[Row]:
     """Every pair at every step on one scene, against nonlinear/reference at TRUTH_STEP."""
     one, _ = scene_batch(load_scene(scene))
     t0 = time.perf_counter()
     truth = simulate(one, "nonlinear", "reference", TRUTH_STEP)
     truth_seconds = time.perf_counter() - t0
     if truth.status[0] != OK:
-        raise RuntimeError(f"{name}: the reference run is {STATUS_NAMES[int(truth.status[0])]}: {truth.message[0]}")
+        raise RuntimeError(
+            f"{name}: the reference run is {STATUS_NAMES[int(truth.status[0])]}: {truth.message[0]}"
+        )
     y_ref = float(truth.peak_displacement[0, 1])
     rows = []
     for fid, integ in (*CANDIDATE_PAIRS, *REFERENCE_PAIRS):
@@ -161,20 +184,31 @@ def measure_scene(name: str, scene: dict, steps: tuple[float, ...], repeats: int
             else:
                 copies = int(np.clip(round(BATCH_SECONDS / max(t1, 1e-6)), 2, max_copies))
                 many = concat([one] * copies)
-                per_case = _median_time(lambda many=many, fid=fid, integ=integ, dt=dt:
-                                        simulate(many, fid, integ, dt), repeats) / copies
+                per_case = (
+                    _median_time(
+                        lambda many=many, fid=fid, integ=integ, dt=dt: simulate(many, fid, integ, dt), repeats
+                    )
+                    / copies
+                )
             e = output_errors(r, truth)
             ok = r.status[0] == OK
-            rows.append(Row(
-                scene=name, fidelity=fid, integrator=integ, dt=dt, seconds_per_case=per_case, copies=copies,
-                err_disp=float(e["peak_displacement"][0]),
-                err_y=abs(float(r.peak_displacement[0, 1]) - y_ref) / y_ref if ok else float("nan"),
-                err_force=float(e["peak_isolator_force"][0]),
-                err_sizing=float(sizing_error(e, relative=True)[0]),
-                err_settle=float(e["settling_time"][0]),
-                status=STATUS_NAMES[int(r.status[0])],
-                steps_per_case=float(one.duration[0] / r.dt[0]) if ok else float("nan"),
-            ))
+            rows.append(
+                Row(
+                    scene=name,
+                    fidelity=fid,
+                    integrator=integ,
+                    dt=dt,
+                    seconds_per_case=per_case,
+                    copies=copies,
+                    err_disp=float(e["peak_displacement"][0]),
+                    err_y=abs(float(r.peak_displacement[0, 1]) - y_ref) / y_ref if ok else float("nan"),
+                    err_force=float(e["peak_isolator_force"][0]),
+                    err_sizing=float(sizing_error(e, relative=True)[0]),
+                    err_settle=float(e["settling_time"][0]),
+                    status=STATUS_NAMES[int(r.status[0])],
+                    steps_per_case=float(one.duration[0] / r.dt[0]) if ok else float("nan"),
+                )
+            )
     mark_pareto(rows)
     return rows
 
@@ -215,27 +249,45 @@ def chooser_rows() -> list[dict]:
             d = yaml.safe_load(path.read_text(encoding="utf-8"))
             if "parameters" not in d:  # a scene: study it as it is
                 d = {"name": name, "scene_file": path.name}
-            sim = {k: v for k, v in (d.get("simulation") or {}).items()
-                   if k not in ("fidelity", "integrator", "dt")}
+            sim = {
+                k: v
+                for k, v in (d.get("simulation") or {}).items()
+                if k not in ("fidelity", "integrator", "dt")
+            }
             d["simulation"] = {**sim, "accuracy": request}
             study = load_study(d, base_dir=examples)
             t0 = time.perf_counter()
             c = choose(study)
-            rows.append({"study": name, "request": request, "fidelity": c.fidelity, "integrator": c.integrator,
-                         "dt": c.dt, "error": c.pilot[-1]["error"] if c.pilot else None, "tried": len(c.pilot),
-                         "pilot_cases": list(c.pilot_cases), "n_cases": study.n_cases,
-                         "seconds": time.perf_counter() - t0})
+            rows.append(
+                {
+                    "study": name,
+                    "request": request,
+                    "fidelity": c.fidelity,
+                    "integrator": c.integrator,
+                    "dt": c.dt,
+                    "error": c.pilot[-1]["error"] if c.pilot else None,
+                    "tried": len(c.pilot),
+                    "pilot_cases": list(c.pilot_cases),
+                    "n_cases": study.n_cases,
+                    "seconds": time.perf_counter() - t0,
+                }
+            )
     return rows
 
 
 def chooser_table(rows: list[dict]) -> str:
-    lines = ["| study (cases) | accuracy | chosen | dt (ms) | largest sizing error on the pilot | candidates "
-             "tried | pilot cases | time to choose (s) |", "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| study (cases) | accuracy | chosen | dt (ms) | largest sizing error on the pilot | candidates "
+        "tried | pilot cases | time to choose (s) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
         err = "— (is the reference)" if r["error"] is None else f"{r['error'] * 100:.2g} %"
-        lines.append(f"| {r['study']} ({r['n_cases']}) | {r['request']} | {r['fidelity']}/{r['integrator']} "
-                     f"| {r['dt'] * 1e3:g} | {err} | {r['tried']} | {r['pilot_cases'] or '—'} "
-                     f"| {r['seconds']:.1f} |")
+        lines.append(
+            f"| {r['study']} ({r['n_cases']}) | {r['request']} | {r['fidelity']}/{r['integrator']} "
+            f"| {r['dt'] * 1e3:g} | {err} | {r['tried']} | {r['pilot_cases'] or '—'} "
+            f"| {r['seconds']:.1f} |"
+        )
     return "\n".join(lines)
 
 
@@ -252,8 +304,10 @@ def machine() -> str:
         pass
     import numba
 
-    return (f"{os.cpu_count()} cores ({model}), Python {platform.python_version()}, numpy {np.__version__}, "
-            f"numba {numba.__version__}; the engine runs on one core")
+    return (
+        f"{os.cpu_count()} cores ({model}), Python {platform.python_version()}, numpy {np.__version__}, "
+        f"numba {numba.__version__}; the engine runs on one core"
+    )
 
 
 def _e(x: float) -> str:
@@ -261,15 +315,19 @@ def _e(x: float) -> str:
 
 
 def table(rows: list[Row], only_pareto: bool = False) -> str:
-    head = ("| fidelity | integrator | dt (ms) | ms/case | err peak disp | err peak force | err sizing "
-            "| settling err (s) | status |\n|---|---|---|---|---|---|---|---|---|")
+    head = (
+        "| fidelity | integrator | dt (ms) | ms/case | err peak disp | err peak force | err sizing "
+        "| settling err (s) | status |\n|---|---|---|---|---|---|---|---|---|"
+    )
     lines = [head]
     shown = sorted((r for r in rows if r.pareto), key=lambda r: r.seconds_per_case) if only_pareto else rows
     for r in shown:
         star = " **\\***" if r.pareto and not only_pareto else (" (truth)" if is_truth(r) else "")
-        lines.append(f"| {r.fidelity} | {r.integrator} | {r.dt * 1e3:g} | {r.seconds_per_case * 1e3:.3g}{star} "
-                     f"| {_e(r.err_disp)} | {_e(r.err_force)} | {_e(r.err_sizing)} | {_e(r.err_settle)} "
-                     f"| {r.status} |")
+        lines.append(
+            f"| {r.fidelity} | {r.integrator} | {r.dt * 1e3:g} | {r.seconds_per_case * 1e3:.3g}{star} "
+            f"| {_e(r.err_disp)} | {_e(r.err_force)} | {_e(r.err_sizing)} | {_e(r.err_settle)} "
+            f"| {r.status} |"
+        )
     return "\n".join(lines)
 
 
@@ -281,31 +339,42 @@ def summary(rows: list[Row]) -> list[str]:
     within = [r for r in ok if r.err_y <= 0.01]
     if within:
         f = min(within, key=lambda r: r.seconds_per_case)
-        out.append(f"fastest within 1 % of the reference peak Y: {f.fidelity}/{f.integrator} at {f.dt * 1e3:g} ms, "
-                   f"{f.seconds_per_case * 1e3:.3g} ms/case, Y error {f.err_y:.1e} (largest over axes "
-                   f"{f.err_disp:.1e}, sizing {f.err_sizing:.1e})")
+        out.append(
+            f"fastest within 1 % of the reference peak Y: {f.fidelity}/{f.integrator} at {f.dt * 1e3:g} ms, "
+            f"{f.seconds_per_case * 1e3:.3g} ms/case, Y error {f.err_y:.1e} (largest over axes "
+            f"{f.err_disp:.1e}, sizing {f.err_sizing:.1e})"
+        )
     sized = [r for r in ok if r.err_sizing <= 0.01]
     if sized:
         f = min(sized, key=lambda r: r.seconds_per_case)
-        out.append(f"fastest within 1 % on every sizing output: {f.fidelity}/{f.integrator} at {f.dt * 1e3:g} ms, "
-                   f"{f.seconds_per_case * 1e3:.3g} ms/case (sizing error {f.err_sizing:.1e})")
+        out.append(
+            f"fastest within 1 % on every sizing output: {f.fidelity}/{f.integrator} at {f.dt * 1e3:g} ms, "
+            f"{f.seconds_per_case * 1e3:.3g} ms/case (sizing error {f.err_sizing:.1e})"
+        )
     if ok:
         b = min(ok, key=lambda r: (r.err_disp, r.seconds_per_case))
-        out.append(f"most accurate fixed-step pair: {b.fidelity}/{b.integrator} at {b.dt * 1e3:g} ms, "
-                   f"{b.seconds_per_case * 1e3:.3g} ms/case, peak displacement error {b.err_disp:.1e}")
+        out.append(
+            f"most accurate fixed-step pair: {b.fidelity}/{b.integrator} at {b.dt * 1e3:g} ms, "
+            f"{b.seconds_per_case * 1e3:.3g} ms/case, peak displacement error {b.err_disp:.1e}"
+        )
     return out
 
 
 def step_costs(rows: list[Row]) -> str:
     """Measured engine time per step at 1 ms (or the closest step) against the chooser's cost table."""
-    lines = ["| fidelity | integrator | measured us/step | chooser's STEP_COST us/step |", "|---|---|---|---|"]
+    lines = [
+        "| fidelity | integrator | measured us/step | chooser's STEP_COST us/step |",
+        "|---|---|---|---|",
+    ]
     for pair in CANDIDATE_PAIRS:
         rs = [r for r in rows if (r.fidelity, r.integrator) == pair and r.status == "ok"]
         if not rs:
             continue
         r = min(rs, key=lambda r: abs(np.log(r.dt / 1e-3)))
-        lines.append(f"| {pair[0]} | {pair[1]} | {r.seconds_per_case / r.steps_per_case * 1e6:.2f} "
-                     f"| {STEP_COST[pair] * 1e6:.2f} |")
+        lines.append(
+            f"| {pair[0]} | {pair[1]} | {r.seconds_per_case / r.steps_per_case * 1e6:.2f} "
+            f"| {STEP_COST[pair] * 1e6:.2f} |"
+        )
     return "\n".join(lines)
 
 
@@ -321,21 +390,39 @@ def plot(results: dict[str, list[Row]], path: Path) -> None:
     markers = {"lti": "o", "ltv": "s", "nonlinear": "^"}
     n = len(results)
     cols = 3
-    fig, axes = plt.subplots((n + cols - 1) // cols, cols, figsize=(15, 4.6 * ((n + cols - 1) // cols)),
-                             squeeze=False)
+    fig, axes = plt.subplots(
+        (n + cols - 1) // cols, cols, figsize=(15, 4.6 * ((n + cols - 1) // cols)), squeeze=False
+    )
     for ax, (name, rows) in zip(axes.flat, results.items(), strict=False):
         for p in pairs:
             rs = [r for r in rows if (r.fidelity, r.integrator) == p and r.status == "ok" and not is_truth(r)]
             if rs:
-                ax.scatter([r.seconds_per_case * 1e3 for r in rs], [max(r.err_disp, ERROR_FLOOR) for r in rs],
-                           s=[18 + 14 * np.log10(r.dt / 1e-4 + 1) * 3 for r in rs], color=colors[p],
-                           marker=markers[p[0]], alpha=0.8, label=f"{p[0]}/{p[1]}")
+                ax.scatter(
+                    [r.seconds_per_case * 1e3 for r in rs],
+                    [max(r.err_disp, ERROR_FLOOR) for r in rs],
+                    s=[18 + 14 * np.log10(r.dt / 1e-4 + 1) * 3 for r in rs],
+                    color=colors[p],
+                    marker=markers[p[0]],
+                    alpha=0.8,
+                    label=f"{p[0]}/{p[1]}",
+                )
         front = sorted((r for r in rows if r.pareto), key=lambda r: r.seconds_per_case)
-        ax.plot([r.seconds_per_case * 1e3 for r in front], [max(r.err_disp, ERROR_FLOOR) for r in front],
-                color="black", lw=1.5, zorder=0, label="Pareto front")
+        ax.plot(
+            [r.seconds_per_case * 1e3 for r in front],
+            [max(r.err_disp, ERROR_FLOOR) for r in front],
+            color="black",
+            lw=1.5,
+            zorder=0,
+            label="Pareto front",
+        )
         for r in front:
-            ax.annotate(f"{r.dt * 1e3:g}", (r.seconds_per_case * 1e3, max(r.err_disp, ERROR_FLOOR)), fontsize=7,
-                        xytext=(3, 3), textcoords="offset points")
+            ax.annotate(
+                f"{r.dt * 1e3:g}",
+                (r.seconds_per_case * 1e3, max(r.err_disp, ERROR_FLOOR)),
+                fontsize=7,
+                xytext=(3, 3),
+                textcoords="offset points",
+            )
         ax.axhline(0.01, color="grey", lw=0.8, ls=":")
         ax.set_xscale("log")
         ax.set_yscale("log")
@@ -347,29 +434,47 @@ def plot(results: dict[str, list[Row]], path: Path) -> None:
         ax.axis("off")
     handles, labels = axes.flat[0].get_legend_handles_labels()
     target = list(axes.flat)[n] if n < axes.size else axes.flat[0]
-    target.legend(handles, labels, loc="center", fontsize=9, title="marker size grows with dt; "
-                  "Pareto labels: dt (ms)")
+    target.legend(
+        handles, labels, loc="center", fontsize=9, title="marker size grows with dt; Pareto labels: dt (ms)"
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
 def markdown(results: dict[str, list[Row]], command: str, elapsed: float, choices: list[dict]) -> str:
-    out = [BEGIN, "",
-           f"Generated by `{command}` on {_dt.date.today().isoformat()} in {elapsed / 60:.1f} min; machine: "
-           f"{machine()}.", "",
-           "Errors against nonlinear/reference at 0.1 ms; *err peak disp*: largest error of a peak c.g. "
-           "displacement over the axes, relative to the largest reference peak; *err sizing*: the largest "
-           "relative error of any sizing output (what a `tolerance` is checked against); time per case: a "
-           "batch of up to 50 copies, median of 3 runs (the reference integrator: one case, one run).", ""]
+    out = [
+        BEGIN,
+        "",
+        f"Generated by `{command}` on {_dt.date.today().isoformat()} in {elapsed / 60:.1f} min; machine: "
+        f"{machine()}.",
+        "",
+        "Errors against nonlinear/reference at 0.1 ms; *err peak disp*: largest error of a peak c.g. "
+        "displacement over the axes, relative to the largest reference peak; *err sizing*: the largest "
+        "relative error of any sizing output (what a `tolerance` is checked against); time per case: a "
+        "batch of up to 50 copies, median of 3 runs (the reference integrator: one case, one run).",
+        "",
+    ]
     for name, rows in results.items():
         out += [f"### {name}: {SCENES[name][0]}", ""]
         out += [f"- {line}" for line in summary(rows)]
-        out += ["", "Pareto front (time per case against peak displacement error):", "", table(rows, True), ""]
+        out += [
+            "",
+            "Pareto front (time per case against peak displacement error):",
+            "",
+            table(rows, True),
+            "",
+        ]
     out += ["### What the chooser picks on the example studies", "", chooser_table(choices), ""]
-    out += ["### Engine time per step", "", "The chooser ranks candidates with a fixed cost table "
-            "(`studies.accuracy.STEP_COST`); measured on the article scene:", "",
-            step_costs(results.get("article", next(iter(results.values())))), ""]
+    out += [
+        "### Engine time per step",
+        "",
+        "The chooser ranks candidates with a fixed cost table "
+        "(`studies.accuracy.STEP_COST`); measured on the article scene:",
+        "",
+        step_costs(results.get("article", next(iter(results.values())))),
+        "",
+    ]
     out += ["### Full tables", "", "A star marks the Pareto front.", ""]
     for name, rows in results.items():
         out += [f"#### {name}", "", table(rows), ""]
@@ -381,14 +486,19 @@ def write_doc(text: str, path: Path = DOC) -> None:
     """Replace the generated section of ``path`` (or append it)."""
     doc = path.read_text(encoding="utf-8") if path.exists() else "# Speed against accuracy\n\n"
     if BEGIN in doc and END in doc:
-        doc = doc[: doc.index(BEGIN)] + text + doc[doc.index(END) + len(END):]
+        doc = doc[: doc.index(BEGIN)] + text + doc[doc.index(END) + len(END) :]
     else:
         doc = doc.rstrip("\n") + "\n\n" + text + "\n"
     path.write_text(doc, encoding="utf-8")
 
 
-def run(quick: bool = False, scenes: list[str] | None = None, write: bool = False,
-        doc: Path = DOC, plot_path: Path = PLOT) -> dict[str, list[Row]]:
+def run(
+    quick: bool = False,
+    scenes: list[str] | None = None,
+    write: bool = False,
+    doc: Path = DOC,
+    plot_path: Path = PLOT,
+) -> dict[str, list[Row]]:
     """Measure, print, and with ``write`` update the doc and the plot."""
     steps = QUICK_STEPS if quick else STEPS
     repeats = 1 if quick else 3
@@ -399,12 +509,16 @@ def run(quick: bool = False, scenes: list[str] | None = None, write: bool = Fals
         rows = measure_scene(name, SCENES[name][1](), steps, repeats, max_copies=10 if quick else MAX_COPIES)
         results[name] = rows
         print(f"\n## {name}: {SCENES[name][0]}  ({time.perf_counter() - t1:.0f} s)")
-        print(f"{'fidelity':10s} {'integrator':10s} {'dt ms':>6s} {'ms/case':>9s} {'err disp':>9s} {'err y':>9s} "
-              f"{'err force':>9s} {'err size':>9s} {'settle s':>9s} status")
+        print(
+            f"{'fidelity':10s} {'integrator':10s} {'dt ms':>6s} {'ms/case':>9s} {'err disp':>9s} {'err y':>9s} "
+            f"{'err force':>9s} {'err size':>9s} {'settle s':>9s} status"
+        )
         for r in rows:
-            print(f"{r.fidelity:10s} {r.integrator:10s} {r.dt * 1e3:6g} {r.seconds_per_case * 1e3:9.3g} "
-                  f"{r.err_disp:9.2e} {r.err_y:9.2e} {r.err_force:9.2e} {r.err_sizing:9.2e} {r.err_settle:9.2e} "
-                  f"{r.status}{'  *' if r.pareto else ''}")
+            print(
+                f"{r.fidelity:10s} {r.integrator:10s} {r.dt * 1e3:6g} {r.seconds_per_case * 1e3:9.3g} "
+                f"{r.err_disp:9.2e} {r.err_y:9.2e} {r.err_force:9.2e} {r.err_sizing:9.2e} {r.err_settle:9.2e} "
+                f"{r.status}{'  *' if r.pareto else ''}"
+            )
         for line in summary(rows):
             print("  " + line)
     choices = chooser_rows()

@@ -47,8 +47,12 @@ GB = 1e9
 MEMORY_LIMIT = 2 * GB
 RATIO_TARGET = 0.80
 SAMPLE_SECONDS = 0.2
-ONE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
-              "NUMBA_NUM_THREADS": "1"}
+ONE_THREAD = {
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "NUMBA_NUM_THREADS": "1",
+}
 
 
 # ------------------------------------------------------------------------------------------ studies
@@ -79,7 +83,7 @@ def kernel_reference(definition: dict, n_cases: int) -> dict[str, float]:
     sim = study.simulation
     m = min(int(n_cases), study.n_cases)
     idx = np.unique(np.linspace(0, study.n_cases - 1, m).round().astype(np.int64))
-    batches = [study.batch(idx[s:s + ENGINE_BATCH_CASES]) for s in range(0, idx.size, ENGINE_BATCH_CASES)]
+    batches = [study.batch(idx[s : s + ENGINE_BATCH_CASES]) for s in range(0, idx.size, ENGINE_BATCH_CASES)]
     run = {"fidelity": sim.fidelity, "integrator": sim.integrator, "dt": sim.dt, "auto_step": sim.auto_step}
     simulate(study.batch(idx[:8]), **run)  # load the compiled kernels
     wall = cpu = 0.0
@@ -90,16 +94,34 @@ def kernel_reference(definition: dict, n_cases: int) -> dict[str, float]:
         cpu += time.thread_time() - c0
         wall += time.perf_counter() - t0
         ok += int(np.count_nonzero(r.status == 0))
-    return {"cases": int(idx.size), "ok": ok, "wall_per_case": wall / idx.size, "cpu_per_case": cpu / idx.size}
+    return {
+        "cases": int(idx.size),
+        "ok": ok,
+        "wall_per_case": wall / idx.size,
+        "cpu_per_case": cpu / idx.size,
+    }
 
 
 def measure_kernel(definition: dict, n_cases: int) -> dict[str, float]:
     """:func:`kernel_reference` in a child process whose BLAS, OpenMP and Numba use one thread."""
-    env = {**os.environ, **ONE_THREAD, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    code = ("import json, sys; from benchmarks.endtoend import kernel_reference; "
-            "a = json.load(sys.stdin); print(json.dumps(kernel_reference(a['definition'], a['n'])))")
-    out = subprocess.run([sys.executable, "-c", code], input=json.dumps({"definition": definition, "n": n_cases}),
-                         capture_output=True, text=True, cwd=ROOT, env=env, check=False)
+    env = {
+        **os.environ,
+        **ONE_THREAD,
+        "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+    }
+    code = (
+        "import json, sys; from benchmarks.endtoend import kernel_reference; "
+        "a = json.load(sys.stdin); print(json.dumps(kernel_reference(a['definition'], a['n'])))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        input=json.dumps({"definition": definition, "n": n_cases}),
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env=env,
+        check=False,
+    )
     if out.returncode != 0:
         raise RuntimeError(f"kernel reference failed:\n{out.stderr[-3000:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -129,8 +151,22 @@ class Service:
         port = free_port()
         data, journal, log = workdir / "data", workdir / "timings.jsonl", workdir / "service.log"
         script = Path(sys.executable).with_name("isolab")
-        cmd = [str(script)] if script.exists() else [sys.executable, "-c", "from isolab.service.cli import app; app()"]
-        cmd += ["serve", "--host", "127.0.0.1", "--port", str(port), "--data", str(data), "--workers", str(workers)]
+        cmd = (
+            [str(script)]
+            if script.exists()
+            else [sys.executable, "-c", "from isolab.service.cli import app; app()"]
+        )
+        cmd += [
+            "serve",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(port),
+            "--data",
+            str(data),
+            "--workers",
+            str(workers),
+        ]
         env = {**os.environ, "ISOLAB_TIMINGS": str(journal)}
         for name in ("ISOLAB_API_TOKEN", "DASK_SCHEDULER_ADDRESS", "ISOLAB_DATA_DIR"):
             env.pop(name, None)
@@ -291,7 +327,11 @@ class StudyRun:
     def ratio_left(self, n_workers: int) -> float:
         """End-to-end throughput over the kernel throughput of the cores other jobs left free (an
         estimate: it assumes the other jobs took their CPU from the workers)."""
-        return self.ratio(max(n_workers - self.other_cores, 0.1)) if np.isfinite(self.other_cores) else float("nan")
+        return (
+            self.ratio(max(n_workers - self.other_cores, 0.1))
+            if np.isfinite(self.other_cores)
+            else float("nan")
+        )
 
 
 def _unix(iso: str | None) -> float:
@@ -300,8 +340,9 @@ def _unix(iso: str | None) -> float:
     return _dt.datetime.fromisoformat(iso.replace("Z", "+00:00")).timestamp()
 
 
-def run_study(svc: Service, definition: dict, poll: float = 0.2,
-              timeout: float = 3600.0) -> tuple[str, dict[str, Any], float, float]:
+def run_study(
+    svc: Service, definition: dict, poll: float = 0.2, timeout: float = 3600.0
+) -> tuple[str, dict[str, Any], float, float]:
     """Submit ``definition``, poll until it finishes; returns (id, final row, POST time, done-seen time)."""
     from isolab.service.client import Client
 
@@ -320,8 +361,15 @@ def run_study(svc: Service, definition: dict, poll: float = 0.2,
             time.sleep(poll)
 
 
-def analyse(run: StudyRun, sid: str, row: dict[str, Any], t_post: float, t_seen: float,
-            events: list[dict[str, Any]], n_workers: int) -> None:
+def analyse(
+    run: StudyRun,
+    sid: str,
+    row: dict[str, Any],
+    t_post: float,
+    t_seen: float,
+    events: list[dict[str, Any]],
+    n_workers: int,
+) -> None:
     """Fill ``run`` with the wall-time decomposition from the journal events of study ``sid``."""
     prefix = f"isolab-{sid}"
     chunks = [e for e in events if e["event"] == "chunk" and e.get("key_prefix") == prefix]
@@ -356,7 +404,10 @@ def analyse(run: StudyRun, sid: str, row: dict[str, Any], t_post: float, t_seen:
         ("accept (POST, validation, catalog, queue, chunk plan)", submitted - t_post),
         ("dispatch (submitted -> first task starts)", first_start - submitted),
         ("compute window (first task start -> last task end)", last_end - first_start),
-        ("transfer of the last chunk (task end -> fetched)", max(fetched - max(last_end, last_chunk["task_end"]), 0)),
+        (
+            "transfer of the last chunk (task end -> fetched)",
+            max(fetched - max(last_end, last_chunk["task_end"]), 0),
+        ),
         ("store the last chunk + catalog update", last_chunk["handled_s"]),
         ("load the saved chunks", load_s),
         ("assemble the dataset (+ error estimate, catalog)", max(finish - load_s - write_s - clear_s, 0.0)),
@@ -379,10 +430,14 @@ def analyse(run: StudyRun, sid: str, row: dict[str, Any], t_post: float, t_seen:
         tail += last_end - tasks[-1]["task_end"]
     tail += (n_workers - len(by_worker)) * (last_end - first_start)
     run.workers = {
-        "engine": engine / window, "in-task overhead (study rebuild, batch build, packing)": in_task / window,
-        "scheduling gaps between tasks": gaps / window, "tail (idle after its last task)": tail / window,
-        "engine_cpu_s": float(sum(e["engine_cpu_s"] for e in chunks)), "engine_s": engine,
-        "prepare_s": float(sum(e["prepare_s"] for e in chunks)), "pack_s": float(sum(e["pack_s"] for e in chunks)),
+        "engine": engine / window,
+        "in-task overhead (study rebuild, batch build, packing)": in_task / window,
+        "scheduling gaps between tasks": gaps / window,
+        "tail (idle after its last task)": tail / window,
+        "engine_cpu_s": float(sum(e["engine_cpu_s"] for e in chunks)),
+        "engine_s": engine,
+        "prepare_s": float(sum(e["prepare_s"] for e in chunks)),
+        "pack_s": float(sum(e["pack_s"] for e in chunks)),
     }
     run.side = {
         "fetch_s": float(sum(e["fetch_s"] for e in chunks)),
@@ -390,7 +445,9 @@ def analyse(run: StudyRun, sid: str, row: dict[str, Any], t_post: float, t_seen:
         "result_mb": float(sum(e["result_bytes"] for e in chunks)) / 1e6,
         "save_chunk_s": total("save_chunk"),
         "handled_s": float(sum(e["handled_s"] for e in chunks)),
-        "load_chunks_s": load_s, "write_dataset_s": write_s, "clear_chunks_s": clear_s,
+        "load_chunks_s": load_s,
+        "write_dataset_s": write_s,
+        "clear_chunks_s": clear_s,
         "dataset_mb": (write["bytes"] / 1e6) if write else float("nan"),
     }
 
@@ -401,8 +458,11 @@ def check_dataset(path: Path) -> dict[str, Any]:
 
     with xr.open_dataset(path) as ds:
         dims = dict(ds.sizes)
-    return {"dims": dims, "time_dims": [d for d in dims if "time" in d.lower() or d in ("t", "step")],
-            "mb": path.stat().st_size / 1e6}
+    return {
+        "dims": dims,
+        "time_dims": [d for d in dims if "time" in d.lower() or d in ("t", "step")],
+        "mb": path.stat().st_size / 1e6,
+    }
 
 
 # ------------------------------------------------------------------------------------------ report
@@ -412,22 +472,32 @@ def _mb(b: float) -> str:
 
 def print_run(run: StudyRun, n_workers: int, duration: float) -> None:
     k = run.kernel
-    print(f"\n=== {run.name}: {run.n_cases} cases, lti/{run.integrator}, {duration:g} s at 1 ms "
-          f"({len(run.chunks)} chunks of {run.chunks[-1] if run.chunks else 0}-{run.chunks[0] if run.chunks else 0} "
-          f"cases) -> {run.status}, {run.n_failed} failed")
+    print(
+        f"\n=== {run.name}: {run.n_cases} cases, lti/{run.integrator}, {duration:g} s at 1 ms "
+        f"({len(run.chunks)} chunks of {run.chunks[-1] if run.chunks else 0}-{run.chunks[0] if run.chunks else 0} "
+        f"cases) -> {run.status}, {run.n_failed} failed"
+    )
     print(f"wall {run.wall:8.2f} s   {run.cases_per_s:8.1f} cases/s end to end")
-    print(f"single-core kernel ({k['cases']} cases, batched, one thread): {k['wall_per_case'] * 1e3:.3f} ms/case "
-          f"wall ({1 / k['wall_per_case']:.1f} cases/s), {k['cpu_per_case'] * 1e3:.3f} ms/case CPU")
+    print(
+        f"single-core kernel ({k['cases']} cases, batched, one thread): {k['wall_per_case'] * 1e3:.3f} ms/case "
+        f"wall ({1 / k['wall_per_case']:.1f} cases/s), {k['cpu_per_case'] * 1e3:.3f} ms/case CPU"
+    )
     ratio = run.ratio(n_workers)
     verdict = "meets" if ratio >= RATIO_TARGET else "MISSES"
-    print(f"end to end / ({n_workers} x single-core kernel) = {ratio * 100:.1f} %  ({verdict} the "
-          f"{RATIO_TARGET * 100:.0f} % target)")
+    print(
+        f"end to end / ({n_workers} x single-core kernel) = {ratio * 100:.1f} %  ({verdict} the "
+        f"{RATIO_TARGET * 100:.0f} % target)"
+    )
     if run.workers:
-        print(f"engine share of the workers' wall time (the fan-out's efficiency): {run.engine_share * 100:.1f} %")
+        print(
+            f"engine share of the workers' wall time (the fan-out's efficiency): {run.engine_share * 100:.1f} %"
+        )
     if np.isfinite(run.other_cores):
-        print(f"other jobs on the machine used {run.other_cores:.2f} cores on average during the study; "
-              f"end to end / ({n_workers - run.other_cores:.2f} x single-core kernel) = "
-              f"{run.ratio_left(n_workers) * 100:.1f} %")
+        print(
+            f"other jobs on the machine used {run.other_cores:.2f} cores on average during the study; "
+            f"end to end / ({n_workers - run.other_cores:.2f} x single-core kernel) = "
+            f"{run.ratio_left(n_workers) * 100:.1f} %"
+        )
     print("wall time along the critical path:")
     for name, sec in run.phases:
         print(f"  {name:58s} {sec:8.3f} s  {sec / run.wall * 100:5.1f} %")
@@ -436,36 +506,52 @@ def print_run(run: StudyRun, n_workers: int, duration: float) -> None:
         print(f"workers in the compute window ({n_workers} x window = 100 %):")
         for name in list(w)[:4]:
             print(f"  {name:58s} {w[name] * 100:5.1f} %")
-        print(f"  engine CPU / engine wall in the workers: {w['engine_cpu_s'] / w['engine_s'] * 100:.0f} %; engine "
-              f"{w['engine_s'] / run.n_cases * 1e3:.3f} ms/case wall, {w['engine_cpu_s'] / run.n_cases * 1e3:.3f} "
-              f"ms/case CPU (kernel alone: {k['cpu_per_case'] * 1e3:.3f})")
+        print(
+            f"  engine CPU / engine wall in the workers: {w['engine_cpu_s'] / w['engine_s'] * 100:.0f} %; engine "
+            f"{w['engine_s'] / run.n_cases * 1e3:.3f} ms/case wall, {w['engine_cpu_s'] / run.n_cases * 1e3:.3f} "
+            f"ms/case CPU (kernel alone: {k['cpu_per_case'] * 1e3:.3f})"
+        )
         s = run.side
         sched = dict(run.phases)
-        sched_s = (sched["dispatch (submitted -> first task starts)"]
-                   + w["scheduling gaps between tasks"] * sched["compute window (first task start -> last task end)"])
+        sched_s = (
+            sched["dispatch (submitted -> first task starts)"]
+            + w["scheduling gaps between tasks"] * sched["compute window (first task start -> last task end)"]
+        )
         transfer_s = sched["transfer of the last chunk (task end -> fetched)"]
-        storage_s = (sched["store the last chunk + catalog update"] + s["load_chunks_s"] + s["write_dataset_s"]
-                     + s["clear_chunks_s"])
-        print("shares of the wall time (critical path):  "
-              f"scheduling {sched_s / run.wall * 100:.1f} %, transfer {transfer_s / run.wall * 100:.1f} %, "
-              f"storage {storage_s / run.wall * 100:.1f} %")
-        print(f"off the critical path (service thread, overlapping compute): fetch {s['fetch_s']:.3f} s for "
-              f"{s['result_mb']:.1f} MB of results, completion notice {s['notify_s']:.2f} s in total, "
-              f"save_chunk {s['save_chunk_s']:.3f} s, on_chunk (save + catalog) {s['handled_s']:.3f} s; "
-              f"dataset {s['dataset_mb']:.1f} MB")
+        storage_s = (
+            sched["store the last chunk + catalog update"]
+            + s["load_chunks_s"]
+            + s["write_dataset_s"]
+            + s["clear_chunks_s"]
+        )
+        print(
+            "shares of the wall time (critical path):  "
+            f"scheduling {sched_s / run.wall * 100:.1f} %, transfer {transfer_s / run.wall * 100:.1f} %, "
+            f"storage {storage_s / run.wall * 100:.1f} %"
+        )
+        print(
+            f"off the critical path (service thread, overlapping compute): fetch {s['fetch_s']:.3f} s for "
+            f"{s['result_mb']:.1f} MB of results, completion notice {s['notify_s']:.2f} s in total, "
+            f"save_chunk {s['save_chunk_s']:.3f} s, on_chunk (save + catalog) {s['handled_s']:.3f} s; "
+            f"dataset {s['dataset_mb']:.1f} MB"
+        )
     print("peak RSS per process:")
     worst = 0
     for pid, smp in sorted(run.memory.items(), key=lambda kv: kv[1].label):
         cpu = smp.cpu_end - (smp.cpu_start or 0.0)
-        print(f"  {smp.label:36s} pid {pid:7d} {_mb(smp.peak_rss)}   CPU {cpu:7.1f} s "
-              f"({cpu / run.wall:4.2f} cores)")
+        print(
+            f"  {smp.label:36s} pid {pid:7d} {_mb(smp.peak_rss)}   CPU {cpu:7.1f} s "
+            f"({cpu / run.wall:4.2f} cores)"
+        )
         worst = max(worst, smp.peak_rss)
     histories = run.n_cases * 12 * 8 * (duration / 1e-3)
     ok = worst < MEMORY_LIMIT and not run.dataset.get("time_dims")
-    print(f"memory: largest process {worst / GB:.2f} GB, {'under' if worst < MEMORY_LIMIT else 'OVER'} "
-          f"{MEMORY_LIMIT / GB:.0f} GB; time histories of every case would take {histories / GB:.0f} GB; the "
-          f"dataset has dims {run.dataset.get('dims')} (no time axis: {not run.dataset.get('time_dims')}) "
-          f"-> {'OK' if ok else 'FAILED'}")
+    print(
+        f"memory: largest process {worst / GB:.2f} GB, {'under' if worst < MEMORY_LIMIT else 'OVER'} "
+        f"{MEMORY_LIMIT / GB:.0f} GB; time histories of every case would take {histories / GB:.0f} GB; the "
+        f"dataset has dims {run.dataset.get('dims')} (no time axis: {not run.dataset.get('time_dims')}) "
+        f"-> {'OK' if ok else 'FAILED'}"
+    )
 
 
 def main(argv: list[str]) -> None:
@@ -481,8 +567,10 @@ def main(argv: list[str]) -> None:
     a = ap.parse_args(argv)
 
     plan = [("exact", n) for n in a.cases] + [("rk4", n) for n in a.rk4_cases]
-    print(f"end-to-end benchmark: {os.cpu_count()} cores, load average "
-          f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}; {a.workers} Dask workers (1 thread each)")
+    print(
+        f"end-to-end benchmark: {os.cpu_count()} cores, load average "
+        f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}; {a.workers} Dask workers (1 thread each)"
+    )
     workdir = Path(tempfile.mkdtemp(prefix="isolab-endtoend-"))
     svc = None
     sampler = None
@@ -498,7 +586,9 @@ def main(argv: list[str]) -> None:
         warm_rk4 = study_definition(a.warmup_cases, "rk4", a.duration, name="endtoend-warmup-rk4")
         if a.rk4_cases:
             run_study(svc, warm_rk4)
-        print(f"warm-up study ({a.warmup_cases} cases, first use of the workers): {ts - tp:.2f} s, {row['status']}")
+        print(
+            f"warm-up study ({a.warmup_cases} cases, first use of the workers): {ts - tp:.2f} s, {row['status']}"
+        )
         kernels: dict[str, dict[str, float]] = {}
         for integrator, n in plan:
             definition = study_definition(n, integrator, a.duration)
@@ -526,24 +616,56 @@ def main(argv: list[str]) -> None:
             print(f"\nkept {workdir}")
         else:
             shutil.rmtree(workdir, ignore_errors=True)
-    print(f"\nsummary ({time.perf_counter() - t_all:.0f} s in all; load average now "
-          f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}):")
-    print(f"{'study':24s} {'wall s':>8s} {'cases/s':>9s} {'kernel/s':>9s} {'ratio':>7s} {'engine':>7s} "
-          f"{'others':>7s} {'ratio*':>7s} {'peak RSS':>10s}")
+    print(
+        f"\nsummary ({time.perf_counter() - t_all:.0f} s in all; load average now "
+        f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}):"
+    )
+    print(
+        f"{'study':24s} {'wall s':>8s} {'cases/s':>9s} {'kernel/s':>9s} {'ratio':>7s} {'engine':>7s} "
+        f"{'others':>7s} {'ratio*':>7s} {'peak RSS':>10s}"
+    )
     for r in runs:
         peak = max((s.peak_rss for s in r.memory.values()), default=0)
-        print(f"{r.name:24s} {r.wall:8.2f} {r.cases_per_s:9.1f} {1 / r.kernel['wall_per_case']:9.1f} "
-              f"{r.ratio(a.workers) * 100:6.1f}% {r.engine_share * 100:6.1f}% {r.other_cores:7.2f} "
-              f"{r.ratio_left(a.workers) * 100:6.1f}% "
-              f"{peak / GB:8.2f} GB")
-    print("ratio: end to end / (workers x single-core kernel); engine: engine share of the workers' wall "
-          "time; others: cores other jobs used meanwhile; ratio*: end to end / (cores they left x kernel)")
+        print(
+            f"{r.name:24s} {r.wall:8.2f} {r.cases_per_s:9.1f} {1 / r.kernel['wall_per_case']:9.1f} "
+            f"{r.ratio(a.workers) * 100:6.1f}% {r.engine_share * 100:6.1f}% {r.other_cores:7.2f} "
+            f"{r.ratio_left(a.workers) * 100:6.1f}% "
+            f"{peak / GB:8.2f} GB"
+        )
+    print(
+        "ratio: end to end / (workers x single-core kernel); engine: engine share of the workers' wall "
+        "time; others: cores other jobs used meanwhile; ratio*: end to end / (cores they left x kernel)"
+    )
     if a.json:
-        a.json.write_text(json.dumps([{
-            "name": r.name, "integrator": r.integrator, "n_cases": r.n_cases, "wall_s": r.wall,
-            "cases_per_s": r.cases_per_s, "kernel": r.kernel, "ratio": r.ratio(a.workers),
-            "ratio_left": r.ratio_left(a.workers), "engine_share": r.engine_share, "phases": r.phases,
-            "workers": r.workers, "side": r.side, "other_cores": r.other_cores, "chunks": r.chunks,
-            "memory": {str(p): {"label": s.label, "peak_rss": s.peak_rss, "cpu_s": s.cpu_end - (s.cpu_start or 0)}
-                       for p, s in r.memory.items()},
-        } for r in runs], indent=1))
+        a.json.write_text(
+            json.dumps(
+                [
+                    {
+                        "name": r.name,
+                        "integrator": r.integrator,
+                        "n_cases": r.n_cases,
+                        "wall_s": r.wall,
+                        "cases_per_s": r.cases_per_s,
+                        "kernel": r.kernel,
+                        "ratio": r.ratio(a.workers),
+                        "ratio_left": r.ratio_left(a.workers),
+                        "engine_share": r.engine_share,
+                        "phases": r.phases,
+                        "workers": r.workers,
+                        "side": r.side,
+                        "other_cores": r.other_cores,
+                        "chunks": r.chunks,
+                        "memory": {
+                            str(p): {
+                                "label": s.label,
+                                "peak_rss": s.peak_rss,
+                                "cpu_s": s.cpu_end - (s.cpu_start or 0),
+                            }
+                            for p, s in r.memory.items()
+                        },
+                    }
+                    for r in runs
+                ],
+                indent=1,
+            )
+        )

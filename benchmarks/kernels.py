@@ -22,8 +22,15 @@ from isolab.studies.study import load_scene, scene_batch
 EXAMPLE = Path(__file__).resolve().parent.parent / "studies" / "examples" / "article-scriber.yaml"
 DURATION = 5.0
 DT = 1e-3
-PAIRS = [("lti", "exact"), ("lti", "rk4"), ("lti", "euler"), ("ltv", "rk4"), ("ltv", "euler"),
-         ("nonlinear", "rk4"), ("nonlinear", "euler")]
+PAIRS = [
+    ("lti", "exact"),
+    ("lti", "rk4"),
+    ("lti", "euler"),
+    ("ltv", "rk4"),
+    ("ltv", "euler"),
+    ("nonlinear", "rk4"),
+    ("nonlinear", "euler"),
+]
 
 
 def article_batch():
@@ -56,8 +63,11 @@ def lti_forcing_numpy(P, t: np.ndarray) -> np.ndarray:
         tau = t - pt[k]
         j = P.pj[0, i, k]
         a = np.where(before, 0.0, P.pa[0, i, k] + j * tau)
-        s = np.where(before, P.ps[0, i, 0],
-                     P.ps[0, i, k] + (P.pv[0, i, k] + (0.5 * P.pa[0, i, k] + j * tau / 6) * tau) * tau)
+        s = np.where(
+            before,
+            P.ps[0, i, 0],
+            P.ps[0, i, k] + (P.pv[0, i, k] + (0.5 * P.pa[0, i, k] + j * tau / 6) * tau) * tau,
+        )
         rho[i] = P.rho_h[0, i] + s[:, None] * P.e[0, i]
         ar[i] = a[:, None] * P.e[0, i]
         p = P.parent[i]
@@ -117,7 +127,9 @@ def rk45(P, rtol: float) -> float:
         return out
 
     grid = np.arange(int(round(DURATION / DT)) + 1) * DT
-    sol = solve_ivp(rhs, (0.0, DURATION), np.zeros(12), method="RK45", rtol=rtol, atol=rtol * 1e-3, t_eval=grid)
+    sol = solve_ivp(
+        rhs, (0.0, DURATION), np.zeros(12), method="RK45", rtol=rtol, atol=rtol * 1e-3, t_eval=grid
+    )
     return float(np.abs(sol.y[1]).max())
 
 
@@ -155,15 +167,21 @@ def main(argv: list[str]) -> None:
     one = article_batch()
     n_steps = int(round(DURATION / DT))
     print(f"article scene, {DURATION} s at {DT * 1e3:g} ms ({n_steps} steps), one core; median of {a.repeat}")
-    print(f"{'fidelity':10s} {'integrator':10s} {'cases':>6s} {'ms/case':>9s} {'cases/s':>9s} {'ns/step':>8s}")
+    print(
+        f"{'fidelity':10s} {'integrator':10s} {'cases':>6s} {'ms/case':>9s} {'cases/s':>9s} {'ns/step':>8s}"
+    )
     per_case = {}
     for fid, integ in PAIRS:
         simulate(one, fid, integ, DT)  # compile, warm up
         for n in (1, 100, a.big if (fid, integ) == ("lti", "exact") else a.others):
             b = concat([one] * n)
-            t = _best(lambda b=b, fid=fid, integ=integ: simulate(b, fid, integ, DT), a.repeat if n <= 100 else 1)
+            t = _best(
+                lambda b=b, fid=fid, integ=integ: simulate(b, fid, integ, DT), a.repeat if n <= 100 else 1
+            )
             per_case[(fid, integ, n)] = t / n
-            print(f"{fid:10s} {integ:10s} {n:6d} {t / n * 1e3:9.3f} {n / t:9.1f} {t / n / n_steps * 1e9:8.0f}")
+            print(
+                f"{fid:10s} {integ:10s} {n:6d} {t / n * 1e3:9.3f} {n / t:9.1f} {t / n / n_steps * 1e9:8.0f}"
+            )
     # alternatives at equal accuracy, on the LTI level
     P = engine_model.params(one)
     ref = simulate(one, "lti", "reference", DT).peak_displacement[0, 1]
@@ -180,14 +198,22 @@ def main(argv: list[str]) -> None:
     t_ivp = _best(lambda: rk45(P, chosen[0]), 1)
     batched = per_case[("lti", "exact", a.big)]
     print()
-    print(f"peak Y error against the LTI reference: engine lti/exact {err_engine:.1e}, numpy RK4 loop {err_np:.1e}, "
-          f"solve_ivp RK45 {chosen[1]:.1e} at rtol {chosen[0]:g}")
-    print(f"numpy time loop (RK4, one case):  {t_np * 1e3:9.1f} ms/case   batched exact is {t_np / batched:7.0f}x faster")
-    print(f"scipy solve_ivp RK45 (one case):  {t_ivp * 1e3:9.1f} ms/case   batched exact is {t_ivp / batched:7.0f}x faster")
+    print(
+        f"peak Y error against the LTI reference: engine lti/exact {err_engine:.1e}, numpy RK4 loop {err_np:.1e}, "
+        f"solve_ivp RK45 {chosen[1]:.1e} at rtol {chosen[0]:g}"
+    )
+    print(
+        f"numpy time loop (RK4, one case):  {t_np * 1e3:9.1f} ms/case   batched exact is {t_np / batched:7.0f}x faster"
+    )
+    print(
+        f"scipy solve_ivp RK45 (one case):  {t_ivp * 1e3:9.1f} ms/case   batched exact is {t_ivp / batched:7.0f}x faster"
+    )
     flops = exact_flops_per_step(P)
     mhz = cpu_mhz()
     achieved = flops * n_steps / batched
     bound = 2.0 * mhz * 1e6  # one multiply-add per cycle
-    print(f"exact path: about {flops} floating-point operations per step; {achieved / 1e9:.2f} GFLOP/s achieved, "
-          f"{achieved / bound * 100:.0f} % of one multiply-add per cycle at {mhz:.0f} MHz "
-          f"(within {bound / achieved:.1f}x of that bound)")
+    print(
+        f"exact path: about {flops} floating-point operations per step; {achieved / 1e9:.2f} GFLOP/s achieved, "
+        f"{achieved / bound * 100:.0f} % of one multiply-add per cycle at {mhz:.0f} MHz "
+        f"(within {bound / achieved:.1f}x of that bound)"
+    )

@@ -100,12 +100,24 @@ class Server:
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         isolab = Path(sys.executable).with_name("isolab")
-        cmd = [str(isolab), "serve", "--host", "127.0.0.1", "--port", str(self.port),
-               "--workers", str(workers), "--data", str(data_dir)]
+        cmd = [
+            str(isolab),
+            "serve",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(self.port),
+            "--workers",
+            str(workers),
+            "--data",
+            str(data_dir),
+        ]
         env = {k: v for k, v in os.environ.items() if k not in ("DASK_SCHEDULER_ADDRESS", "ISOLAB_API_TOKEN")}
         self.log = log
         with open(log, "wb") as out:
-            self.proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=env, start_new_session=True)
+            self.proc = subprocess.Popen(
+                cmd, stdout=out, stderr=subprocess.STDOUT, env=env, start_new_session=True
+            )
 
     def wait_healthy(self, deadline: float) -> None:
         while time.monotonic() < deadline:
@@ -181,8 +193,9 @@ class Tally:
     turnaround: list[float] = field(default_factory=list)
 
 
-async def timed(tally: Tally, what: str, latencies: list[float], expected: int,
-                request: Any) -> httpx.Response | None:
+async def timed(
+    tally: Tally, what: str, latencies: list[float], expected: int, request: Any
+) -> httpx.Response | None:
     """Await ``request``, count it, and keep its latency (s) in ``latencies``; None (and the error
     tallied under ``what``) when it fails or answers another status than ``expected``."""
     t0 = time.perf_counter()
@@ -200,8 +213,9 @@ async def timed(tally: Tally, what: str, latencies: list[float], expected: int,
     return r
 
 
-async def client(n: int, http: httpx.AsyncClient, tally: Tally, window_end: float, drain_end: float,
-                 poll: float) -> None:
+async def client(
+    n: int, http: httpx.AsyncClient, tally: Tally, window_end: float, drain_end: float, poll: float
+) -> None:
     # engineers do not start their clients in the same millisecond: each starts at a random moment of
     # the first poll period and polls every poll s +- 10 % (else 50 clients poll in lockstep)
     rng = random.Random(n)
@@ -210,8 +224,13 @@ async def client(n: int, http: httpx.AsyncClient, tally: Tally, window_end: floa
     while time.monotonic() < window_end:
         k += 1
         t0 = time.perf_counter()  # the study's turnaround starts with its POST
-        r = await timed(tally, "POST /studies", tally.post_latency, 202,
-                        http.post("/studies", json=small_study(n * 1000 + k)))
+        r = await timed(
+            tally,
+            "POST /studies",
+            tally.post_latency,
+            202,
+            http.post("/studies", json=small_study(n * 1000 + k)),
+        )
         if r is None:
             continue
         tally.submitted += 1
@@ -235,7 +254,9 @@ async def client(n: int, http: httpx.AsyncClient, tally: Tally, window_end: floa
 
 async def run_clients(url: str, clients: int, window_end: float, drain_end: float, poll: float) -> Tally:
     tally = Tally()
-    limits = httpx.Limits(max_connections=clients + 10, max_keepalive_connections=clients + 10, keepalive_expiry=2.0)
+    limits = httpx.Limits(
+        max_connections=clients + 10, max_keepalive_connections=clients + 10, keepalive_expiry=2.0
+    )
     async with httpx.AsyncClient(base_url=url, timeout=30.0, limits=limits) as http:
         await asyncio.gather(*(client(n, http, tally, window_end, drain_end, poll) for n in range(clients)))
     return tally
@@ -256,7 +277,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--clients", type=int, default=50, help="concurrent clients (default 50)")
     parser.add_argument("--window", type=float, default=60.0, help="seconds of submitting (default 60)")
     parser.add_argument("--drain", type=float, default=25.0, help="seconds to wait for the last studies")
-    parser.add_argument("--poll", type=float, default=0.5, help="seconds between a client's polls (default 0.5, as the Python client)")
+    parser.add_argument(
+        "--poll",
+        type=float,
+        default=0.5,
+        help="seconds between a client's polls (default 0.5, as the Python client)",
+    )
     parser.add_argument("--big-cases", type=int, default=100_000, help="cases of the big study")
     parser.add_argument("--workers", type=int, default=2, help="Dask workers of the server")
     parser.add_argument("--budget", type=float, default=120.0, help="hard limit of the whole run, s")
@@ -288,7 +314,9 @@ def main(argv: list[str] | None = None) -> int:
         window_end = time.monotonic() + window
         drain_end = min(window_end + args.drain, hard_end - 15.0)
         results: mp.Queue = mp.get_context("spawn").Queue()
-        prober = mp.get_context("spawn").Process(target=probe, args=(url, big, time.time() + (drain_end - time.monotonic()), results))
+        prober = mp.get_context("spawn").Process(
+            target=probe, args=(url, big, time.time() + (drain_end - time.monotonic()), results)
+        )
         prober.start()
         # the clients stand in for machines on the network: on this machine they yield the CPU to the
         # server (the server, its workers and the probe were started before, at their own priority)
@@ -296,7 +324,9 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.monotonic()
         tally = asyncio.run(run_clients(url, args.clients, window_end, drain_end, args.poll))
         elapsed = time.monotonic() - t0
-        latencies, probe_statuses, probe_errors, slow = results.get(timeout=max(5.0, drain_end - time.monotonic() + 10))
+        latencies, probe_statuses, probe_errors, slow = results.get(
+            timeout=max(5.0, drain_end - time.monotonic() + 10)
+        )
         prober.join(10)
         with httpx.Client(base_url=url, timeout=30.0) as http:
             info = http.get(f"/studies/{big}").json()
@@ -315,36 +345,61 @@ def main(argv: list[str] | None = None) -> int:
         "studies_per_s": round(done / elapsed, 2),
         "requests": tally.requests + sum(probe_statuses.values()),
         "errors": len(tally.errors) + len(probe_errors),
-        "big_study": {"cases": args.big_cases, "status_at_end": info["status"],
-                      "cases_done": info["progress"]["done"], "cases_per_s": round(big_rate, 1)},
-        "probe_get_big": {"n": len(latencies), "p50_ms": round(1e3 * percentile(latencies, 50), 1),
-                          "p99_ms": round(1e3 * percentile(latencies, 99), 1),
-                          "max_ms": round(1e3 * max(latencies, default=float("nan")), 1)},
-        "clients_get": {"n": len(tally.get_latency), "p50_ms": round(1e3 * percentile(tally.get_latency, 50), 1),
-                        "p99_ms": round(1e3 * percentile(tally.get_latency, 99), 1)},
-        "clients_post": {"n": len(tally.post_latency), "p50_ms": round(1e3 * percentile(tally.post_latency, 50), 1),
-                         "p99_ms": round(1e3 * percentile(tally.post_latency, 99), 1)},
-        "turnaround_s": {"p50": round(percentile(tally.turnaround, 50), 2),
-                         "p99": round(percentile(tally.turnaround, 99), 2),
-                         "mean": round(statistics.fmean(tally.turnaround), 2) if tally.turnaround else None},
+        "big_study": {
+            "cases": args.big_cases,
+            "status_at_end": info["status"],
+            "cases_done": info["progress"]["done"],
+            "cases_per_s": round(big_rate, 1),
+        },
+        "probe_get_big": {
+            "n": len(latencies),
+            "p50_ms": round(1e3 * percentile(latencies, 50), 1),
+            "p99_ms": round(1e3 * percentile(latencies, 99), 1),
+            "max_ms": round(1e3 * max(latencies, default=float("nan")), 1),
+        },
+        "clients_get": {
+            "n": len(tally.get_latency),
+            "p50_ms": round(1e3 * percentile(tally.get_latency, 50), 1),
+            "p99_ms": round(1e3 * percentile(tally.get_latency, 99), 1),
+        },
+        "clients_post": {
+            "n": len(tally.post_latency),
+            "p50_ms": round(1e3 * percentile(tally.post_latency, 50), 1),
+            "p99_ms": round(1e3 * percentile(tally.post_latency, 99), 1),
+        },
+        "turnaround_s": {
+            "p50": round(percentile(tally.turnaround, 50), 2),
+            "p99": round(percentile(tally.turnaround, 99), 2),
+            "mean": round(statistics.fmean(tally.turnaround), 2) if tally.turnaround else None,
+        },
         "slow_probe_answers": slow,
         "total_s": round(time.monotonic() - start, 1),
     }
-    print(f"load: {args.clients} clients for {window:.0f} s on {url} ({args.workers} workers), "
-          f"big study of {args.big_cases} cases running")
-    print(f"  small studies: {tally.submitted} submitted, {done} done, "
-          f"{tally.finished.get('failed', 0)} failed, {tally.unfinished} unfinished; "
-          f"{result['studies_per_s']} studies/s; turnaround p50 {result['turnaround_s']['p50']} s, "
-          f"p99 {result['turnaround_s']['p99']} s")
+    print(
+        f"load: {args.clients} clients for {window:.0f} s on {url} ({args.workers} workers), "
+        f"big study of {args.big_cases} cases running"
+    )
+    print(
+        f"  small studies: {tally.submitted} submitted, {done} done, "
+        f"{tally.finished.get('failed', 0)} failed, {tally.unfinished} unfinished; "
+        f"{result['studies_per_s']} studies/s; turnaround p50 {result['turnaround_s']['p50']} s, "
+        f"p99 {result['turnaround_s']['p99']} s"
+    )
     print(f"  requests: {result['requests']}, errors: {result['errors']}")
-    print(f"  GET /studies/{{big}} while it runs (probe, {len(latencies)} requests): "
-          f"p50 {result['probe_get_big']['p50_ms']} ms, p99 {result['probe_get_big']['p99_ms']} ms, "
-          f"max {result['probe_get_big']['max_ms']} ms (target p99 < {TARGET_P99_S * 1e3:.0f} ms)")
-    print(f"  clients' GET /studies/{{id}}: p50 {result['clients_get']['p50_ms']} ms, "
-          f"p99 {result['clients_get']['p99_ms']} ms; POST /studies: p50 {result['clients_post']['p50_ms']} ms, "
-          f"p99 {result['clients_post']['p99_ms']} ms")
-    print(f"  big study: {info['progress']['done']} of {args.big_cases} cases in the run "
-          f"({result['big_study']['cases_per_s']} cases/s), {info['status']} at the end")
+    print(
+        f"  GET /studies/{{big}} while it runs (probe, {len(latencies)} requests): "
+        f"p50 {result['probe_get_big']['p50_ms']} ms, p99 {result['probe_get_big']['p99_ms']} ms, "
+        f"max {result['probe_get_big']['max_ms']} ms (target p99 < {TARGET_P99_S * 1e3:.0f} ms)"
+    )
+    print(
+        f"  clients' GET /studies/{{id}}: p50 {result['clients_get']['p50_ms']} ms, "
+        f"p99 {result['clients_get']['p99_ms']} ms; POST /studies: p50 {result['clients_post']['p50_ms']} ms, "
+        f"p99 {result['clients_post']['p99_ms']} ms"
+    )
+    print(
+        f"  big study: {info['progress']['done']} of {args.big_cases} cases in the run "
+        f"({result['big_study']['cases_per_s']} cases/s), {info['status']} at the end"
+    )
     print(f"  total {result['total_s']} s")
     for e in (tally.errors + probe_errors)[:10]:
         print(f"  error: {e}")

@@ -15,10 +15,16 @@ from isolab.studies.study import load_scene, scene_batch
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "studies" / "examples" / "article-scriber.yaml"
 PAIRS = [
-    ("lti", "exact"), ("lti", "rk4"), ("lti", "euler"),
-    ("ltv", "rk4"), ("ltv", "euler"),
-    ("nonlinear", "rk4"), ("nonlinear", "euler"),
-    ("lti", "reference"), ("ltv", "reference"), ("nonlinear", "reference"),
+    ("lti", "exact"),
+    ("lti", "rk4"),
+    ("lti", "euler"),
+    ("ltv", "rk4"),
+    ("ltv", "euler"),
+    ("nonlinear", "rk4"),
+    ("nonlinear", "euler"),
+    ("lti", "reference"),
+    ("ltv", "reference"),
+    ("nonlinear", "reference"),
 ]
 
 
@@ -40,13 +46,18 @@ def measure(scene_path: Path = EXAMPLE, dt: float = 1e-3, cases: int = 100) -> l
         def rel(a, b_):
             return float(np.max(np.abs(a - b_)) / np.max(np.abs(b_)))
 
-        rows.append({
-            "fidelity": fid, "integrator": integ, "dt": dt, "seconds_per_case": per_case,
-            "err_peak_y": rel(r.peak_displacement[0, 1], ref.peak_displacement[0, 1]),
-            "err_peak_force": rel(r.peak_isolator_force[0], ref.peak_isolator_force[0]),
-            "err_settling": abs(float(r.settling_time[0] - ref.settling_time[0])),
-            "status": int(r.status[0]),
-        })
+        rows.append(
+            {
+                "fidelity": fid,
+                "integrator": integ,
+                "dt": dt,
+                "seconds_per_case": per_case,
+                "err_peak_y": rel(r.peak_displacement[0, 1], ref.peak_displacement[0, 1]),
+                "err_peak_force": rel(r.peak_isolator_force[0], ref.peak_isolator_force[0]),
+                "err_settling": abs(float(r.settling_time[0] - ref.settling_time[0])),
+                "status": int(r.status[0]),
+            }
+        )
     return rows
 
 
@@ -60,9 +71,13 @@ def main(argv: list[str]) -> None:
     a = p.parse_args(argv)
     rows = measure(Path(a.scene), a.dt, a.cases)
     print(f"scene {a.scene}, dt {a.dt} s; errors against nonlinear/reference (DOP853, rtol 1e-10)")
-    print(f"{'fidelity':10s} {'integrator':10s} {'ms/case':>9s} {'cases/s':>9s} {'err peak y':>11s} "
-          f"{'err force':>10s} {'err settle s':>12s}")
+    print(
+        f"{'fidelity':10s} {'integrator':10s} {'ms/case':>9s} {'cases/s':>9s} {'err peak y':>11s} "
+        f"{'err force':>10s} {'err settle s':>12s}"
+    )
     for r in rows:
-        print(f"{r['fidelity']:10s} {r['integrator']:10s} {r['seconds_per_case'] * 1e3:9.3f} "
-              f"{1 / r['seconds_per_case']:9.1f} {r['err_peak_y']:11.2e} {r['err_peak_force']:10.2e} "
-              f"{r['err_settling']:12.3e}")
+        print(
+            f"{r['fidelity']:10s} {r['integrator']:10s} {r['seconds_per_case'] * 1e3:9.3f} "
+            f"{1 / r['seconds_per_case']:9.1f} {r['err_peak_y']:11.2e} {r['err_peak_force']:10.2e} "
+            f"{r['err_settling']:12.3e}"
+        )

@@ -17,6 +17,13 @@ except PackageNotFoundError:  # pragma: no cover - the source tree used without 
     __version__ = "0+unknown"
 
 __all__ = [
-    "GRAVITY", "STATUS_NAMES", "SceneBatch", "SceneError", "SimulationResult", "check_choice", "concat",
-    "simulate", "__version__",
+    "GRAVITY",
+    "STATUS_NAMES",
+    "SceneBatch",
+    "SceneError",
+    "SimulationResult",
+    "check_choice",
+    "concat",
+    "simulate",
+    "__version__",
 ]

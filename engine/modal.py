@@ -77,8 +77,15 @@ def state_matrix(M: np.ndarray, K: np.ndarray, C: np.ndarray) -> np.ndarray:
     return A
 
 
-def transmissibility(M: np.ndarray, K: np.ndarray, C: np.ndarray, d: np.ndarray, k: np.ndarray,
-                     c_rel: np.ndarray, freq: np.ndarray) -> np.ndarray:
+def transmissibility(
+    M: np.ndarray,
+    K: np.ndarray,
+    C: np.ndarray,
+    d: np.ndarray,
+    k: np.ndarray,
+    c_rel: np.ndarray,
+    freq: np.ndarray,
+) -> np.ndarray:
     """|c.g. displacement / floor displacement| per axis (C, 3) at the floor frequency ``freq`` (C, 3) Hz.
 
     ``d`` (C, n, 3) isolator lever arms (m), ``k`` (C, n, 3) stiffness (N/m), ``c_rel`` (C, n, 3) the

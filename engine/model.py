@@ -197,8 +197,9 @@ def params(b: SceneBatch) -> Params:
         f0=f64(preload(b)),
         sm=f64(b.stage_mass, dtype=float),
         rho_h=f64(rho_h),
-        e=f64(b.stage_axis / np.linalg.norm(b.stage_axis, axis=-1, keepdims=True)) if b.n_stages else f64(
-            b.stage_axis, dtype=float),
+        e=f64(b.stage_axis / np.linalg.norm(b.stage_axis, axis=-1, keepdims=True))
+        if b.n_stages
+        else f64(b.stage_axis, dtype=float),
         parent=f64(b.stage_parent, dtype=np.int64),
         pt=f64(b.prof_t, dtype=float),
         ps=f64(b.prof_s, dtype=float),
@@ -223,7 +224,18 @@ def work(b: SceneBatch) -> Work:
     """Scratch arrays for one case at a time."""
     m, n = b.n_stages, b.n_isolators
     return Work(
-        rho=np.zeros((m, 3)), vr=np.zeros((m, 3)), ar=np.zeros((m, 3)), jr=np.zeros((m, 3)),
-        xf=np.zeros(3), vf=np.zeros(3), acc=np.zeros(6), f=np.zeros(6), M=np.zeros((6, 6)),
-        R=np.eye(3), F=np.zeros((n, 3)), x1=np.zeros(13), k1=np.zeros((4, 13)), k2=np.zeros(13),
+        rho=np.zeros((m, 3)),
+        vr=np.zeros((m, 3)),
+        ar=np.zeros((m, 3)),
+        jr=np.zeros((m, 3)),
+        xf=np.zeros(3),
+        vf=np.zeros(3),
+        acc=np.zeros(6),
+        f=np.zeros(6),
+        M=np.zeros((6, 6)),
+        R=np.eye(3),
+        F=np.zeros((n, 3)),
+        x1=np.zeros(13),
+        k1=np.zeros((4, 13)),
+        k2=np.zeros(13),
     )

@@ -24,9 +24,24 @@ from isolab.engine.dynamics import (
 Peaks = namedtuple(
     "Peaks",
     [
-        "u", "th", "poi", "force", "min_load", "sumsq", "nobs", "last_viol",
-        "target", "t_last", "tol", "diverged",
-        "slot", "h_u", "h_th", "h_poi", "h_force", "h_t",
+        "u",
+        "th",
+        "poi",
+        "force",
+        "min_load",
+        "sumsq",
+        "nobs",
+        "last_viol",
+        "target",
+        "t_last",
+        "tol",
+        "diverged",
+        "slot",
+        "h_u",
+        "h_th",
+        "h_poi",
+        "h_force",
+        "h_t",
     ],
 )
 structref.define_proxy(KernelPeaks, PeaksType, list(Peaks._fields))
@@ -37,8 +52,16 @@ DIVERGED_ROTATION = 0.5
 """A rotation beyond this (rad) likewise."""
 
 
-def allocate(n_cases: int, n_points: int, n_isolators: int, target: np.ndarray, t_last: np.ndarray,
-             tol: np.ndarray, record: list[int] | None, n_steps: int) -> Peaks:
+def allocate(
+    n_cases: int,
+    n_points: int,
+    n_isolators: int,
+    target: np.ndarray,
+    t_last: np.ndarray,
+    tol: np.ndarray,
+    record: list[int] | None,
+    n_steps: int,
+) -> Peaks:
     """Accumulators for ``n_cases`` cases; histories of ``n_steps + 1`` samples for the ``record`` cases.
 
     ``target`` (C, 6) is the final static displacement and rotation the case settles to, m and rad;
@@ -51,13 +74,24 @@ def allocate(n_cases: int, n_points: int, n_isolators: int, target: np.ndarray, 
     R = len(record)
     T = n_steps + 1 if R else 0
     return Peaks(
-        u=np.zeros((n_cases, 3)), th=np.zeros((n_cases, 3)), poi=np.zeros((n_cases, n_points, 3)),
-        force=np.zeros((n_cases, n_isolators, 3)), min_load=np.full((n_cases, n_isolators), np.inf),
-        sumsq=np.zeros((n_cases, 3)), nobs=np.zeros(n_cases), last_viol=np.full(n_cases, -np.inf),
-        target=np.ascontiguousarray(target, dtype=float), t_last=np.ascontiguousarray(t_last, dtype=float),
-        tol=np.ascontiguousarray(tol, dtype=float), diverged=np.full(n_cases, np.nan),
-        slot=slot, h_u=np.zeros((R, T, 3)), h_th=np.zeros((R, T, 3)), h_poi=np.zeros((R, T, n_points, 3)),
-        h_force=np.zeros((R, T, n_isolators, 3)), h_t=np.zeros((R, T)),
+        u=np.zeros((n_cases, 3)),
+        th=np.zeros((n_cases, 3)),
+        poi=np.zeros((n_cases, n_points, 3)),
+        force=np.zeros((n_cases, n_isolators, 3)),
+        min_load=np.full((n_cases, n_isolators), np.inf),
+        sumsq=np.zeros((n_cases, 3)),
+        nobs=np.zeros(n_cases),
+        last_viol=np.full(n_cases, -np.inf),
+        target=np.ascontiguousarray(target, dtype=float),
+        t_last=np.ascontiguousarray(t_last, dtype=float),
+        tol=np.ascontiguousarray(tol, dtype=float),
+        diverged=np.full(n_cases, np.nan),
+        slot=slot,
+        h_u=np.zeros((R, T, 3)),
+        h_th=np.zeros((R, T, 3)),
+        h_poi=np.zeros((R, T, n_points, 3)),
+        h_force=np.zeros((R, T, n_isolators, 3)),
+        h_t=np.zeros((R, T)),
     )
 
 

@@ -85,9 +85,21 @@ class SimulationResult:
         """One case's outputs as plain JSON-able Python (SI units, keys named for the quantity)."""
         out: dict = {"status": STATUS_NAMES[int(self.status[case])], "message": self.message[case]}
         for name in (
-            "dt", "peak_displacement", "peak_rotation", "peak_point_displacement", "peak_isolator_force",
-            "static_isolator_load", "min_isolator_load", "rms_displacement", "final_displacement",
-            "settling_time", "settled", "natural_frequency", "damping_ratio", "mode_energy", "mechanism",
+            "dt",
+            "peak_displacement",
+            "peak_rotation",
+            "peak_point_displacement",
+            "peak_isolator_force",
+            "static_isolator_load",
+            "min_isolator_load",
+            "rms_displacement",
+            "final_displacement",
+            "settling_time",
+            "settled",
+            "natural_frequency",
+            "damping_ratio",
+            "mode_energy",
+            "mechanism",
             "transmissibility",
         ):
             v = np.asarray(getattr(self, name)[case])

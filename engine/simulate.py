@@ -23,24 +23,37 @@ def check_choice(fidelity: str, integrator: str) -> None:
         raise SceneError("integrator", f"must be one of {sorted(INTEGRATORS)}, got {integrator!r}")
     levels = INTEGRATORS[integrator].LEVELS
     if fidelity not in levels:
-        raise SceneError("integrator", f"{integrator!r} integrates only the {', '.join(levels)} level, "
-                                       f"not {fidelity!r}")
+        raise SceneError(
+            "integrator", f"{integrator!r} integrates only the {', '.join(levels)} level, not {fidelity!r}"
+        )
 
 
 def _divergence_cause(integrator: str, step: float) -> str:
     """Why a case that passed the stability guard still ran away (the message after "diverged at t")."""
-    where = (f"the base moved more than {peaks.DIVERGED_DISPLACEMENT:g} m or turned more than "
-             f"{peaks.DIVERGED_ROTATION:g} rad")
+    where = (
+        f"the base moved more than {peaks.DIVERGED_DISPLACEMENT:g} m or turned more than "
+        f"{peaks.DIVERGED_ROTATION:g} rad"
+    )
     if integrator in ("exact", "reference"):
-        return (f"{where} with the {integrator} integrator, so the scene itself runs away (mounts too soft "
-                "for the load or the stage forces); stiffen or add mounts, or slow the stages")
-    return (f"{where} although the step ({step:.3g} s, {integrator}) is inside the stability limit with the "
-            "stages at home and at the ends of their travel; the scene itself likely runs away (mounts too "
-            "soft for the load or the stage forces): check it with the reference integrator")
+        return (
+            f"{where} with the {integrator} integrator, so the scene itself runs away (mounts too soft "
+            "for the load or the stage forces); stiffen or add mounts, or slow the stages"
+        )
+    return (
+        f"{where} although the step ({step:.3g} s, {integrator}) is inside the stability limit with the "
+        "stages at home and at the ends of their travel; the scene itself likely runs away (mounts too "
+        "soft for the load or the stage forces): check it with the reference integrator"
+    )
 
 
-def simulate(batch: SceneBatch, fidelity: str = "ltv", integrator: str = "rk4", dt: float = 1e-3,
-             auto_step: bool = True, record: list[int] | None = None) -> SimulationResult:
+def simulate(
+    batch: SceneBatch,
+    fidelity: str = "ltv",
+    integrator: str = "rk4",
+    dt: float = 1e-3,
+    auto_step: bool = True,
+    record: list[int] | None = None,
+) -> SimulationResult:
     """Simulate every case of ``batch``.
 
     Args:
@@ -75,19 +88,25 @@ def simulate(batch: SceneBatch, fidelity: str = "ltv", integrator: str = "rk4", 
     message = [""] * C
     for c in np.flatnonzero(md.tipping):
         status[c] = TIPPING
-        message[c] = ("statically unstable: the rocking stiffness of the weights above the mounts "
-                      "exceeds the mounts' own; widen the layout, lower the c.g. or stiffen the mounts")
+        message[c] = (
+            "statically unstable: the rocking stiffness of the weights above the mounts "
+            "exceeds the mounts' own; widen the layout, lower the c.g. or stiffen the mounts"
+        )
 
     # the time-varying levels change mass and gravity stiffness as the stages travel: the guards look at
     # the stages at the ends of their travel too
-    placed = [(model.mass_matrix(batch, rho), model.stiffness_matrix(batch, rho))
-              for rho in (model.travel_positions(batch) if fidelity != "lti" else [])]
+    placed = [
+        (model.mass_matrix(batch, rho), model.stiffness_matrix(batch, rho))
+        for rho in (model.travel_positions(batch) if fidelity != "lti" else [])
+    ]
     for M, K in placed:
         for c in np.flatnonzero(modal.modes(M, K, C0).tipping & (status == OK)):
             status[c] = TIPPING
-            message[c] = ("statically unstable with the stages at the ends of their travel: the rocking "
-                          "stiffness of the weights above the mounts exceeds the mounts' own; widen the "
-                          "layout, lower the c.g., shorten the travel or stiffen the mounts")
+            message[c] = (
+                "statically unstable with the stages at the ends of their travel: the rocking "
+                "stiffness of the weights above the mounts exceeds the mounts' own; widen the "
+                "layout, lower the c.g., shorten the travel or stiffen the mounts"
+            )
 
     # stability guard (fixed-step integrators)
     steps = np.full(C, float(dt))
@@ -104,10 +123,11 @@ def simulate(batch: SceneBatch, fidelity: str = "ltv", integrator: str = "rk4", 
             if n_div[c] == 0 or not auto_step:
                 status[c] = UNSTABLE
                 need = "more than 4096 sub-steps" if n_div[c] == 0 else f"{n_div[c]} sub-steps"
-                message[c] = (f"dt = {dt:.4g} s is past the {integrator} stability limit of the fastest mode "
-                              f"({fastest[c]:.4g} Hz at home, needs {need}); "
-                              + ("use a smaller dt or the exact integrator" if n_div[c] else
-                                 "use the exact integrator"))
+                message[c] = (
+                    f"dt = {dt:.4g} s is past the {integrator} stability limit of the fastest mode "
+                    f"({fastest[c]:.4g} Hz at home, needs {need}); "
+                    + ("use a smaller dt or the exact integrator" if n_div[c] else "use the exact integrator")
+                )
                 n_div[c] = 1
         n_div[status != OK] = 1
         steps = dt / n_div
@@ -121,8 +141,16 @@ def simulate(batch: SceneBatch, fidelity: str = "ltv", integrator: str = "rk4", 
     n_steps[too_many] = 1
 
     target = model.static_offset(batch, fidelity)
-    O = peaks.allocate(C, batch.n_points, batch.n_isolators, target, batch.last_move_end(),
-                       batch.settle_tol, record, int(n_steps[list(record)].max()) if record else 0)
+    O = peaks.allocate(
+        C,
+        batch.n_points,
+        batch.n_isolators,
+        target,
+        batch.last_move_end(),
+        batch.settle_tol,
+        record,
+        int(n_steps[list(record)].max()) if record else 0,
+    )
     W = model.work(batch)
     run_status = status.copy()
     mod = INTEGRATORS[integrator]
@@ -138,8 +166,10 @@ def simulate(batch: SceneBatch, fidelity: str = "ltv", integrator: str = "rk4", 
             message[c] = f"diverged at t = {O.diverged[c]:.4g} s: " + _divergence_cause(integrator, steps[c])
         elif run_status[c] == 3:
             status[c] = FAILED
-            message[c] = message[c] or ("the mass matrix lost positive definiteness (the base turned "
-                                        "beyond the range the model holds)")
+            message[c] = message[c] or (
+                "the mass matrix lost positive definiteness (the base turned "
+                "beyond the range the model holds)"
+            )
 
     t_end = n_steps * steps
     t_last = batch.last_move_end()
@@ -150,8 +180,9 @@ def simulate(batch: SceneBatch, fidelity: str = "ltv", integrator: str = "rk4", 
     if batch.has_floor_motion and np.any(batch.floor_amp != 0):
         d, _, _ = model.relative_geometry(batch)
         c_rel = batch.iso_c * (1.0 - batch.iso_skyhook[..., None])
-        T = modal.transmissibility(M0, K0, C0, d, batch.iso_k, c_rel,
-                                   np.where(batch.floor_amp != 0, batch.floor_freq, 0.0))
+        T = modal.transmissibility(
+            M0, K0, C0, d, batch.iso_k, c_rel, np.where(batch.floor_amp != 0, batch.floor_freq, 0.0)
+        )
     else:
         T = np.zeros((C, 3))
 
@@ -167,8 +198,11 @@ def simulate(batch: SceneBatch, fidelity: str = "ltv", integrator: str = "rk4", 
     history = None
     if record:
         history = {
-            "time": O.h_t, "displacement": O.h_u, "rotation": O.h_th,
-            "point_displacement": O.h_poi, "isolator_force": O.h_force,
+            "time": O.h_t,
+            "displacement": O.h_u,
+            "rotation": O.h_th,
+            "point_displacement": O.h_poi,
+            "isolator_force": O.h_force,
             "n_samples": n_steps[list(record)] + 1,
         }
     return SimulationResult(

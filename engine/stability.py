@@ -65,8 +65,9 @@ def spectral_radius(S: np.ndarray) -> np.ndarray:
     return np.abs(np.linalg.eigvals(S)).max(axis=-1)
 
 
-def subdivisions(A: np.ndarray, dt: float | np.ndarray, integrator: str, margin: float = 1.25,
-                 max_div: int = 4096) -> np.ndarray:
+def subdivisions(
+    A: np.ndarray, dt: float | np.ndarray, integrator: str, margin: float = 1.25, max_div: int = 4096
+) -> np.ndarray:
     """Smallest number of sub-steps (C,) int that makes ``dt`` / n stable with ``margin`` to spare.
 
     The check runs at ``margin * dt / n`` so that the stage-dependent mass of the time-varying levels

@@ -31,10 +31,22 @@ def validate(b: SceneBatch) -> None:
                 raise SceneError(f.name, "must be finite (got NaN or infinity)" + _case(bad))
     n, m = b.n_isolators, b.n_stages
     shapes = {
-        "inertia": (C, 3, 3), "cg": (C, 3), "iso_pos": (C, n, 3), "iso_k": (C, n, 3), "iso_c": (C, n, 3),
-        "iso_skyhook": (C, n), "stage_mass": (C, m), "stage_home": (C, m, 3), "stage_axis": (C, m, 3),
-        "stage_parent": (m,), "points": (C, b.n_points, 3), "floor_amp": (C, 3), "floor_freq": (C, 3),
-        "floor_phase": (C, 3), "duration": (C,), "settle_tol": (C,),
+        "inertia": (C, 3, 3),
+        "cg": (C, 3),
+        "iso_pos": (C, n, 3),
+        "iso_k": (C, n, 3),
+        "iso_c": (C, n, 3),
+        "iso_skyhook": (C, n),
+        "stage_mass": (C, m),
+        "stage_home": (C, m, 3),
+        "stage_axis": (C, m, 3),
+        "stage_parent": (m,),
+        "points": (C, b.n_points, 3),
+        "floor_amp": (C, 3),
+        "floor_freq": (C, 3),
+        "floor_phase": (C, 3),
+        "duration": (C,),
+        "settle_tol": (C,),
     }
     for name, shape in shapes.items():
         if np.shape(getattr(b, name)) != shape:
@@ -77,8 +89,9 @@ def validate(b: SceneBatch) -> None:
         parent = np.asarray(b.stage_parent)
         for i, p in enumerate(parent):
             if not -1 <= p < i:
-                raise SceneError("stage_parent",
-                                 f"stage {i} rides on {p}: a parent must come before its child")
+                raise SceneError(
+                    "stage_parent", f"stage {i} rides on {p}: a parent must come before its child"
+                )
         if (np.diff(b.prof_t, axis=-1) < 0).any():
             raise SceneError("prof_t", "piece start times must not decrease")
     if (b.duration <= 0).any():

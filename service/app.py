@@ -111,8 +111,9 @@ async def require_token(
         return
     given = credentials.credentials if credentials is not None else ""
     if not hmac.compare_digest(given.encode(), token.encode()):
-        raise HTTPException(status_code=401, detail="missing or wrong bearer token",
-                            headers={"WWW-Authenticate": "Bearer"})
+        raise HTTPException(
+            status_code=401, detail="missing or wrong bearer token", headers={"WWW-Authenticate": "Bearer"}
+        )
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -164,7 +165,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.jobs = None
     app.state.heavy_work = heavy_work_limiter()
     app.add_middleware(RequestLimits, max_bytes=settings.max_body_bytes)
-    app.add_exception_handler(StarletteHTTPException, unreadable_body_is_422)
+    app.add_exception_handler(StarletteHTTPException, unreadable_body_is_422)  # type: ignore[arg-type]
     if settings.cors_origins:
         app.add_middleware(
             CORSMiddleware,

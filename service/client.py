@@ -15,6 +15,7 @@ reads files). Every failed request raises :class:`ClientError` carrying the serv
 
 from __future__ import annotations
 
+import builtins
 import json
 import os
 import tempfile
@@ -144,7 +145,7 @@ class Client:
         """A study's status, progress ``{done, total, failed}``, times, error and definition."""
         return self._request("GET", f"/studies/{study_id}").json()
 
-    def list(self, **filters: Any) -> list[dict[str, Any]]:
+    def list(self, **filters: Any) -> builtins.list[dict[str, Any]]:
         """Studies in the catalog, newest first. Filters: name, status, isolator_type, created_after,
         created_before (ISO 8601), limit (<= 500), offset."""
         params = {k: v for k, v in filters.items() if v is not None}
@@ -238,7 +239,7 @@ class Client:
             with xr.open_dataset(path) as ds:
                 return ds.load()
 
-    def cases(self, study_id: str, **query: Any) -> list[dict[str, Any]]:
+    def cases(self, study_id: str, **query: Any) -> builtins.list[dict[str, Any]]:
         """Rows of a done study's case table: one dict per case. Query: filter, sort, columns (a list or a
         comma-separated string), limit, offset."""
         params = {
@@ -261,7 +262,7 @@ class Client:
     def compare(
         self,
         scene: Mapping[str, Any] | str | Path,
-        types: list[str] | None = None,
+        types: builtins.list[str] | None = None,
         simulation: Mapping[str, Any] | None = None,
     ) -> dict[str, Any]:
         """Run one scene (a dict, or a YAML/JSON scene file) under several isolator types (default all
@@ -272,7 +273,7 @@ class Client:
             path = Path(scene)
             text = path.read_text(encoding="utf-8")
             scene = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
-        body: dict[str, Any] = {"scene": dict(scene)}
+        body: dict[str, Any] = {"scene": dict(scene)}  # type: ignore[arg-type]  # a mapping by now
         if types is not None:
             body["isolator_types"] = list(types)
         if simulation is not None:

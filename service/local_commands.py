@@ -31,10 +31,18 @@ def case_outputs(result, case: int, isolators: list[str], points: list[str]) -> 
         "mechanism": [bool(m) for m in r.mechanism[case]],
         "static_isolator_load": _labelled(r.static_isolator_load[case], isolators),
         "units": {
-            "peak_displacement": "m", "peak_rotation": "rad", "peak_point_displacement": "m",
-            "peak_isolator_force": "N", "min_isolator_load": "N", "static_isolator_load": "N",
-            "rms_displacement": "m", "settling_time": "s", "natural_frequency": "Hz", "damping_ratio": "1",
-            "transmissibility": "1", "dt": "s",
+            "peak_displacement": "m",
+            "peak_rotation": "rad",
+            "peak_point_displacement": "m",
+            "peak_isolator_force": "N",
+            "min_isolator_load": "N",
+            "static_isolator_load": "N",
+            "rms_displacement": "m",
+            "settling_time": "s",
+            "natural_frequency": "Hz",
+            "damping_ratio": "1",
+            "transmissibility": "1",
+            "dt": "s",
         },
     }
     if not ok:
@@ -88,6 +96,8 @@ def simulate(
             choice = choose(Study.model_validate({"name": scene.stem, "scene": sc.model_dump(mode="json")}))
             fid, integ = fidelity or choice.fidelity, integrator or choice.integrator
             step, reason = dt or choice.dt, choice.reason
+        if fid is None or integ is None or step is None:  # resolved above; a scene always has defaults
+            raise ValueError("simulation: no fidelity, integrator and step to run with")
         t0 = time.perf_counter()
         result = run(batch, fid, integ, step, auto_step=sim.auto_step, record=[0] if plot else None)
         elapsed = time.perf_counter() - t0
@@ -100,7 +110,7 @@ def simulate(
         "integrator": integ,
         "dt": float(step),
         **({"accuracy": reason} if reason else {}),
-        "duration": float(batch.duration[0]),
+        "duration": float(batch.duration[0]),  # type: ignore[index]  # set by scene_batch
         "isolators": names["isolators"],
         "points": names["points"],
         "stages": names["stages"],
@@ -111,10 +121,18 @@ def simulate(
         from isolab.service.plots import case_png
 
         h = result.history
+        assert h is not None  # recorded above
         n = int(h["n_samples"][0])
-        plot.write_bytes(case_png(h["time"][0, :n], h["displacement"][0, :n], h["rotation"][0, :n],
-                                  h["isolator_force"][0, :n], names["isolators"],
-                                  title=f"{scene.name} ({fid}/{integ})"))
+        plot.write_bytes(
+            case_png(
+                h["time"][0, :n],
+                h["displacement"][0, :n],
+                h["rotation"][0, :n],
+                h["isolator_force"][0, :n],
+                names["isolators"],
+                title=f"{scene.name} ({fid}/{integ})",
+            )
+        )
         out["plot"] = str(plot)
     if as_json:
         typer.echo(json.dumps(out, indent=2))
@@ -149,8 +167,9 @@ def run_study_command(
 
     from isolab.studies.runner import run_local
 
-    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
-                  TimeElapsedColumn()) as bar:
+    with Progress(
+        TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn()
+    ) as bar:
         task = bar.add_task(study.name, total=None)
 
         def progress(done: int, total: int) -> None:

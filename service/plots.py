@@ -117,7 +117,8 @@ def _reduce(values: np.ndarray, how: str) -> float:
         return float("nan")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        return float({"max": np.nanmax, "min": np.nanmin, "mean": np.nanmean}[how](v))
+        reducers: dict[str, Any] = {"max": np.nanmax, "min": np.nanmin, "mean": np.nanmean}
+        return float(reducers[how](v))
 
 
 def _reduced(keys: list[np.ndarray], y: np.ndarray, how: str) -> tuple[list[np.ndarray], np.ndarray, bool]:
@@ -166,7 +167,7 @@ def study_png(
     groups = [None] if group is None else [str(g) for g in _levels(np.asarray(group.values))[0]]
 
     def members(g: str | None) -> np.ndarray:
-        if g is None:
+        if g is None or group is None:
             return np.arange(yv.size)
         return np.flatnonzero(np.asarray(group.values).astype(str) == g)
 
@@ -224,7 +225,7 @@ def study_png(
         fig.colorbar(art, ax=ax, label=label)
         ax.set_xlabel(_label(x.name, x.unit))
         ax.set_ylabel(_label(x2.name, x2.unit))
-        if g is not None:
+        if g is not None and group is not None:
             ax.set_title(f"{group.name} = {g}")
     if title:
         fig.suptitle(title)

@@ -27,7 +27,6 @@ MAX_JSON_DEPTH = 32
 """Deepest nesting of objects and arrays accepted in a JSON body (a study needs about 8)."""
 
 
-
 # ---------------------------------------------------------------------------------------------- bodies
 def json_depth(body: bytes) -> int:
     """Deepest nesting of ``[``/``{`` in a JSON text (brackets inside strings do not count)."""

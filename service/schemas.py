@@ -112,8 +112,11 @@ class StudySummary(BaseModel):
     error: str | None = Field(None, description="why the study failed")
     parameters: list[str] = Field(description="names of the varied parameters")
     isolator_types: list[str]
-    fidelity: str | None = Field(None, description="model fidelity the cases run at (chosen by the runner "
-                                                    "for an accuracy request; null until then)")
+    fidelity: str | None = Field(
+        None,
+        description="model fidelity the cases run at (chosen by the runner "
+        "for an accuracy request; null until then)",
+    )
     integrator: str | None = None
     dt: float | None = Field(None, description="integration step the cases run at, s")
     links: StudyLinks
@@ -211,7 +214,7 @@ class ComparisonRequest(BaseModel):
 
     scene: dict[str, Any] = Field(description="inline scene (as in a study's scene block)")
     isolator_types: list[IsolatorType] = Field(
-        default_factory=lambda: list(ISOLATOR_TYPES),
+        default_factory=lambda: list(ISOLATOR_TYPES),  # type: ignore[arg-type]  # the Literal's values
         min_length=1,
         max_length=3,
         description="isolator presets to compare (default all three)",

@@ -42,9 +42,13 @@ from isolab.studies.study import study_from_json
 CANDIDATE_STEPS = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3)
 """Steps the chooser tries, s (those at or below a requested ``dt``)."""
 CANDIDATE_PAIRS = (
-    ("lti", "euler"), ("lti", "exact"), ("lti", "rk4"),
-    ("ltv", "euler"), ("ltv", "rk4"),
-    ("nonlinear", "euler"), ("nonlinear", "rk4"),
+    ("lti", "euler"),
+    ("lti", "exact"),
+    ("lti", "rk4"),
+    ("ltv", "euler"),
+    ("ltv", "rk4"),
+    ("nonlinear", "euler"),
+    ("nonlinear", "rk4"),
 )
 """Fidelity/integrator pairs the chooser tries, cheapest level first (the order breaks cost ties)."""
 REFERENCE_PAIR = ("nonlinear", "reference")
@@ -79,17 +83,28 @@ DISPLACEMENT_FLOOR = 1e-9
 FORCE_FLOOR = 1e-6
 """Peak isolator forces below this fraction of the largest preload count as zero, likewise."""
 
-SIZING_OUTPUTS = ("peak_displacement", "peak_point_displacement", "peak_rotation", "peak_isolator_force",
-                  "min_isolator_load")
+SIZING_OUTPUTS = (
+    "peak_displacement",
+    "peak_point_displacement",
+    "peak_rotation",
+    "peak_isolator_force",
+    "min_isolator_load",
+)
 """Outputs a relative tolerance applies to."""
-ESTIMATED_OUTPUTS = ("peak_displacement", "peak_point_displacement", "peak_rotation", "peak_isolator_force",
-                     "min_isolator_load", "settling_time")
+ESTIMATED_OUTPUTS = (
+    "peak_displacement",
+    "peak_point_displacement",
+    "peak_rotation",
+    "peak_isolator_force",
+    "min_isolator_load",
+    "settling_time",
+)
 """Outputs whose error every stored study carries (point displacement only where the scene has points)."""
 OUTPUT_UNITS = {name: ("s" if name == "settling_time" else "1") for name in ESTIMATED_OUTPUTS}
 OUTPUT_MEANING = {
     "peak_displacement": "largest |error| of a peak c.g. displacement relative to the largest reference peak",
     "peak_point_displacement": "largest |error| of a peak point displacement relative to the largest "
-                               "reference peak",
+    "reference peak",
     "peak_rotation": "largest |error| of a peak rotation relative to the largest reference peak",
     "peak_isolator_force": "largest |error| of a peak isolator force relative to the largest reference peak",
     "min_isolator_load": "largest |error| of a smallest isolator load relative to the largest preload",
@@ -119,9 +134,12 @@ def output_errors(result: Any, reference: Any) -> dict[str, np.ndarray]:
             return np.abs(a - b).max(axis=1), np.abs(b).max(axis=1)
 
     out: dict[str, np.ndarray] = {}
-    for name, floor in (("peak_displacement", DISPLACEMENT_FLOOR), ("peak_point_displacement",
-                        DISPLACEMENT_FLOOR), ("peak_rotation", DISPLACEMENT_FLOOR),
-                        ("peak_isolator_force", FORCE_FLOOR * preload)):
+    for name, floor in (
+        ("peak_displacement", DISPLACEMENT_FLOOR),
+        ("peak_point_displacement", DISPLACEMENT_FLOOR),
+        ("peak_rotation", DISPLACEMENT_FLOOR),
+        ("peak_isolator_force", FORCE_FLOOR * preload),
+    ):
         num, big = diff(name)
         out[name] = num / np.maximum(big, floor)
     num, _ = diff("min_isolator_load")
@@ -178,8 +196,9 @@ class Choice:
             "accuracy_reason": self.reason,
         }
         if self.tolerance is not None:
-            out["accuracy_tolerance"] = (f"{self.tolerance * 100:.6g} %" if self.relative
-                                         else f"{self.tolerance:.6g} m")
+            out["accuracy_tolerance"] = (
+                f"{self.tolerance * 100:.6g} %" if self.relative else f"{self.tolerance:.6g} m"
+            )
         if self.request is not None and self.pilot:
             out["accuracy_pilot_cases"] = list(self.pilot_cases)
             out["accuracy_pilot"] = json.dumps(list(self.pilot))
@@ -210,10 +229,17 @@ def _fmt_error(e: float | None, relative: bool) -> str:
     return f"{e * 100:.3g} %" if relative else f"{e * 1e6:.3g} um"
 
 
-def choose_for_batch(batch: SceneBatch, tolerance: float, relative: bool = True, *,
-                     steps: Sequence[float] = CANDIDATE_STEPS, auto_step: bool = True,
-                     pairs: Sequence[tuple[str, str]] = CANDIDATE_PAIRS,
-                     case_numbers: Sequence[int] | None = None, margin: float = PILOT_MARGIN) -> Choice:
+def choose_for_batch(
+    batch: SceneBatch,
+    tolerance: float,
+    relative: bool = True,
+    *,
+    steps: Sequence[float] = CANDIDATE_STEPS,
+    auto_step: bool = True,
+    pairs: Sequence[tuple[str, str]] = CANDIDATE_PAIRS,
+    case_numbers: Sequence[int] | None = None,
+    margin: float = PILOT_MARGIN,
+) -> Choice:
     """The cheapest (fidelity, integrator, step) whose error on every case of ``batch`` (the pilot cases)
     stays within ``margin`` times ``tolerance`` (relative, 1, or absolute on peak displacement, m).
 
@@ -228,24 +254,37 @@ def choose_for_batch(batch: SceneBatch, tolerance: float, relative: bool = True,
     truth = simulate(batch, *REFERENCE_PAIR, dt=fine, auto_step=auto_step)
     usable = np.flatnonzero(truth.status == OK)
     if usable.size == 0:
-        why = "; ".join(sorted({f"{STATUS_NAMES[int(s)]}: {m}" for s, m in zip(truth.status, truth.message,
-                                                                                 strict=True)}))
+        why = "; ".join(
+            sorted({f"{STATUS_NAMES[int(s)]}: {m}" for s, m in zip(truth.status, truth.message, strict=True)})
+        )
         fid, integ = pairs[0]
-        return Choice(None, fid, integ, steps[-1], tolerance, relative,
-                      reason=f"no pilot case could be simulated at the reference level ({why}); the cheapest "
-                             f"candidate is used and the cases report their status", pilot_cases=cases)
+        return Choice(
+            None,
+            fid,
+            integ,
+            steps[-1],
+            tolerance,
+            relative,
+            reason=f"no pilot case could be simulated at the reference level ({why}); the cheapest "
+            f"candidate is used and the cases report their status",
+            pilot_cases=cases,
+        )
     if usable.size < batch.n_cases:
         batch = batch.take(usable)
         truth = _take_result(truth, usable)
         cases = tuple(cases[i] for i in usable)
     duration = np.asarray(batch.duration, dtype=float)
-    A = modal.state_matrix(model.mass_matrix(batch), model.stiffness_matrix(batch),
-                           model.damping_matrix(batch))
+    A = modal.state_matrix(
+        model.mass_matrix(batch), model.stiffness_matrix(batch), model.damping_matrix(batch)
+    )
     candidates = []
     for rank, (fid, integ) in enumerate(pairs):
         for dt in steps:
-            n_div = (stability.subdivisions(A, dt, integ) if integ in ("euler", "rk4")
-                     else np.ones(len(duration), dtype=np.int64))
+            n_div = (
+                stability.subdivisions(A, dt, integ)
+                if integ in ("euler", "rk4")
+                else np.ones(len(duration), dtype=np.int64)
+            )
             if np.any(n_div == 0) or (not auto_step and np.any(n_div > 1)):
                 continue  # the guard would refuse a case
             n_steps = np.rint(duration / (dt / n_div))
@@ -259,30 +298,55 @@ def choose_for_batch(batch: SceneBatch, tolerance: float, relative: bool = True,
         worst = float(np.max(err)) if np.all(np.isfinite(err)) else None
         meets = worst is not None and worst <= margin * tolerance
         bad = [STATUS_NAMES[int(s)] for s in r.status if s != OK]
-        rows.append({"fidelity": fid, "integrator": integ, "dt": dt, "step_used": used, "cost_s": cost,
-                     "error": worst, "status": bad[0] if bad else "ok", "meets": meets})
+        rows.append(
+            {
+                "fidelity": fid,
+                "integrator": integ,
+                "dt": dt,
+                "step_used": used,
+                "cost_s": cost,
+                "error": worst,
+                "status": bad[0] if bad else "ok",
+                "meets": meets,
+            }
+        )
         if meets:
             missed = len(rows) - 1
-            best_missed = min((row for row in rows[:-1] if row["error"] is not None),
-                              key=lambda row: row["error"], default=None)
+            best_missed = min(
+                (row for row in rows[:-1] if row["error"] is not None),
+                key=lambda row: row["error"],
+                default=None,
+            )
             also = ""
             if best_missed is not None:
-                also = (f"; the {missed} cheaper candidates missed it (closest: {best_missed['fidelity']}/"
-                        f"{best_missed['integrator']} at {best_missed['dt'] * 1e3:g} ms, "
-                        f"{_fmt_error(best_missed['error'], relative)})")
-            reason = (f"{fid}/{integ} at {dt * 1e3:g} ms is the cheapest candidate whose largest error on "
-                      f"pilot cases {list(cases)} ({_fmt_error(worst, relative)} against nonlinear/reference "
-                      f"at {fine * 1e3:g} ms) stays within {margin:g} of the tolerance "
-                      f"{_fmt_error(tolerance, relative)}" + also)
+                also = (
+                    f"; the {missed} cheaper candidates missed it (closest: {best_missed['fidelity']}/"
+                    f"{best_missed['integrator']} at {best_missed['dt'] * 1e3:g} ms, "
+                    f"{_fmt_error(best_missed['error'], relative)})"
+                )
+            reason = (
+                f"{fid}/{integ} at {dt * 1e3:g} ms is the cheapest candidate whose largest error on "
+                f"pilot cases {list(cases)} ({_fmt_error(worst, relative)} against nonlinear/reference "
+                f"at {fine * 1e3:g} ms) stays within {margin:g} of the tolerance "
+                f"{_fmt_error(tolerance, relative)}" + also
+            )
             return Choice(None, fid, integ, dt, tolerance, relative, reason, cases, tuple(rows))
-    closest = min((row for row in rows if row["error"] is not None), key=lambda row: row["error"],
-                  default=None)
-    near = "" if closest is None else (
-        f" (closest: {closest['fidelity']}/{closest['integrator']} at {closest['dt'] * 1e3:g} ms, "
-        f"{_fmt_error(closest['error'], relative)})")
-    reason = (f"no candidate meets {margin:g} of {_fmt_error(tolerance, relative)} on pilot cases "
-              f"{list(cases)}{near}: the "
-              f"reference itself (nonlinear/reference at {fine * 1e3:g} ms)")
+    closest = min(
+        (row for row in rows if row["error"] is not None), key=lambda row: row["error"], default=None
+    )
+    near = (
+        ""
+        if closest is None
+        else (
+            f" (closest: {closest['fidelity']}/{closest['integrator']} at {closest['dt'] * 1e3:g} ms, "
+            f"{_fmt_error(closest['error'], relative)})"
+        )
+    )
+    reason = (
+        f"no candidate meets {margin:g} of {_fmt_error(tolerance, relative)} on pilot cases "
+        f"{list(cases)}{near}: the "
+        f"reference itself (nonlinear/reference at {fine * 1e3:g} ms)"
+    )
     return Choice(None, *REFERENCE_PAIR, fine, tolerance, relative, reason, cases, tuple(rows))
 
 
@@ -345,9 +409,12 @@ def pilot_cases(study: Any, limit: int = PILOT_LIMIT, seed: int = 0) -> list[int
 
 def _reference_choice(sim: Simulation, request: str) -> Choice:
     dt = float(sim.dt) if sim.dt is not None else DEFAULT_DT
-    return Choice(request, *REFERENCE_PAIR, dt,
-                  reason=f"accuracy reference: the nonlinear level with the reference integrator at "
-                         f"{dt * 1e3:g} ms")
+    return Choice(
+        request,
+        *REFERENCE_PAIR,
+        dt,
+        reason=f"accuracy reference: the nonlinear level with the reference integrator at {dt * 1e3:g} ms",
+    )
 
 
 def choose(study: Any) -> Choice:
@@ -392,10 +459,17 @@ def _choose(study: Any) -> Choice:
         return _reference_choice(sim, request)
     tolerance, relative = request_tolerance(sim)
     cases = pilot_cases(study)
-    c = choose_for_batch(study.batch(cases), tolerance, relative, steps=candidate_steps(sim.dt),
-                         auto_step=sim.auto_step, case_numbers=cases)
-    return Choice(request, c.fidelity, c.integrator, c.dt, c.tolerance, c.relative, c.reason, c.pilot_cases,
-                  c.pilot)
+    c = choose_for_batch(
+        study.batch(cases),
+        tolerance,
+        relative,
+        steps=candidate_steps(sim.dt),
+        auto_step=sim.auto_step,
+        case_numbers=cases,
+    )
+    return Choice(
+        request, c.fidelity, c.integrator, c.dt, c.tolerance, c.relative, c.reason, c.pilot_cases, c.pilot
+    )
 
 
 def choose_from_json(definition_json: str) -> Choice:
@@ -406,9 +480,14 @@ def choose_from_json(definition_json: str) -> Choice:
 def resolved_definition(study: Any, choice: Choice) -> dict[str, Any]:
     """The study's definition with the choice written into its simulation block (no accuracy request)."""
     definition = study.model_dump(mode="json")
-    definition["simulation"] = {**definition["simulation"], "accuracy": None, "tolerance": None,
-                                "fidelity": choice.fidelity, "integrator": choice.integrator,
-                                "dt": float(choice.dt)}
+    definition["simulation"] = {
+        **definition["simulation"],
+        "accuracy": None,
+        "tolerance": None,
+        "fidelity": choice.fidelity,
+        "integrator": choice.integrator,
+        "dt": float(choice.dt),
+    }
     return definition
 
 
@@ -419,8 +498,14 @@ def resolved_simulation(study: Any, choice: Choice | None = None) -> Simulation:
     if sim.request is None:
         return sim
     choice = choice or choose(study)
-    data = {**sim.model_dump(), "accuracy": None, "tolerance": None, "fidelity": choice.fidelity,
-            "integrator": choice.integrator, "dt": float(choice.dt)}
+    data = {
+        **sim.model_dump(),
+        "accuracy": None,
+        "tolerance": None,
+        "fidelity": choice.fidelity,
+        "integrator": choice.integrator,
+        "dt": float(choice.dt),
+    }
     return Simulation.model_validate(data)
 
 
@@ -432,8 +517,9 @@ def resolved_study(study: Any, choice: Choice | None = None) -> Any:
     return type(study).model_validate(resolved_definition(study, choice or choose(study)))
 
 
-def recorded_choice(study: Any, fidelity: str | None, integrator: str | None,
-                    dt: float | None) -> Choice | None:
+def recorded_choice(
+    study: Any, fidelity: str | None, integrator: str | None, dt: float | None
+) -> Choice | None:
     """The choice a runner recorded for ``study`` (catalog columns), or None when there is none yet."""
     if study.simulation.request is None or not (fidelity and integrator and dt):
         return None
@@ -441,8 +527,9 @@ def recorded_choice(study: Any, fidelity: str | None, integrator: str | None,
 
 
 # ------------------------------------------------------------------------------------------- estimates
-def error_sample(study: Any, n: int = ERROR_SAMPLE, seed: int = 0,
-                 limit: int = ERROR_SAMPLE_LIMIT) -> list[int]:
+def error_sample(
+    study: Any, n: int = ERROR_SAMPLE, seed: int = 0, limit: int = ERROR_SAMPLE_LIMIT
+) -> list[int]:
     """A seeded sample of cases to rerun at the reference level: one per group of categorical values
     (isolator types) first, then others up to ``n`` cases; at most ``limit``. Sorted."""
     rng = np.random.default_rng(seed)
@@ -462,8 +549,9 @@ def sample_arrays(definition_json: str, case: int) -> dict[str, dict[str, np.nda
     study = study_from_json(definition_json)
     sim = study.simulation
     batch = study.batch(np.array([int(case)]))
-    ours = result_arrays(simulate(batch, sim.fidelity, sim.integrator, dt=float(sim.dt),
-                                  auto_step=sim.auto_step))
+    ours = result_arrays(
+        simulate(batch, sim.fidelity, sim.integrator, dt=float(sim.dt), auto_step=sim.auto_step)
+    )
     dt = float(ours["dt"][0]) if np.isfinite(ours["dt"][0]) else float(sim.dt)
     reference = result_arrays(simulate(batch, *REFERENCE_PAIR, dt=dt, auto_step=sim.auto_step))
     return {"ours": ours, "reference": reference}
@@ -489,9 +577,13 @@ class ErrorEstimate:
     method: str
 
 
-def estimate_errors(study_arrays: Mapping[str, np.ndarray], reference: Mapping[str, np.ndarray],
-                    cases: Sequence[int], outputs: Sequence[str] = ESTIMATED_OUTPUTS,
-                    method: str = "") -> ErrorEstimate:
+def estimate_errors(
+    study_arrays: Mapping[str, np.ndarray],
+    reference: Mapping[str, np.ndarray],
+    cases: Sequence[int],
+    outputs: Sequence[str] = ESTIMATED_OUTPUTS,
+    method: str = "",
+) -> ErrorEstimate:
     """Largest error per output of the study's results (``study_arrays``: result arrays of the sampled
     ``cases``, in that order) against their reference reruns (``reference``, same cases)."""
     cases = tuple(int(c) for c in cases)
@@ -517,5 +609,10 @@ def estimate_errors(study_arrays: Mapping[str, np.ndarray], reference: Mapping[s
 
 def exact_estimate(cases: Sequence[int], outputs: Sequence[str] = ESTIMATED_OUTPUTS) -> ErrorEstimate:
     """The estimate of a study that ran at the reference level itself: zero by definition."""
-    return ErrorEstimate({k: 0.0 for k in outputs}, {k: None for k in outputs}, tuple(cases), {},
-                         "the study ran at the reference level (nonlinear, reference integrator)")
+    return ErrorEstimate(
+        {k: 0.0 for k in outputs},
+        {k: None for k in outputs},
+        tuple(cases),
+        {},
+        "the study ran at the reference level (nonlinear, reference integrator)",
+    )

@@ -288,7 +288,7 @@ def _filter_value(table: CaseColumns, column: str, op: str, raw: str) -> Any:
 
 def _force(raw: str, where: str) -> float:
     try:
-        q = UREG.Quantity(raw)
+        q: Any = UREG.Quantity(raw)
         return float(q.to("N").magnitude)
     except Exception:  # pint raises several kinds of errors on text it cannot read
         raise CaseQueryError("filter", f"{where}: cannot read {raw!r} as a force") from None
@@ -296,7 +296,9 @@ def _force(raw: str, where: str) -> float:
 
 def _split_clauses(text: str) -> list[str]:
     """Split at commas outside quotes."""
-    parts, current, quote = [], [], None
+    parts: list[str] = []
+    current: list[str] = []
+    quote: str | None = None
     for ch in text:
         if quote:
             quote = None if ch == quote else quote

@@ -45,7 +45,7 @@ def comparison_study(
         DefinitionError: naming the request's field (``scene``, ``simulation`` or ``isolator_types``)
             under ``prefix`` (default ``["body"]``).
     """
-    pre = ["body"] if prefix is None else list(prefix)
+    pre: list[str | int] = ["body"] if prefix is None else list(prefix)
     body: dict[str, Any] = {
         "name": "comparison",
         "scene": scene,
@@ -72,11 +72,12 @@ def run_comparison(study: Study) -> CaseColumns:
         ValueError: a scene the engine refuses under one of the types.
     """
     sim = study.simulation
+    fidelity, integrator, dt = sim.engine_choice()
     result = simulate(
         study.batch(np.arange(study.n_cases)),
-        fidelity=sim.fidelity,
-        integrator=sim.integrator,
-        dt=sim.dt,
+        fidelity=fidelity,
+        integrator=integrator,
+        dt=dt,
         auto_step=sim.auto_step,
     )
     iso, pts = study_labels(study)

@@ -60,8 +60,12 @@ _RESULT_FIELDS: dict[str, tuple[Any, str]] = {
 _VARIABLES: dict[str, tuple[tuple[str, ...], str, str, str]] = {
     "peak_displacement": (("axis",), "m", "peak absolute displacement of the machine c.g.", "f"),
     "peak_rotation": (("rotation",), "rad", "peak absolute rotation of the machine base", "f"),
-    "peak_point_displacement": (("point", "axis"), "m", "peak absolute displacement of a point of interest",
-                                "f"),
+    "peak_point_displacement": (
+        ("point", "axis"),
+        "m",
+        "peak absolute displacement of a point of interest",
+        "f",
+    ),
     "peak_isolator_force": (("isolator", "axis"), "N", "peak absolute dynamic isolator force", "f"),
     "static_isolator_load": (("isolator",), "N", "vertical isolator preload at the reference state", "f"),
     "min_isolator_load": (("isolator",), "N", "smallest total vertical isolator load", "f"),
@@ -75,8 +79,12 @@ _VARIABLES: dict[str, tuple[tuple[str, ...], str, str, str]] = {
     "damping_ratio": (("mode",), "1", "modal damping ratio", "f"),
     "mode_energy": (("mode", "dof"), "1", "kinetic-energy share of a degree of freedom in a mode", "f"),
     "mechanism": (("mode",), "1", "zero-stiffness (rigid-body) mode", "b"),
-    "transmissibility": (("axis",), "1", "floor-to-c.g. displacement transmissibility at the floor frequency",
-                         "f"),
+    "transmissibility": (
+        ("axis",),
+        "1",
+        "floor-to-c.g. displacement transmissibility at the floor frequency",
+        "f",
+    ),
     "dt": ((), "s", "integration time step used", "f"),
 }
 
@@ -148,8 +156,9 @@ def from_chunks(
         arrays = parts[k]
         st = np.asarray(arrays["status"], dtype=np.int8)
         if st.shape != (len(idx),):
-            raise ValueError(f"parts[{k}]: status has {st.shape[0] if st.ndim else 0} cases, "
-                             f"the chunk has {len(idx)}")
+            raise ValueError(
+                f"parts[{k}]: status has {st.shape[0] if st.ndim else 0} cases, the chunk has {len(idx)}"
+            )
         if "indices" in arrays and not np.array_equal(np.asarray(arrays["indices"]), idx):
             raise ValueError(f"parts[{k}]: computed for other cases than chunk {k} holds")
         status[idx] = st
@@ -162,7 +171,7 @@ def from_chunks(
                 if v.shape != want:
                     raise ValueError(f"parts[{k}]: {name} has shape {v.shape}, expected {want}")
                 fields[name][idx] = v
-    return SimulationResult(status=status, message=message, **fields)
+    return SimulationResult(status=status, message=message, **fields)  # type: ignore[arg-type]
 
 
 # -------------------------------------------------------------------------------------------- dataset
@@ -210,13 +219,26 @@ def to_dataset(
         raise ValueError(f"result: {n} cases, but the design has {design.n_cases}")
     n_iso, n_pts = len(isolator_names), len(point_names)
     if np.shape(result.static_isolator_load)[1:] != (n_iso,):
-        raise ValueError(f"isolator_names: {n_iso} names for {np.shape(result.static_isolator_load)[1:]} "
-                         "isolators in the result")
+        raise ValueError(
+            f"isolator_names: {n_iso} names for {np.shape(result.static_isolator_load)[1:]} "
+            "isolators in the result"
+        )
     if np.shape(result.peak_point_displacement)[1:2] != (n_pts,):
-        raise ValueError(f"point_names: {n_pts} names for {np.shape(result.peak_point_displacement)[1]} "
-                         "points in the result")
-    reserved = set(_VARIABLES) | {"status", "message", "axis", "rotation", "isolator", "point", "mode", "dof",
-                                  "case"}
+        raise ValueError(
+            f"point_names: {n_pts} names for {np.shape(result.peak_point_displacement)[1]} "
+            "points in the result"
+        )
+    reserved = set(_VARIABLES) | {
+        "status",
+        "message",
+        "axis",
+        "rotation",
+        "isolator",
+        "point",
+        "mode",
+        "dof",
+        "case",
+    }
     for name in design.names:
         if name in reserved:
             raise ValueError(f"design.names: parameter {name!r} clashes with a dataset dimension or variable")
@@ -286,21 +308,27 @@ def to_dataset(
         {"units": "1", "long_name": "rotation axis: rx about X (pitch), ry about Y (roll), rz about Z (yaw)"},
     )
     coords["isolator"] = xr.Variable(
-        "isolator", np.array([str(s) for s in isolator_names], dtype=np.str_).reshape(-1),
+        "isolator",
+        np.array([str(s) for s in isolator_names], dtype=np.str_).reshape(-1),
         {"units": "1", "long_name": "isolator"},
     )
     coords["point"] = xr.Variable(
-        "point", np.array([str(s) for s in point_names], dtype=np.str_).reshape(-1),
+        "point",
+        np.array([str(s) for s in point_names], dtype=np.str_).reshape(-1),
         {"units": "1", "long_name": "point of interest"},
     )
     coords["mode"] = xr.Variable(
-        "mode", np.arange(1, N_MODES + 1, dtype=np.int32),
+        "mode",
+        np.arange(1, N_MODES + 1, dtype=np.int32),
         {"units": "1", "long_name": "vibration mode number, by ascending natural frequency"},
     )
     coords["dof"] = xr.Variable(
-        "dof", np.array(DOF_NAMES),
-        {"units": "1",
-         "long_name": "degree of freedom of the base: c.g. translation x, y, z; rotation rx, ry, rz"},
+        "dof",
+        np.array(DOF_NAMES),
+        {
+            "units": "1",
+            "long_name": "degree of freedom of the base: c.g. translation x, y, z; rotation rx, ry, rz",
+        },
     )
     ds = xr.Dataset(data_vars, coords=coords)
     ds.attrs = _dataset_attrs(design, attrs or {})
@@ -457,7 +485,8 @@ def add_error_estimate(
     for name, value in values.items():
         case = worst_case.get(name)
         out[ERROR_ESTIMATE_PREFIX + name] = xr.Variable(
-            (), np.float64(value),
+            (),
+            np.float64(value),
             attrs={
                 "units": units.get(name, "1"),
                 "long_name": f"{meaning.get(name, name)}, over the sampled cases against the reference level",
@@ -474,7 +503,7 @@ def error_estimate(ds: xr.Dataset) -> dict[str, float]:
     """The measured error a stored study carries: output -> largest error found (see
     :func:`add_error_estimate`); empty for a dataset without one."""
     return {
-        str(name)[len(ERROR_ESTIMATE_PREFIX):]: float(ds[name])
+        str(name)[len(ERROR_ESTIMATE_PREFIX) :]: float(ds[name])
         for name in ds.data_vars
         if str(name).startswith(ERROR_ESTIMATE_PREFIX)
     }

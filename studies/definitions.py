@@ -103,7 +103,7 @@ def case_count_bound(body: Any, prefix: Loc | None = None) -> tuple[int, Loc] | 
 
     Sampled designs have ``design.samples`` cases, a list design ``len(design.cases)``, a grid the
     product of each parameter's ``values`` count or ``range.num``."""
-    pre = ["body"] if prefix is None else list(prefix)
+    pre: Loc = ["body"] if prefix is None else list(prefix)
     if not isinstance(body, dict):
         return None
     design = body.get("design")
@@ -188,7 +188,7 @@ def check_definition(body: dict[str, Any], max_cases: int | None = None, prefix:
     Raises:
         DefinitionError: one detail per problem, ``loc`` under ``prefix`` (default ``["body"]``).
     """
-    pre = ["body"] if prefix is None else list(prefix)
+    pre: Loc = ["body"] if prefix is None else list(prefix)
     if body.get("scene_file") is not None:
         raise DefinitionError(
             [

@@ -103,8 +103,13 @@ def choose_chunk_size(n_cases: int, n_workers: int, seconds_per_case_estimate: f
     return max(1, size)
 
 
-def run_chunk(definition_json: str, indices: Sequence[int] | np.ndarray, store_root: str | None = None,
-              study_id: str | None = None, chunk_index: int | None = None) -> dict[str, np.ndarray]:
+def run_chunk(
+    definition_json: str,
+    indices: Sequence[int] | np.ndarray,
+    store_root: str | None = None,
+    study_id: str | None = None,
+    chunk_index: int | None = None,
+) -> dict[str, np.ndarray]:
     """Run the cases ``indices`` of the study defined by ``definition_json`` (the worker task).
 
     The engine runs on consecutive batches of at most ``ENGINE_BATCH_CASES`` cases. Deterministic given
@@ -129,11 +134,11 @@ def run_chunk(definition_json: str, indices: Sequence[int] | np.ndarray, store_r
     parts: list[dict[str, np.ndarray]] = []
     for start in range(0, len(idx), ENGINE_BATCH_CASES):
         t0 = time.perf_counter()
-        batch = study.batch(idx[start:start + ENGINE_BATCH_CASES])
+        batch = study.batch(idx[start : start + ENGINE_BATCH_CASES])
         t1 = time.perf_counter()
         c1 = time.thread_time()
-        result = simulate(batch, fidelity=sim.fidelity, integrator=sim.integrator, dt=sim.dt,
-                          auto_step=sim.auto_step)
+        fidelity, integrator, dt = sim.engine_choice()
+        result = simulate(batch, fidelity=fidelity, integrator=integrator, dt=dt, auto_step=sim.auto_step)
         c2 = time.thread_time()
         t2 = time.perf_counter()
         parts.append(result_arrays(result))
@@ -143,8 +148,9 @@ def run_chunk(definition_json: str, indices: Sequence[int] | np.ndarray, store_r
         engine_cpu += c2 - c1
         pack += time.perf_counter() - t2
     t0 = time.perf_counter()
-    arrays = parts[0] if len(parts) == 1 else {name: np.concatenate([p[name] for p in parts])
-                                               for name in parts[0]}
+    arrays = (
+        parts[0] if len(parts) == 1 else {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
+    )
     arrays["indices"] = idx
     if store_root is not None and study_id is not None and chunk_index is not None:
         from isolab.studies.store import Store
@@ -154,8 +160,9 @@ def run_chunk(definition_json: str, indices: Sequence[int] | np.ndarray, store_r
             store.save_chunk(study_id, int(chunk_index), arrays)
             arrays = {"indices": idx, "status": arrays["status"], "saved": np.array(True)}
     pack += time.perf_counter() - t0
-    arrays["timing"] = np.array([task_start, time.time(), prepare, engine_wall, engine_cpu, pack,
-                                 float(os.getpid())])
+    arrays["timing"] = np.array(
+        [task_start, time.time(), prepare, engine_wall, engine_cpu, pack, float(os.getpid())]
+    )
     return arrays
 
 
@@ -261,8 +268,14 @@ def run_chunks(
         return report
 
     token = uuid.uuid4().hex[:8]
-    record_timing("fanout_start", key_prefix=key_prefix, n_chunks=len(chunks), n_todo=len(todo),
-                  n_cases=total, chunk_cases=[len(chunks[k]) for k in todo])
+    record_timing(
+        "fanout_start",
+        key_prefix=key_prefix,
+        n_chunks=len(chunks),
+        n_todo=len(todo),
+        n_cases=total,
+        chunk_cases=[len(chunks[k]) for k in todo],
+    )
     futures = {}
     # one call for every chunk (the scheduler queues them all, none waits in a busy worker's own queue),
     # at a priority that puts studies with fewer chunks to run first (see the module docstring)
@@ -270,8 +283,12 @@ def run_chunks(
     if store_target is not None:
         args += [[str(store_target[0])] * len(todo), [str(store_target[1])] * len(todo), list(todo)]
     submitted = client.map(
-        task, *args, key=[f"{key_prefix}-chunk-{k}-{token}" for k in todo], pure=False,
-        retries=TASK_RETRIES, priority=-len(todo),
+        task,
+        *args,
+        key=[f"{key_prefix}-chunk-{k}-{token}" for k in todo],
+        pure=False,
+        retries=TASK_RETRIES,
+        priority=-len(todo),
     )
     for k, fut in zip(todo, submitted, strict=True):
         futures[fut] = k
@@ -315,16 +332,18 @@ def run_chunks(
                     on_chunk(k, arrays)
                     timing.handled_s = time.perf_counter() - t0
                 report.completed.append(k)
-                record_timing("chunk", key_prefix=key_prefix, chunk=k, failed=k in report.failed,
-                              **asdict(timing))
+                record_timing(
+                    "chunk", key_prefix=key_prefix, chunk=k, failed=k in report.failed, **asdict(timing)
+                )
                 done += len(chunks[k])
                 if progress is not None:
                     progress(done, total)
     except BaseException:
         client.cancel(list(pending))
         raise
-    record_timing("fanout_end", key_prefix=key_prefix, cancelled=report.cancelled,
-                  n_failed_chunks=len(report.failed))
+    record_timing(
+        "fanout_end", key_prefix=key_prefix, cancelled=report.cancelled, n_failed_chunks=len(report.failed)
+    )
     if not report.cancelled and report.failed and len(report.failed) == len(report.submitted):
         first = min(report.failed.items())
         raise FanoutError(f"every chunk failed; chunk {first[0]}: {first[1]}")

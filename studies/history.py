@@ -89,6 +89,7 @@ def case_history(study: Any, case: int, every: int = 1) -> CaseHistory:
         record=[0],
     )
     h = result.history
+    assert h is not None  # asked for with record=[0]
     n = int(h["n_samples"][0])
     iso, pts = study_labels(study)
     return CaseHistory(

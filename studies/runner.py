@@ -111,8 +111,12 @@ def isolator_types(study: Any) -> list[str]:
     design = study.design()
     iso = study.scene.isolators
     varied = {t.path: name for t, name in zip(study.targets, design.names, strict=True)}
-    types = {str(v) for path, name in varied.items() if path.endswith("preset")
-             for v in np.unique(design.values[name])}
+    types = {
+        str(v)
+        for path, name in varied.items()
+        if path.endswith("preset")
+        for v in np.unique(design.values[name])
+    }
     group_used = iso.mounts is None or any(m.preset is None for m in iso.mounts)
     if group_used and "isolators.preset" not in varied:
         types.add(str(iso.preset))
@@ -163,8 +167,13 @@ def run_study(
     sim = study.simulation
     if study_id is None:
         study_id = store.create(
-            definition, name=study.name, n_cases=n_cases, parameters=list(design.names),
-            isolator_types=isolator_types(study), fidelity=sim.fidelity, integrator=sim.integrator,
+            definition,
+            name=study.name,
+            n_cases=n_cases,
+            parameters=list(design.names),
+            isolator_types=isolator_types(study),
+            fidelity=sim.fidelity,
+            integrator=sim.integrator,
             dt=sim.dt,
         )
     row = store.get(study_id)  # exists, and the id is valid
@@ -184,31 +193,47 @@ def run_study(
         chunks = store.load_chunk_plan(study_id)
         if chunks is None or int(sum(len(c) for c in chunks)) != n_cases:
             store.clear_chunks(study_id)
-            size = chunk_size or choose_chunk_size(n_cases, _worker_count(client),
-                                                   estimate_seconds_per_case(run))
+            size = chunk_size or choose_chunk_size(
+                n_cases, _worker_count(client), estimate_seconds_per_case(run)
+            )
             chunks = plan_chunks(n_cases, size)
             store.save_chunk_plan(study_id, chunks)
         saved = store.load_chunks(study_id)
-        skip = {k for k, arrays in saved.items()
-                if k < len(chunks) and np.array_equal(arrays.get("indices", chunks[k]), chunks[k])}
+        skip = {
+            k
+            for k, arrays in saved.items()
+            if k < len(chunks) and np.array_equal(arrays.get("indices", chunks[k]), chunks[k])
+        }
         counts = {k: _counts(saved[k]) for k in skip}
 
         def on_chunk(k: int, arrays: dict[str, np.ndarray]) -> None:
             if "saved" not in arrays:  # a worker that does not see the store, or a failed chunk
                 store.save_chunk(study_id, k, arrays)
             counts[k] = _counts(arrays)
-            store.update(study_id, n_done=sum(c[0] for c in counts.values()),
-                         n_failed=sum(c[1] for c in counts.values()))
+            store.update(
+                study_id,
+                n_done=sum(c[0] for c in counts.values()),
+                n_failed=sum(c[1] for c in counts.values()),
+            )
 
-        store.update(study_id, n_done=sum(c[0] for c in counts.values()),
-                     n_failed=sum(c[1] for c in counts.values()))
+        store.update(
+            study_id, n_done=sum(c[0] for c in counts.values()), n_failed=sum(c[1] for c in counts.values())
+        )
         if skip:
             log.info("study %s: resuming, %d of %d chunks already done", study_id, len(skip), len(chunks))
         # the error estimate's sampled cases run beside the chunks (a few engine calls each)
         samples = _submit_samples(client, run, run_json, f"isolab-{study_id}")
-        report = run_chunks(client, run_json, chunks, skip=skip, on_chunk=on_chunk,
-                            progress=progress, cancel=cancel, key_prefix=f"isolab-{study_id}",
-                            store_target=(str(store.root), study_id))
+        report = run_chunks(
+            client,
+            run_json,
+            chunks,
+            skip=skip,
+            on_chunk=on_chunk,
+            progress=progress,
+            cancel=cancel,
+            key_prefix=f"isolab-{study_id}",
+            store_target=(str(store.root), study_id),
+        )
         if report.cancelled:
             client.cancel(samples[1])
             store.update(study_id, status="cancelled", finished=utc_now())
@@ -230,9 +255,18 @@ def run_study(
         # the dataset is assembled and written on a worker that sees the store (the results, the error
         # estimate's bookkeeping and the netCDF compression stay out of this process, which serves
         # requests: the load benchmark's p99 went from 70-146 ms to 46-67 ms), else here
-        future = client.submit(finish_study, str(store.root), study_id, run_json, json.dumps(attrs),
-                               estimate, pure=False, retries=TASK_RETRIES, priority=1,
-                               key=f"isolab-{study_id}-finish-{uuid.uuid4().hex[:8]}")
+        future = client.submit(
+            finish_study,
+            str(store.root),
+            study_id,
+            run_json,
+            json.dumps(attrs),
+            estimate,
+            pure=False,
+            retries=TASK_RETRIES,
+            priority=1,
+            key=f"isolab-{study_id}-finish-{uuid.uuid4().hex[:8]}",
+        )
         n_failed = _wait(client, future, cancel)
         if cancel is not None and cancel.is_set():
             store.update(study_id, status="cancelled", finished=utc_now())
@@ -251,26 +285,38 @@ def run_study(
         raise
 
 
-def assemble_dataset(store: Store, study_id: str, run_json: str, attrs: dict[str, Any],
-                     estimate: ErrorEstimate) -> int:
+def assemble_dataset(
+    store: Store, study_id: str, run_json: str, attrs: dict[str, Any], estimate: ErrorEstimate
+) -> int:
     """Build a study's dataset from its saved chunks, add the error ``estimate`` and write it atomically;
     the number of cases that did not end OK."""
 
     run = study_from_json(run_json)
     iso_names, point_names = study_labels(run)
     chunks = store.load_chunk_plan(study_id)
-    result = from_chunks(store.load_chunks(study_id), chunks, n_isolators=len(iso_names),
-                         n_points=len(point_names))
+    if chunks is None:
+        raise RuntimeError(f"study {study_id}: its chunk plan is missing from the store")
+    result = from_chunks(
+        store.load_chunks(study_id), chunks, n_isolators=len(iso_names), n_points=len(point_names)
+    )
     ds = to_dataset(result, run.design(), isolator_names=iso_names, point_names=point_names, attrs=attrs)
-    ds = add_error_estimate(ds, estimate.values, worst_case=estimate.worst_case, cases=estimate.cases,
-                            excluded=estimate.excluded, method=estimate.method,
-                            meaning=OUTPUT_MEANING, units=OUTPUT_UNITS)
+    ds = add_error_estimate(
+        ds,
+        estimate.values,
+        worst_case=estimate.worst_case,
+        cases=estimate.cases,
+        excluded=estimate.excluded,
+        method=estimate.method,
+        meaning=OUTPUT_MEANING,
+        units=OUTPUT_UNITS,
+    )
     store.write_dataset(study_id, ds)
     return int(np.count_nonzero(result.status != 0))
 
 
-def finish_study(store_root: str, study_id: str, run_json: str, attrs_json: str,
-                 estimate: ErrorEstimate) -> int | None:
+def finish_study(
+    store_root: str, study_id: str, run_json: str, attrs_json: str, estimate: ErrorEstimate
+) -> int | None:
     """The Dask task that finishes a study on a worker (:func:`assemble_dataset`); None when this worker
     does not see the store, so the runner finishes."""
     store = Store(store_root, catalog=False)
@@ -292,8 +338,9 @@ def _wait(client: Any, future: Any, cancel: threading.Event | None) -> Any:
     return future.result()
 
 
-def _choice(client: Any, study: Any, definition_json: str, cancel: threading.Event | None,
-            key_prefix: str) -> Choice | None:
+def _choice(
+    client: Any, study: Any, definition_json: str, cancel: threading.Event | None, key_prefix: str
+) -> Choice | None:
     """The fidelity, integrator and step to run with: the study's own, or measured for its accuracy
     request on a worker (:func:`studies.accuracy.choose`); None when cancelled meanwhile."""
     if study.simulation.request is None or study.simulation.accuracy == "reference":
@@ -301,8 +348,9 @@ def _choice(client: Any, study: Any, definition_json: str, cancel: threading.Eve
     known = cached_choice(study)
     if known is not None:
         return known
-    future = client.submit(choose_from_json, definition_json, pure=False,
-                           key=f"{key_prefix}-accuracy-{uuid.uuid4().hex[:8]}")
+    future = client.submit(
+        choose_from_json, definition_json, pure=False, key=f"{key_prefix}-accuracy-{uuid.uuid4().hex[:8]}"
+    )
     choice = _wait(client, future, cancel)
     if choice is not None:
         remember_choice(study, choice)
@@ -316,18 +364,22 @@ def _submit_samples(client: Any, study: Any, run_json: str, key_prefix: str) -> 
     if (study.simulation.fidelity, study.simulation.integrator) == REFERENCE_PAIR:
         return cases, []
     token = uuid.uuid4().hex[:8]
-    futures = [client.submit(sample_arrays, run_json, c, pure=False, priority=1,
-                             key=f"{key_prefix}-sample-{c}-{token}") for c in cases]
+    futures = [
+        client.submit(
+            sample_arrays, run_json, c, pure=False, priority=1, key=f"{key_prefix}-sample-{c}-{token}"
+        )
+        for c in cases
+    ]
     return cases, futures
 
 
-def _error_estimate(client: Any, study: Any, samples: tuple[list[int], list[Any]],
-                    cancel: threading.Event | None) -> ErrorEstimate | None:
+def _error_estimate(
+    client: Any, study: Any, samples: tuple[list[int], list[Any]], cancel: threading.Event | None
+) -> ErrorEstimate | None:
     """The largest error per output over the sampled cases (see :func:`_submit_samples`); None when
     ``cancel`` is set while waiting for them."""
     cases, futures = samples
-    outputs = [o for o in ESTIMATED_OUTPUTS
-               if o != "peak_point_displacement" or len(study.scene.points) > 0]
+    outputs = [o for o in ESTIMATED_OUTPUTS if o != "peak_point_displacement" or len(study.scene.points) > 0]
     if not futures:
         return exact_estimate(cases, outputs)
     try:
@@ -335,16 +387,20 @@ def _error_estimate(client: Any, study: Any, samples: tuple[list[int], list[Any]
     except Exception as err:  # the study's own results stand; the estimate says why it is missing
         log.exception("error estimate: the sampled cases failed")
         nan = {o: float("nan") for o in outputs}
-        return ErrorEstimate(nan, {o: None for o in outputs}, tuple(cases),
-                             {c: f"reference rerun failed: {type(err).__name__}: {err}" for c in cases},
-                             "reference reruns failed")
+        return ErrorEstimate(
+            nan,
+            {o: None for o in outputs},
+            tuple(cases),
+            {c: f"reference rerun failed: {type(err).__name__}: {err}" for c in cases},
+            "reference reruns failed",
+        )
     if any(p is None for p in parts):
         return None
     ours = {k: np.concatenate([np.asarray(p["ours"][k]) for p in parts]) for k in parts[0]["ours"]}
-    reference = {k: np.concatenate([np.asarray(p["reference"][k]) for p in parts])
-                 for k in parts[0]["reference"]}
-    method = ("nonlinear level, reference integrator (DOP853, rtol 1e-10), sampled at the step each case "
-              "used")
+    reference = {
+        k: np.concatenate([np.asarray(p["reference"][k]) for p in parts]) for k in parts[0]["reference"]
+    }
+    method = "nonlinear level, reference integrator (DOP853, rtol 1e-10), sampled at the step each case used"
     return estimate_errors(ours, reference, cases, outputs, method=method)
 
 
@@ -359,8 +415,9 @@ def _design_extra(study: Any) -> dict[str, Any]:
     return {k: v for k, v in dump.items() if k in ("type", "seed", "samples") and v is not None}
 
 
-def make_client(scheduler_address: str | None = None, workers: int = 2, *,
-                dashboard_address: str | None = ":0"):
+def make_client(
+    scheduler_address: str | None = None, workers: int = 2, *, dashboard_address: str | None = ":0"
+):
     """A Dask client: to ``scheduler_address``, else ``DASK_SCHEDULER_ADDRESS`` / dask's
     ``scheduler-address`` config, else a new LocalCluster of ``workers`` processes with one thread each
     (closed with the client; its dashboard on ``dashboard_address``, default a free port)."""
@@ -377,8 +434,9 @@ def make_client(scheduler_address: str | None = None, workers: int = 2, *,
         return Client(address)
     if int(workers) < 1:
         raise ValueError(f"workers: {workers} must be at least 1")
-    return Client(n_workers=int(workers), threads_per_worker=1, processes=True,
-                  dashboard_address=dashboard_address)
+    return Client(
+        n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=dashboard_address
+    )
 
 
 def run_local(
@@ -401,8 +459,12 @@ def run_local(
     study = load_study(source)
     with tempfile.TemporaryDirectory(prefix="isolab-") as tmp:
         own = store if store is not None else Store(Path(tmp))
-        with LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
-                          dashboard_address=":0") as cluster, Client(cluster) as client:
+        with (
+            LocalCluster(
+                n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=":0"
+            ) as cluster,
+            Client(cluster) as client,
+        ):
             study_id = run_study(study, own, client, progress=progress)
         copy_atomic(own.path(study_id), out_path)
         return own.open_dataset(study_id)

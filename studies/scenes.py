@@ -516,8 +516,11 @@ def slowest_decay_time(batch: SceneBatch) -> np.ndarray:
     from isolab.engine import model as engine_model
 
     try:
-        md = modal.modes(engine_model.mass_matrix(batch), engine_model.stiffness_matrix(batch),
-                         engine_model.damping_matrix(batch))
+        md = modal.modes(
+            engine_model.mass_matrix(batch),
+            engine_model.stiffness_matrix(batch),
+            engine_model.damping_matrix(batch),
+        )
     except np.linalg.LinAlgError:
         return np.zeros(batch.n_cases)
     w = 2 * np.pi * md.frequency

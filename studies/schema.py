@@ -93,7 +93,6 @@ reach kHz, and they shift with the stages' positions faster than the stability g
 # from: within them every result is finite and bounded, or flagged unstable/tipping, or refused.
 
 
-
 def _within(low: float, high: float, unit: str, why: str) -> AfterValidator:
     """Refuse a value outside [low, high] (SI), saying ``why`` the range is what it is."""
 
@@ -592,23 +591,28 @@ def parse_tolerance(value: Any, field: str = "simulation.tolerance") -> tuple[fl
     relative error of the sizing outputs. A bare number is refused: it would be ambiguous.
     """
     if not isinstance(value, str):
-        raise ValueError(f"{field}: give a length such as '10 um' (absolute error of peak displacement) or "
-                         f"a percentage such as '1 %' (relative error), got {value!r}")
+        raise ValueError(
+            f"{field}: give a length such as '10 um' (absolute error of peak displacement) or "
+            f"a percentage such as '1 %' (relative error), got {value!r}"
+        )
     try:
         float(value.strip())
     except ValueError:
         pass
     else:
-        raise ValueError(f"{field}: {value!r} has no unit; write '10 um' (absolute error of peak "
-                         "displacement) or '1 %' (relative error)")
+        raise ValueError(
+            f"{field}: {value!r} has no unit; write '10 um' (absolute error of peak "
+            "displacement) or '1 %' (relative error)"
+        )
     try:
         x, relative = to_si(value, "length", field), False
     except ValueError:
         try:
             x, relative = to_si(value, "dimensionless", field), True
         except ValueError:
-            raise ValueError(f"{field}: cannot read {value!r} as a length ('10 um') or a relative error "
-                             "('1 %')") from None
+            raise ValueError(
+                f"{field}: cannot read {value!r} as a length ('10 um') or a relative error ('1 %')"
+            ) from None
     if relative and not 0.0 < x <= 1.0:
         raise ValueError(f"{field}: a relative tolerance must lie in (0, 100 %], got {value!r}")
     if not relative and not 0.0 < x <= 1.0:
@@ -655,6 +659,16 @@ class Simulation(_Model):
         "'10 um' (peak displacement) or a relative error such as '1 %'",
     )
     auto_step: bool = Field(True, description="shorten the step where the integrator would be unstable")
+
+    def engine_choice(self) -> tuple[str, str, float]:
+        """(fidelity, integrator, dt in s) the engine runs with. Raises ValueError while an accuracy request
+        is unresolved (the study runner resolves it before any case runs)."""
+        if self.fidelity is None or self.integrator is None or self.dt is None:
+            raise ValueError(
+                "simulation: the accuracy request is not resolved to a fidelity, integrator and step"
+            )
+        return self.fidelity, self.integrator, float(self.dt)
+
     duration: Literal["auto"] | Annotated[Time, Field(gt=0, le=3600)] = Field(
         "auto",
         description=f"s, or auto: last stage move end + the larger of {AUTO_DURATION_MARGIN:g} s and "
@@ -706,8 +720,11 @@ class Simulation(_Model):
             return self
         if any(getattr(self, k) is not None for k in _CHOICE_FIELDS):
             fields_set.update(_REQUEST_FIELDS)  # and an explicit choice overrides a scene's request
-        for name, default in (("fidelity", DEFAULT_FIDELITY), ("integrator", DEFAULT_INTEGRATOR),
-                              ("dt", DEFAULT_DT)):
+        for name, default in (
+            ("fidelity", DEFAULT_FIDELITY),
+            ("integrator", DEFAULT_INTEGRATOR),
+            ("dt", DEFAULT_DT),
+        ):
             if getattr(self, name) is None:  # a default, not an input: it must not override when merged
                 setattr(self, name, default)
                 fields_set.discard(name)

@@ -21,6 +21,7 @@ configured (see :func:`isolab.studies.timings.record_timing`).
 
 from __future__ import annotations
 
+import builtins
 import contextlib
 import datetime as _dt
 import json
@@ -46,8 +47,22 @@ STATUSES = ("queued", "running", "done", "failed", "cancelled")
 _ID = re.compile(r"[0-9a-f]{32}")
 _JSON_COLUMNS = ("parameters", "isolator_types", "definition")
 _COLUMNS = (
-    "id", "name", "status", "created", "started", "finished", "n_cases", "n_done", "n_failed",
-    "parameters", "isolator_types", "fidelity", "integrator", "dt", "error", "definition",
+    "id",
+    "name",
+    "status",
+    "created",
+    "started",
+    "finished",
+    "n_cases",
+    "n_done",
+    "n_failed",
+    "parameters",
+    "isolator_types",
+    "fidelity",
+    "integrator",
+    "dt",
+    "error",
+    "definition",
 )
 _UPDATABLE = frozenset(_COLUMNS) - {"id", "created"}
 
@@ -236,9 +251,7 @@ class Store:
             "fidelity": fidelity,
             "integrator": integrator,
             "dt": None if dt is None else float(dt),
-            "definition": (
-                definition if isinstance(definition, str) else json.dumps(definition)
-            ),
+            "definition": (definition if isinstance(definition, str) else json.dumps(definition)),
         }
         cols = ", ".join(row)
         marks = ", ".join("?" for _ in row)
@@ -291,7 +304,7 @@ class Store:
         created_before: str | _dt.datetime | None = None,
         limit: int = 50,
         offset: int = 0,
-    ) -> list[dict[str, Any]]:
+    ) -> builtins.list[dict[str, Any]]:
         """Catalog rows, newest first, filtered in SQL.
 
         Args:
@@ -373,8 +386,9 @@ class Store:
         """Write a study's dataset atomically to :meth:`path`."""
         t0 = time.perf_counter()
         path = write_netcdf(ds, self.path(study_id))
-        record_timing("write_dataset", study_id=study_id, seconds=time.perf_counter() - t0,
-                      bytes=path.stat().st_size)
+        record_timing(
+            "write_dataset", study_id=study_id, seconds=time.perf_counter() - t0, bytes=path.stat().st_size
+        )
         return path
 
     def open_dataset(self, study_id: str) -> xr.Dataset:
@@ -385,7 +399,7 @@ class Store:
         with NETCDF_LOCK, xr.open_dataset(path) as ds:
             return ds.load()
 
-    def dataset_ids(self) -> list[str]:
+    def dataset_ids(self) -> builtins.list[str]:
         """Ids of the studies that have a dataset file, sorted."""
         return sorted(p.stem for p in self.studies_dir.glob("*.nc") if _ID.fullmatch(p.stem))
 
@@ -400,8 +414,13 @@ class Store:
         path = self.chunk_dir(study_id) / f"{k}.npz"
         t0 = time.perf_counter()
         _save_npz(path, arrays)
-        record_timing("save_chunk", study_id=study_id, chunk=k, seconds=time.perf_counter() - t0,
-                      bytes=path.stat().st_size)
+        record_timing(
+            "save_chunk",
+            study_id=study_id,
+            chunk=k,
+            seconds=time.perf_counter() - t0,
+            bytes=path.stat().st_size,
+        )
         return path
 
     def load_chunks(self, study_id: str) -> dict[int, dict[str, np.ndarray]]:
@@ -423,15 +442,17 @@ class Store:
 
     def save_chunk_plan(self, study_id: str, chunks: Sequence[np.ndarray]) -> None:
         """Save how a study's cases are split into chunks (so a resumed run splits them the same way)."""
-        _save_npz(self.chunk_dir(study_id) / "plan.npz",
-                  {f"c{k}": np.asarray(c, dtype=np.int64) for k, c in enumerate(chunks)})
+        _save_npz(
+            self.chunk_dir(study_id) / "plan.npz",
+            {f"c{k}": np.asarray(c, dtype=np.int64) for k, c in enumerate(chunks)},
+        )
 
     def has_chunk_plan(self, study_id: str) -> bool:
         """Whether this process sees the saved chunk split of a study: a Dask worker that does shares the
         store with the runner, and saves chunks and writes the dataset itself."""
         return (self.chunk_dir(study_id) / "plan.npz").is_file()
 
-    def load_chunk_plan(self, study_id: str) -> list[np.ndarray] | None:
+    def load_chunk_plan(self, study_id: str) -> builtins.list[np.ndarray] | None:
         """The saved chunk split of a study, or None."""
         path = self.chunk_dir(study_id) / "plan.npz"
         if not path.exists():
@@ -462,7 +483,7 @@ def _save_npz(path: Path, arrays: Mapping[str, np.ndarray]) -> None:
             raise ValueError(f"arrays[{name!r}]: object arrays cannot be saved; use a numeric or str dtype")
         checked[str(name)] = a
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
-        np.savez(f, **checked)
+        np.savez(f, **checked)  # type: ignore[arg-type]  # numpy's stub types the keywords as flags
 
 
 def _decode(row: sqlite3.Row) -> dict[str, Any]:

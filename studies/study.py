@@ -51,7 +51,11 @@ class Study(_Model):
     scene_file: str | None = Field(
         None, description="scene file, relative to the study file; read only when loading a study file"
     )
-    simulation: Simulation | None = None
+    simulation: Simulation = Field(
+        None,
+        description="overrides the scene's simulation block; after validation, the block every case "
+        "runs with",
+    )
     parameters: list[ParameterSpec] = Field(default_factory=list)
     design_spec: DesignSpec = Field(default_factory=DesignSpec, alias="design")
 

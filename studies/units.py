@@ -20,7 +20,7 @@ import numpy as np
 import pint
 from pydantic import BeforeValidator, ValidationInfo, WithJsonSchema
 
-UREG = pint.UnitRegistry()
+UREG: Any = pint.UnitRegistry()
 """The one unit registry of the product (creating a registry is slow, and quantities of two registries do
 not mix)."""
 

@@ -127,7 +127,7 @@ def test_the_import_graph_has_no_circle():
         stack.append(node)
         for dep in sorted(graph[node]):
             if state.get(dep) == 1:
-                cycles.append([*stack[stack.index(dep):], dep])
+                cycles.append([*stack[stack.index(dep) :], dep])
             elif dep not in state:
                 visit(dep)
         stack.pop()
@@ -192,16 +192,30 @@ def test_a_wheel_installs_the_three_packages_under_one_namespace(tmp_path):
     wheel has no top-level ``engine``, ``studies`` or ``service``."""
     wheels = tmp_path / "wheels"
     subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(wheels),
-         str(ROOT)],
-        check=True, capture_output=True, timeout=300,
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--no-deps",
+            "--no-build-isolation",
+            "-q",
+            "-w",
+            str(wheels),
+            str(ROOT),
+        ],
+        check=True,
+        capture_output=True,
+        timeout=300,
     )
     (wheel,) = wheels.glob("isolab-*.whl")
     tops = {n.split("/")[0] for n in zipfile.ZipFile(wheel).namelist()}
     assert "isolab" in tops and not tops & set(PACKAGES), tops
     members = zipfile.ZipFile(wheel).namelist()
     assert "isolab/studies/examples/article-scriber.yaml" in members
-    init_dirs = {str(p.parent.relative_to(ROOT)) for pkg in PACKAGES for p in (ROOT / pkg).rglob("__init__.py")}
+    init_dirs = {
+        str(p.parent.relative_to(ROOT)) for pkg in PACKAGES for p in (ROOT / pkg).rglob("__init__.py")
+    }
     shipped = {os.path.dirname(n).removeprefix("isolab/") for n in members if n.endswith("__init__.py")}
     assert init_dirs <= shipped, f"packages missing from the wheel: {init_dirs - shipped}"
 
@@ -210,11 +224,15 @@ def test_a_wheel_installs_the_three_packages_under_one_namespace(tmp_path):
     py = venv / "bin" / "python"
     site = subprocess.run(
         [str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-        check=True, capture_output=True, text=True,
+        check=True,
+        capture_output=True,
+        text=True,
     ).stdout.strip()
     subprocess.run(
         [sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", site, str(wheel)],
-        check=True, capture_output=True, timeout=300,
+        check=True,
+        capture_output=True,
+        timeout=300,
     )
     # dependencies from the development environment: a path line in a .pth file adds the directory, but its
     # own .pth files (the editable install's finder among them) are not run

@@ -63,21 +63,21 @@ def augmented(P) -> tuple[np.ndarray, int, int]:
     Z[:, 6:12, 6:12] = P.a22
     Z[:, 6:12, 12:18] = P.minv
     for q in range(deg):
-        Z[:, 12 + 6 * q:18 + 6 * q, 18 + 6 * q:24 + 6 * q] = np.eye(6)
+        Z[:, 12 + 6 * q : 18 + 6 * q, 18 + 6 * q : 24 + 6 * q] = np.eye(6)
     if osc:
         o = 12 + nF
         # generalised force of the floor: per axis a, K_a amp_a sin + C'_a amp_a w_a cos
         Bf = np.zeros((C, 6, 6))
         rel = 1.0 - P.sky
         for a in range(3):
-            ks = (P.k[:, :, a] * P.famp[:, None, a])  # (C, n)
-            cs = (rel * P.cd[:, :, a] * P.famp[:, None, a] * P.fomega[:, None, a])
+            ks = P.k[:, :, a] * P.famp[:, None, a]  # (C, n)
+            cs = rel * P.cd[:, :, a] * P.famp[:, None, a] * P.fomega[:, None, a]
             for col, per in ((2 * a, ks), (2 * a + 1, cs)):
                 force = np.zeros(P.d.shape)
                 force[..., a] = per
                 Bf[:, :3, col] = force.sum(axis=1)
                 Bf[:, 3:, col] = np.cross(P.d, force).sum(axis=1)
-        Z[:, 6:12, o:o + 6] = P.minv @ Bf
+        Z[:, 6:12, o : o + 6] = P.minv @ Bf
         for a in range(3):
             w = P.fomega[:, a]
             Z[:, o + 2 * a, o + 2 * a + 1] = w
@@ -326,5 +326,17 @@ def run(P, level, dt, n_steps, O, W, status):
     """Integrate every case exactly at the output step ``dt[c]`` s (LTI level only)."""
     duration = dt * n_steps
     full, ev, sub_b, sub_a, deg, osc = prepare(P, dt, duration)
-    run_exact(kernel_struct(P), dt, n_steps, kernel_struct(O), kernel_struct(W), status,
-              full, ev, sub_b, sub_a, deg, bool(osc))
+    run_exact(
+        kernel_struct(P),
+        dt,
+        n_steps,
+        kernel_struct(O),
+        kernel_struct(W),
+        status,
+        full,
+        ev,
+        sub_b,
+        sub_a,
+        deg,
+        bool(osc),
+    )

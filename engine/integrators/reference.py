@@ -77,4 +77,3 @@ def run(P, level, dt, n_steps, O, W, status, rtol: float = RTOL, atol: float = A
             if level == NONLINEAR:
                 x[3:7] /= np.linalg.norm(x[3:7])
             idx = idx_a
-

@@ -75,10 +75,15 @@ def _jobs(request: Request) -> JobQueue:
 
 
 # ------------------------------------------------------------------------------ domain errors -> HTTP
-NOT_FOUND = {404: {"model": MessageBody, "description": "no study with this id (or a malformed id)"}}
-NOT_DONE = {409: {"model": MessageBody, "description": "the study is not done yet"}}
-INVALID = {422: {"model": ValidationErrorBody, "description": "invalid input; `loc` names the field"}}
-PNG = {200: {"content": {"image/png": {}}, "description": "a PNG image"}}
+Responses = dict[int | str, dict[str, Any]]
+NOT_FOUND: Responses = {
+    404: {"model": MessageBody, "description": "no study with this id (or a malformed id)"}
+}
+NOT_DONE: Responses = {409: {"model": MessageBody, "description": "the study is not done yet"}}
+INVALID: Responses = {
+    422: {"model": ValidationErrorBody, "description": "invalid input; `loc` names the field"}
+}
+PNG: Responses = {200: {"content": {"image/png": {}}, "description": "a PNG image"}}
 
 
 def invalid(loc: list[str | int], msg: str, kind: str = "value_error") -> HTTPException:

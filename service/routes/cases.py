@@ -201,8 +201,7 @@ async def get_case_plot(
     params = ", ".join(f"{k}={plots.format_value(v)}" for k, v in h.parameters.items())
     title = f"{study.name} case {case}" + (f" ({params})" if params else "")
     png = await run_heavy(
-        request,
-        plots.case_png, h.time, h.displacement, h.rotation, h.isolator_force, h.isolator_names, title
+        request, plots.case_png, h.time, h.displacement, h.rotation, h.isolator_force, h.isolator_names, title
     )
     return Response(png, media_type="image/png")
 

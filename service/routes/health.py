@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import tempfile
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from distributed import Client
 from fastapi import APIRouter, Depends, Request, Response
@@ -65,7 +65,8 @@ def probe_dask(client: Client | None, timeout_s: float = SCHEDULER_TIMEOUT_S) ->
     if client is None:
         return DaskHealth(scheduler=None, workers=[], n_workers=0, error="no Dask client")
     try:
-        identity = client.sync(client.scheduler.identity, n_workers=-1, callback_timeout=timeout_s)
+        scheduler: Any = client.scheduler  # an rpc while the client is connected
+        identity = client.sync(scheduler.identity, n_workers=-1, callback_timeout=timeout_s)
     except Exception as exc:  # any failure to reach the scheduler makes the service degraded
         address = getattr(client.scheduler, "address", None)
         return DaskHealth(scheduler=address, workers=[], n_workers=0, error=f"{type(exc).__name__}: {exc}")

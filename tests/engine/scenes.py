@@ -58,8 +58,8 @@ def scene(
         p = st["pieces"]
         prof[:, i, : p.shape[1]] = p
         if p.shape[1] < K:  # pad with rest pieces at the final position
-            prof[0, i, p.shape[1]:] = p[0, -1]
-            prof[1, i, p.shape[1]:] = p[1, -1]
+            prof[0, i, p.shape[1] :] = p[0, -1]
+            prof[1, i, p.shape[1] :] = p[1, -1]
     rep = lambda a: np.repeat(np.asarray(a, dtype=float)[None], C, axis=0)  # noqa: E731
     pts = np.array(points or [(0.0, 0.0, 0.0)], dtype=float)
     return SceneBatch(
@@ -74,18 +74,29 @@ def scene(
         stage_home=rep([s["home"] for s in stages]).reshape(C, m, 3),
         stage_axis=rep([s["axis"] for s in stages]).reshape(C, m, 3),
         stage_parent=np.array([s.get("parent", -1) for s in stages], dtype=np.int64),
-        prof_t=rep(prof[0]), prof_s=rep(prof[1]), prof_v=rep(prof[2]), prof_a=rep(prof[3]),
+        prof_t=rep(prof[0]),
+        prof_s=rep(prof[1]),
+        prof_v=rep(prof[2]),
+        prof_a=rep(prof[3]),
         prof_j=rep(prof[4]),
         points=rep(pts),
-        floor_amp=rep(floor_amp), floor_freq=rep(floor_freq), floor_phase=np.zeros((C, 3)),
+        floor_amp=rep(floor_amp),
+        floor_freq=rep(floor_freq),
+        floor_phase=np.zeros((C, 3)),
         duration=np.full(C, duration),
         gravity_stiffness=gravity_stiffness,
         g=g,
     )
 
 
-def y_stage(mass: float = 1000.0, travel: float = 3.0, v: float = 2.0, a: float = 2 * GRAVITY,
-            home=(0.0, -1.5, 0.3), start: float = 0.0) -> dict:
+def y_stage(
+    mass: float = 1000.0,
+    travel: float = 3.0,
+    v: float = 2.0,
+    a: float = 2 * GRAVITY,
+    home=(0.0, -1.5, 0.3),
+    start: float = 0.0,
+) -> dict:
     """A stage along +Y doing one trapezoidal move."""
     pieces = trapezoid_pieces(travel, v, a, start)
     return {"mass": mass, "home": home, "axis": (0.0, 1.0, 0.0), "pieces": pieces}
@@ -124,13 +135,21 @@ def one_mode(zeta: float, n_cases: int = 1) -> SceneBatch:
     mt = ONE_MODE_BASE + ONE_MODE_PUSH
     kz = mt * ONE_MODE_W**2 / 4
     cz = 2 * zeta * np.sqrt(kz * mt / 4)
-    return scene(n_cases=n_cases, mass=ONE_MODE_BASE, size=(2.0, 2.0, 0.5), span=(0.4, 0.4),
-                 k=(kz / 100, kz / 100, kz), c=(cz / 100, cz / 100, cz),
-                 stages=[vertical_stage(ONE_MODE_PUSH, 1.0)], duration=1.0)
+    return scene(
+        n_cases=n_cases,
+        mass=ONE_MODE_BASE,
+        size=(2.0, 2.0, 0.5),
+        span=(0.4, 0.4),
+        k=(kz / 100, kz / 100, kz),
+        c=(cz / 100, cz / 100, cz),
+        stages=[vertical_stage(ONE_MODE_PUSH, 1.0)],
+        duration=1.0,
+    )
 
 
-def run_unguarded(b: SceneBatch, integrator: str, steps: np.ndarray,
-                  n_steps: int) -> tuple[np.ndarray, np.ndarray]:
+def run_unguarded(
+    b: SceneBatch, integrator: str, steps: np.ndarray, n_steps: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Run an integrator's kernel directly on the LTI level (no stability guard) at per-case ``steps`` (s):
     (status, peak |u| m)."""
     from isolab.engine import model, peaks
@@ -139,9 +158,11 @@ def run_unguarded(b: SceneBatch, integrator: str, steps: np.ndarray,
 
     C = b.n_cases
     P, W = model.params(b), model.work(b)
-    O = peaks.allocate(C, b.n_points, b.n_isolators, model.static_offset(b, "lti"), b.last_move_end(),
-                       b.settle_tol, None, 0)
+    O = peaks.allocate(
+        C, b.n_points, b.n_isolators, model.static_offset(b, "lti"), b.last_move_end(), b.settle_tol, None, 0
+    )
     status = np.zeros(C, dtype=np.int8)
-    INTEGRATORS[integrator].run(P, LTI, np.asarray(steps, dtype=float), np.full(C, n_steps, dtype=np.int64),
-                                O, W, status)
+    INTEGRATORS[integrator].run(
+        P, LTI, np.asarray(steps, dtype=float), np.full(C, n_steps, dtype=np.int64), O, W, status
+    )
     return status, O.u

@@ -70,8 +70,16 @@ def _pair(k11: float, k12: float, k22: float, m1: float, m2: float) -> tuple[np.
 @pytest.mark.parametrize("gravity_stiffness", [True, False])
 def test_mounts_below_the_cg_couple_translation_with_rocking(gravity_stiffness: bool) -> None:
     h = 0.5  # mounts 0.5 m below the c.g.
-    b = scene(mass=M, size=SIZE, span=SPAN, height=h, k=K_MOUNT, c=C_MOUNT, duration=0.01,
-              gravity_stiffness=gravity_stiffness)
+    b = scene(
+        mass=M,
+        size=SIZE,
+        span=SPAN,
+        height=h,
+        k=K_MOUNT,
+        c=C_MOUNT,
+        duration=0.01,
+        gravity_stiffness=gravity_stiffness,
+    )
     r = simulate(b, "lti", "exact", dt=1e-3)
     kx, ky, kz = K_MOUNT
     ixx, iyy, izz = np.diag(box_inertia(M, *SIZE))
@@ -128,8 +136,9 @@ def _heave_step(t: np.ndarray, kz: float, cz: float) -> tuple[np.ndarray, float]
         ("nonlinear", "reference", 1e-3, 1e-7),
     ],
 )
-def test_vertical_force_step_gives_the_one_dof_step_response(fidelity: str, integrator: str, dt: float,
-                                                             rtol: float) -> None:
+def test_vertical_force_step_gives_the_one_dof_step_response(
+    fidelity: str, integrator: str, dt: float, rtol: float
+) -> None:
     kz, cz = 2e6, 2e4  # per mount: wn = 28 rad/s, zeta = 0.14
     b = scene(mass=M, k=(1e6, 1e6, kz), c=(1e4, 1e4, cz), stages=[vertical_stage(M_STAGE, A0)], duration=1.0)
     r = simulate(b, fidelity, integrator, dt=dt, record=[0])
@@ -152,8 +161,16 @@ F_N = 10.0  # heave natural frequency of the transmissibility scenes, Hz
 def _floor_scene(ratios: np.ndarray, zeta: np.ndarray, skyhook: bool = False, duration: float = 0.01):
     """Symmetric layout, no stages, heave at F_N Hz, a 10 um vertical floor sine at r F_N per case."""
     kz, cz = mount(M / 4, F_N, 1.0)
-    b = scene(n_cases=len(ratios), mass=M, k=(kz, kz, kz), c=(cz, cz, cz), skyhook=skyhook, duration=duration,
-              floor_amp=(0.0, 0.0, 10e-6), floor_freq=(0.0, 0.0, F_N))
+    b = scene(
+        n_cases=len(ratios),
+        mass=M,
+        k=(kz, kz, kz),
+        c=(cz, cz, cz),
+        skyhook=skyhook,
+        duration=duration,
+        floor_amp=(0.0, 0.0, 10e-6),
+        floor_freq=(0.0, 0.0, F_N),
+    )
     b.floor_freq[:, 2] = F_N * np.asarray(ratios)
     b.iso_c[:] = np.asarray(zeta)[:, None, None] * cz  # c = 2 zeta sqrt(k m) with m = M / 4
     return b
@@ -187,8 +204,12 @@ def test_transmissibility_matches_the_one_dof_formula() -> None:
 @pytest.mark.parametrize(("fidelity", "integrator"), [("lti", "exact"), ("ltv", "rk4")])
 def test_simulated_steady_state_amplitude_equals_the_transmissibility(fidelity: str, integrator: str) -> None:
     # r = 2, zeta = 0.2: 30 floor periods of 50 ms; passive and sky-hook mounts side by side
-    b = concat([_floor_scene(np.array([2.0]), np.array([0.2]), duration=1.5),
-                _floor_scene(np.array([2.0]), np.array([0.2]), skyhook=True, duration=1.5)])
+    b = concat(
+        [
+            _floor_scene(np.array([2.0]), np.array([0.2]), duration=1.5),
+            _floor_scene(np.array([2.0]), np.array([0.2]), skyhook=True, duration=1.5),
+        ]
+    )
     r = simulate(b, fidelity, integrator, dt=1e-3, record=[0, 1])
     t = r.history["time"][0]
     # fit the last 10 periods with sin, cos and offset at the floor frequency: the start transient has
@@ -249,8 +270,12 @@ def test_parked_stage_tilts_the_base_to_the_static_solution() -> None:
     h, hz, dy, ms = 0.3, 0.3, 1.5, 1000.0  # mounts 0.3 m below the c.g.; stage 0.3 m above it
     mt = M + ms
     k, c = mount(mt / 4, 6.0, 0.6)  # stiff and heavily damped: settled 1 s after the move
-    stage = {"mass": ms, "home": (0.0, -1.5, hz), "axis": (0.0, 1.0, 0.0),
-             "pieces": pieces_array(trapezoid(dy, 2.0, GRAVITY))}
+    stage = {
+        "mass": ms,
+        "home": (0.0, -1.5, hz),
+        "axis": (0.0, 1.0, 0.0),
+        "pieces": pieces_array(trapezoid(dy, 2.0, GRAVITY)),
+    }
     b = scene(mass=M, height=h, k=(k, k, k), c=(c, c, c), stages=[stage], duration=2.0)
     # hand solution: y and pitch (rotation about X) couple through the mounts below the c.g.
     rock = mt * GRAVITY * h + ms * GRAVITY * hz  # weights above the mounts, tilting with the base

@@ -21,8 +21,12 @@ POINT = (1.3, 2.1, 0.2)  # a point of interest near a corner: sees translation a
 
 def _on_grid_scene():
     # a = 25.6 m/s^2 and v = 2 m/s: t_acc = 10/128 s, cruise 48/128 s, travel 0.90625 m
-    stage = {"mass": 1000.0, "home": (0.4, -0.5, 0.3), "axis": (0.0, 1.0, 0.0),
-             "pieces": trapezoid_pieces(0.90625, 2.0, 25.6)}
+    stage = {
+        "mass": 1000.0,
+        "home": (0.4, -0.5, 0.3),
+        "axis": (0.0, 1.0, 0.0),
+        "pieces": trapezoid_pieces(0.90625, 2.0, 25.6),
+    }
     assert np.all(np.mod(stage["pieces"][0], H0) == 0.0)
     # mounts below the c.g. so that translation and rocking couple; fastest mode 6.7 Hz (w H0 = 0.33)
     return scene(duration=0.75, stages=[stage], height=0.3, points=[POINT])
@@ -62,17 +66,20 @@ def _stage(mass, home, axis, pieces, parent=-1):
 
 PROFILES = {
     # start times off the grid of every step below, so breakpoints fall inside steps
-    "trapezoid": [_stage(1000.0, (0.4, -0.5, 0.3), (0, 1, 0),
-                         pieces_array(trapezoid(0.9, 2.0, 20.0, start=0.011)))],
+    "trapezoid": [
+        _stage(1000.0, (0.4, -0.5, 0.3), (0, 1, 0), pieces_array(trapezoid(0.9, 2.0, 20.0, start=0.011)))
+    ],
     # jerk-limited: the forcing is cubic within a piece
-    "scurve": [_stage(1000.0, (0.4, -0.5, 0.3), (0, 1, 0),
-                      pieces_array(scurve(0.9, 2.0, 20.0, 400.0, start=0.013)))],
+    "scurve": [
+        _stage(1000.0, (0.4, -0.5, 0.3), (0, 1, 0), pieces_array(scurve(0.9, 2.0, 20.0, 400.0, start=0.013)))
+    ],
     # an X stage riding on a Y stage, both moving at once (Coriolis-free in LTI, but the weights' moments
     # and the forcing of the child follow both travels)
     "gantry": [
         _stage(1500.0, (0.0, -0.8, 0.3), (0, 1, 0), pieces_array(trapezoid(1.2, 1.5, 12.0, start=0.021))),
-        _stage(300.0, (-0.5, -0.8, 0.5), (1, 0, 0), pieces_array(trapezoid(0.8, 1.0, 9.0, start=0.05)),
-               parent=0),
+        _stage(
+            300.0, (-0.5, -0.8, 0.5), (1, 0, 0), pieces_array(trapezoid(0.8, 1.0, 9.0, start=0.05)), parent=0
+        ),
     ],
 }
 

@@ -121,8 +121,15 @@ def energy_bound(b) -> tuple[np.ndarray, np.ndarray]:
     Kinv = np.linalg.inv(K)
     T = float(b.duration[0])
     tk = b.prof_t[0].ravel()
-    grid = np.unique(np.concatenate([np.linspace(0.0, T, 4001), tk[(tk > 0) & (tk < T)],
-                                     np.clip(tk[(tk > 0) & (tk < T)] - 1e-9, 0, T)]))
+    grid = np.unique(
+        np.concatenate(
+            [
+                np.linspace(0.0, T, 4001),
+                tk[(tk > 0) & (tk < T)],
+                np.clip(tk[(tk > 0) & (tk < T)] - 1e-9, 0, T),
+            ]
+        )
+    )
     p = Pieces(*(np.asarray(x)[0][None] for x in (b.prof_t, b.prof_s, b.prof_v, b.prof_a, b.prof_j)))
     s, _, a = evaluate(p, grid)  # (1, m, T)
     s, a = s[0], a[0]
@@ -141,16 +148,31 @@ def energy_bound(b) -> tuple[np.ndarray, np.ndarray]:
     return q[:3], q[3:]
 
 
-FAST_PAIRS = [("lti", "exact"), ("lti", "euler"), ("lti", "rk4"), ("ltv", "euler"), ("ltv", "rk4"),
-              ("nonlinear", "euler"), ("nonlinear", "rk4")]
+FAST_PAIRS = [
+    ("lti", "exact"),
+    ("lti", "euler"),
+    ("lti", "rk4"),
+    ("ltv", "euler"),
+    ("ltv", "rk4"),
+    ("nonlinear", "euler"),
+    ("nonlinear", "rk4"),
+]
 
 
 @st.composite
 def scenes(draw, pairs=FAST_PAIRS):
     """A scene dict from the ranges the schema accepts, and how to simulate it."""
     mass = draw(st.floats(schema.MIN_MACHINE_MASS * (1 + 1e-9), schema.MAX_MACHINE_MASS * (1 - 1e-9)))
-    size = [float(np.clip(np.exp(draw(st.floats(np.log(schema.MIN_BASE_SIZE), np.log(schema.MAX_BASE_SIZE)))),
-                          schema.MIN_BASE_SIZE, schema.MAX_BASE_SIZE)) for _ in range(3)]
+    size = [
+        float(
+            np.clip(
+                np.exp(draw(st.floats(np.log(schema.MIN_BASE_SIZE), np.log(schema.MAX_BASE_SIZE)))),
+                schema.MIN_BASE_SIZE,
+                schema.MAX_BASE_SIZE,
+            )
+        )
+        for _ in range(3)
+    ]
     lx, ly, lz = size
     density = mass / (lx * ly * lz)
     iso = {
@@ -158,9 +180,11 @@ def scenes(draw, pairs=FAST_PAIRS):
         "f_vertical": draw(st.floats(schema.MIN_MOUNT_FREQUENCY, schema.MAX_MOUNT_FREQUENCY)),
         "f_horizontal": draw(st.floats(schema.MIN_MOUNT_FREQUENCY, schema.MAX_MOUNT_FREQUENCY)),
         "zeta": draw(st.floats(0.0, schema.MAX_DAMPING_RATIO)),
-        "layout": {"span_x": float(np.clip(draw(st.floats(0.1, 1.5)) * lx, schema.MIN_SPAN, schema.MAX_SPAN)),
-                   "span_y": float(np.clip(draw(st.floats(0.1, 1.5)) * ly, schema.MIN_SPAN, schema.MAX_SPAN)),
-                   "height": draw(st.floats(-schema.MAX_MOUNT_HEIGHT, schema.MAX_MOUNT_HEIGHT))},
+        "layout": {
+            "span_x": float(np.clip(draw(st.floats(0.1, 1.5)) * lx, schema.MIN_SPAN, schema.MAX_SPAN)),
+            "span_y": float(np.clip(draw(st.floats(0.1, 1.5)) * ly, schema.MIN_SPAN, schema.MAX_SPAN)),
+            "height": draw(st.floats(-schema.MAX_MOUNT_HEIGHT, schema.MAX_MOUNT_HEIGHT)),
+        },
     }
     axis = draw(st.sampled_from([(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (1, -2, 1)]))
     unit = np.asarray(axis, float) / np.linalg.norm(axis)
@@ -177,19 +201,33 @@ def scenes(draw, pairs=FAST_PAIRS):
     # stage mass: up to a little past the accepted share of the base (past it the scene is refused)
     ratio = float(np.exp(draw(st.floats(np.log(1e-4), np.log(1.2 * schema.MAX_STAGE_MASS_RATIO)))))
     stage_mass = float(np.clip(ratio * mass, schema.MIN_STAGE_MASS, schema.MAX_STAGE_MASS))
-    stage = {"name": "s", "mass": stage_mass,
-             "home": [draw(st.floats(0, 1)) * lx, draw(st.floats(0, 1)) * ly, lz + draw(st.floats(0, 1))],
-             "axis": list(axis), "profile": profile}
+    stage = {
+        "name": "s",
+        "mass": stage_mass,
+        "home": [draw(st.floats(0, 1)) * lx, draw(st.floats(0, 1)) * ly, lz + draw(st.floats(0, 1))],
+        "axis": list(axis),
+        "profile": profile,
+    }
     fid, integ = draw(st.sampled_from(pairs))
-    dt = float(np.clip(np.exp(draw(st.floats(np.log(schema.MIN_DT), np.log(schema.MAX_DT)))), schema.MIN_DT,
-                       schema.MAX_DT))
+    dt = float(
+        np.clip(
+            np.exp(draw(st.floats(np.log(schema.MIN_DT), np.log(schema.MAX_DT)))),
+            schema.MIN_DT,
+            schema.MAX_DT,
+        )
+    )
     data = {
         "machine": {"block": {"size": [lx, ly, lz], "density": density}},
         "isolators": iso,
         "stages": [stage],
         "points": {"p": [lx, ly, lz]},
-        "simulation": {"fidelity": fid, "integrator": integ, "dt": dt, "duration": 1.5,
-                       "gravity_stiffness": draw(st.booleans())},
+        "simulation": {
+            "fidelity": fid,
+            "integrator": integ,
+            "dt": dt,
+            "duration": 1.5,
+            "gravity_stiffness": draw(st.booleans()),
+        },
     }
     return data
 
@@ -210,8 +248,16 @@ def check(data: dict, ratios: list[float] | None = None) -> str:
         assert err.field and err.reason
         return "refused"
     status = int(r.status[0])
-    numbers = [r.peak_displacement, r.peak_rotation, r.peak_point_displacement, r.peak_isolator_force,
-               r.min_isolator_load, r.rms_displacement, r.final_displacement, r.settling_time]
+    numbers = [
+        r.peak_displacement,
+        r.peak_rotation,
+        r.peak_point_displacement,
+        r.peak_isolator_force,
+        r.min_isolator_load,
+        r.rms_displacement,
+        r.final_displacement,
+        r.settling_time,
+    ]
     if status != OK:
         # FAILED is seen when a fixed-step run of a time-varying level goes astray before its divergence
         # check trips ("the mass matrix lost positive definiteness"): flagged, with no numbers
@@ -229,8 +275,9 @@ def check(data: dict, ratios: list[float] | None = None) -> str:
     u_max, th_max = energy_bound(b)
     exact = sim.fidelity == "lti" and sim.integrator in ("exact", "reference")
     factor = 1.01 if exact else 3.0  # 1 %: the total variation is summed on a grid (4,001 points)
-    ratio = max(np.max(r.peak_displacement[0] / (u_max + 1e-15)),
-                np.max(r.peak_rotation[0] / (th_max + 1e-15)))
+    ratio = max(
+        np.max(r.peak_displacement[0] / (u_max + 1e-15)), np.max(r.peak_rotation[0] / (th_max + 1e-15))
+    )
     if ratios is not None:
         ratios.append(float(ratio))
     assert (r.peak_displacement[0] <= factor * u_max + 1e-12).all(), (r.peak_displacement[0], u_max)
@@ -238,8 +285,12 @@ def check(data: dict, ratios: list[float] | None = None) -> str:
     return "ok"
 
 
-@settings(max_examples=150, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
+@settings(
+    max_examples=150,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
+)
 @given(scenes())
 def test_drawn_scenes_are_finite_and_bounded_or_flagged(data: dict) -> None:
     check(data)
@@ -270,8 +321,12 @@ def test_a_jerk_phase_shorter_than_the_step_is_integrated_not_sampled(integrator
     # a 10 um S-curve move over 2.6 ms (jerk phases of 0.3 ms) inside one 5 ms step: the fixed-step
     # integrators split the step at the profile's breakpoints, so the base moves as the reference says;
     # sampling the jerk phase at the step's stages instead gave 30 times the reference peak with RK4
-    stage = {"mass": 1000.0, "home": (0.0, -1.5, 0.3), "axis": (0.0, 1.0, 0.0),
-             "pieces": pieces_array(scurve(1e-5, 1.9, 8.0, 25_000.0))}
+    stage = {
+        "mass": 1000.0,
+        "home": (0.0, -1.5, 0.3),
+        "axis": (0.0, 1.0, 0.0),
+        "pieces": pieces_array(scurve(1e-5, 1.9, 8.0, 25_000.0)),
+    }
     b = scene(stages=[stage], duration=1.0)
     # (exact, on the lti level: seven breakpoints in one step, each with its own pair of sub-step maps)
     level = "lti" if integrator == "exact" else "ltv"
@@ -287,8 +342,12 @@ def test_exact_step_maps_are_prepared_in_blocks_without_changing_a_case() -> Non
     from isolab.engine import concat
     from isolab.engine.integrators import exact
 
-    stage = {"mass": 1000.0, "home": (0.0, -1.5, 0.3), "axis": (0.0, 1.0, 0.0),
-             "pieces": pieces_array(scurve(1e-3, 1.9, 8.0, 25_000.0))}
+    stage = {
+        "mass": 1000.0,
+        "home": (0.0, -1.5, 0.3),
+        "axis": (0.0, 1.0, 0.0),
+        "pieces": pieces_array(scurve(1e-3, 1.9, 8.0, 25_000.0)),
+    }
     one = scene(stages=[stage], duration=0.5)
     alone = simulate(one, "lti", "exact", dt=5e-3)
     many = simulate(concat([one] * (exact.PREPARE_BLOCK + 7)), "lti", "exact", dt=5e-3)

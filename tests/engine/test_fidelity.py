@@ -22,10 +22,18 @@ def _soft_scene(scale: float, height: float):
     """
     load = (M + scale * M_STAGE) / 4
     k, c = mount(load, 1.0, 0.1)
-    stage = y_stage(mass=scale * M_STAGE, travel=3.0 * scale, v=2.0 * scale, a=2 * GRAVITY * scale,
-                    home=(0.0, -1.5, 0.3))
-    return scene(mass=M, k=(k, k, k), c=(c, c, c), height=height, stages=[stage], duration=2.0,
-                 points=[(1.3, 2.1, 0.2)])
+    stage = y_stage(
+        mass=scale * M_STAGE, travel=3.0 * scale, v=2.0 * scale, a=2 * GRAVITY * scale, home=(0.0, -1.5, 0.3)
+    )
+    return scene(
+        mass=M,
+        k=(k, k, k),
+        c=(c, c, c),
+        height=height,
+        stages=[stage],
+        duration=2.0,
+        points=[(1.3, 2.1, 0.2)],
+    )
 
 
 def _peaks(scale: float, height: float) -> dict[str, np.ndarray]:
@@ -34,8 +42,9 @@ def _peaks(scale: float, height: float) -> dict[str, np.ndarray]:
     for level in LEVELS:
         r = simulate(b, level, "rk4", dt=1e-3)
         assert r.status[0] == 0, r.message[0]
-        out[level] = np.concatenate([r.peak_displacement[0], r.peak_rotation[0],
-                                     r.peak_point_displacement[0, 0]])
+        out[level] = np.concatenate(
+            [r.peak_displacement[0], r.peak_rotation[0], r.peak_point_displacement[0, 0]]
+        )
     return out
 
 

@@ -34,10 +34,21 @@ def _stiff_scene():
     w dt = 3.9 at 1 ms, past both Euler's limit (2) and RK4's (2.83). A smooth S-curve drives it, so the
     response is mostly quasi-static and a stable step can also be an accurate one."""
     k, c = mount(M_STIFF / 4, 400.0, 0.01)
-    stage = {"mass": 50.0, "home": (0.1, -0.3, 0.15), "axis": (0.0, 1.0, 0.0),
-             "pieces": pieces_array(scurve(0.2, 0.5, 5.0, 50.0, start=0.01))}
-    return scene(mass=M_STIFF, size=(1.0, 1.2, 0.15), span=(0.9, 1.1), k=(k, k, k), c=(c, c, c),
-                 stages=[stage], duration=0.6)
+    stage = {
+        "mass": 50.0,
+        "home": (0.1, -0.3, 0.15),
+        "axis": (0.0, 1.0, 0.0),
+        "pieces": pieces_array(scurve(0.2, 0.5, 5.0, 50.0, start=0.01)),
+    }
+    return scene(
+        mass=M_STIFF,
+        size=(1.0, 1.2, 0.15),
+        span=(0.9, 1.1),
+        k=(k, k, k),
+        c=(c, c, c),
+        stages=[stage],
+        duration=0.6,
+    )
 
 
 @pytest.mark.parametrize(("integrator", "sub_steps"), [("euler", 3), ("rk4", 2)])
@@ -48,8 +59,14 @@ def test_guard_refuses_or_subdivides_a_step_past_the_limit(integrator: str, sub_
     assert f"{integrator} stability limit" in refused.message[0]
     assert "624.6 Hz" in refused.message[0]  # names the fastest mode
     assert f"needs {sub_steps} sub-steps" in refused.message[0]
-    for name in ("peak_displacement", "peak_rotation", "peak_isolator_force", "min_isolator_load",
-                 "final_displacement", "settling_time"):
+    for name in (
+        "peak_displacement",
+        "peak_rotation",
+        "peak_isolator_force",
+        "min_isolator_load",
+        "final_displacement",
+        "settling_time",
+    ):
         assert np.isnan(getattr(refused, name)[0]).all(), name
     assert refused.natural_frequency[0].max() == pytest.approx(624.6, abs=0.1)
 
@@ -74,10 +91,21 @@ def _stage_to_the_centre():
     """A 5 t stage on a light (1 t) base travels 2 m in Y from y = 2 m to the c.g.: the inertia in roll
     falls from 20,000 to 90 kg m^2, so the fastest mode rises from 11 Hz (stage at home) to 34 Hz (at the
     end of its travel)."""
-    stage = {"mass": 5000.0, "home": (0.0, 2.0, 0.0), "axis": (0.0, -1.0, 0.0),
-             "pieces": trapezoid_pieces(2.0, 1.0, 2.0)}
-    return scene(mass=1000.0, size=(1.0, 1.0, 0.2), span=(0.5, 2.0), k=(1e6, 1e6, 1e6), c=(1e3, 1e3, 1e3),
-                 stages=[stage], duration=5.0)
+    stage = {
+        "mass": 5000.0,
+        "home": (0.0, 2.0, 0.0),
+        "axis": (0.0, -1.0, 0.0),
+        "pieces": trapezoid_pieces(2.0, 1.0, 2.0),
+    }
+    return scene(
+        mass=1000.0,
+        size=(1.0, 1.0, 0.2),
+        span=(0.5, 2.0),
+        k=(1e6, 1e6, 1e6),
+        c=(1e3, 1e3, 1e3),
+        stages=[stage],
+        duration=5.0,
+    )
 
 
 def test_guard_looks_at_the_stages_at_the_ends_of_their_travel() -> None:
@@ -100,8 +128,12 @@ def test_a_stage_that_climbs_too_high_tips_the_time_varying_levels() -> None:
     # 1 t climbing 2 m on 0.4 m square of soft mounts: weight x height (24.5 kN m at 2.5 m) exceeds the
     # mounts' rocking stiffness (16 kN m/rad) at the top, not at home (4.9 kN m at 0.5 m)
     def climb(travel: float):
-        stage = {"mass": 1000.0, "home": (0.0, 0.0, 0.5), "axis": (0.0, 0.0, 1.0),
-                 "pieces": trapezoid_pieces(travel, 1.0, 2.0)}
+        stage = {
+            "mass": 1000.0,
+            "home": (0.0, 0.0, 0.5),
+            "axis": (0.0, 0.0, 1.0),
+            "pieces": trapezoid_pieces(travel, 1.0, 2.0),
+        }
         return scene(span=(0.4, 0.4), k=(1e5, 1e5, 1e5), c=(1e3, 1e3, 1e3), stages=[stage], duration=4.0)
 
     for fidelity, integrator in (("ltv", "rk4"), ("nonlinear", "euler"), ("ltv", "reference")):
@@ -177,8 +209,16 @@ def test_a_heavy_fast_stage_lifts_one_mount_off() -> None:
     kz, cz = mount((base + ms) / 4, 2.0, 0.05)  # soft (2 Hz) vertically, four times stiffer horizontally
     # the stage runs 0.8 m above the c.g., off-centre in X: the -X mounts carry less preload
     stage = y_stage(mass=ms, travel=1.0, v=2.0, a=2 * GRAVITY, home=(hx, 0.0, 0.8))
-    b = scene(mass=base, size=(1.2, 1.6, 0.3), span=(1.1, 1.4), height=0.3, k=(4 * kz, 4 * kz, kz),
-              c=(cz, cz, cz), stages=[stage], duration=1.5)
+    b = scene(
+        mass=base,
+        size=(1.2, 1.6, 0.3),
+        span=(1.1, 1.4),
+        height=0.3,
+        k=(4 * kz, 4 * kz, kz),
+        c=(cz, cz, cz),
+        stages=[stage],
+        duration=1.5,
+    )
     r = simulate(b, "ltv", "rk4", dt=1e-3)
     assert r.status[0] == OK
     f0 = r.static_isolator_load[0]
@@ -199,8 +239,17 @@ def _narrow_scene(margin: np.ndarray, gravity_stiffness: bool = True):
     mounts' rocking stiffness 4 kz b^2 equal ``margin`` times the weight's M g h."""
     base, half, h = 2000.0, 0.2, 1.0
     kz = np.asarray(margin) * base * GRAVITY * h / (4 * half**2)
-    b = scene(n_cases=len(kz), mass=base, size=(1.2, 1.6, 0.3), span=(2 * half, 2 * half), height=h,
-              k=(1e5, 1e5, 1e5), c=(1e3, 1e3, 1e3), duration=0.5, gravity_stiffness=gravity_stiffness)
+    b = scene(
+        n_cases=len(kz),
+        mass=base,
+        size=(1.2, 1.6, 0.3),
+        span=(2 * half, 2 * half),
+        height=h,
+        k=(1e5, 1e5, 1e5),
+        c=(1e3, 1e3, 1e3),
+        duration=0.5,
+        gravity_stiffness=gravity_stiffness,
+    )
     b.iso_k[..., 2] = kz[:, None]
     return b
 
@@ -271,8 +320,16 @@ def _bad_inputs():
     return [
         ("nan mass", dict(mass=nan_mass), "mass"),
         ("negative stiffness", dict(iso_k=neg_k), "iso_k"),
-        ("two isolators", dict(iso_pos=b.iso_pos[:, :2], iso_k=b.iso_k[:, :2], iso_c=b.iso_c[:, :2],
-                               iso_skyhook=b.iso_skyhook[:, :2]), "iso_pos"),
+        (
+            "two isolators",
+            dict(
+                iso_pos=b.iso_pos[:, :2],
+                iso_k=b.iso_k[:, :2],
+                iso_c=b.iso_c[:, :2],
+                iso_skyhook=b.iso_skyhook[:, :2],
+            ),
+            "iso_pos",
+        ),
         ("collinear isolators", dict(iso_pos=line), "iso_pos"),
         ("non-SPD inertia", dict(inertia=inertia), "inertia"),
         ("asymmetric inertia", dict(inertia=asym), "inertia"),
@@ -290,16 +347,20 @@ def test_bad_scene_is_refused_naming_the_field(what: str, changes: dict, field: 
     assert err.value.reason and field in str(err.value)
 
 
-@pytest.mark.parametrize(("fidelity", "integrator", "dt", "field"), [
-    ("quadratic", "rk4", 1e-3, "fidelity"),
-    ("ltv", "leapfrog", 1e-3, "integrator"),
-    ("ltv", "exact", 1e-3, "integrator"),  # exact discretisation exists for the LTI level only
-    ("nonlinear", "exact", 1e-3, "integrator"),
-    ("lti", "rk4", 0.0, "dt"),
-    ("lti", "rk4", np.nan, "dt"),
-])
-def test_bad_choice_is_refused_naming_the_field(fidelity: str, integrator: str, dt: float,
-                                                field: str) -> None:
+@pytest.mark.parametrize(
+    ("fidelity", "integrator", "dt", "field"),
+    [
+        ("quadratic", "rk4", 1e-3, "fidelity"),
+        ("ltv", "leapfrog", 1e-3, "integrator"),
+        ("ltv", "exact", 1e-3, "integrator"),  # exact discretisation exists for the LTI level only
+        ("nonlinear", "exact", 1e-3, "integrator"),
+        ("lti", "rk4", 0.0, "dt"),
+        ("lti", "rk4", np.nan, "dt"),
+    ],
+)
+def test_bad_choice_is_refused_naming_the_field(
+    fidelity: str, integrator: str, dt: float, field: str
+) -> None:
     with pytest.raises(SceneError) as err:
         simulate(_base(), fidelity, integrator, dt=dt)
     assert err.value.field == field

@@ -23,6 +23,8 @@ from isolab.service.app import create_app
 from isolab.service.request_limits import MAX_JSON_DEPTH
 from isolab.service.settings import Settings
 
+pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
+
 MAX_CASES = 1000
 MAX_BODY = 1024 * 1024
 ANSWER_WITHIN_S = 10.0

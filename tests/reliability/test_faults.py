@@ -26,6 +26,8 @@ from isolab.service.settings import Settings
 from isolab.studies.store import Store, write_netcdf
 from isolab.studies.study import Study
 
+pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
+
 N = 240
 MARK = "saved before the service was killed"
 
@@ -114,8 +116,9 @@ class KillOnFinish(WorkerPlugin):
             os.kill(os.getpid(), signal.SIGKILL)
 
 
-def test_a_worker_killed_as_it_finishes_a_study_is_replaced_and_the_study_completes(app_client,
-                                                                                    tmp_path: Path) -> None:
+def test_a_worker_killed_as_it_finishes_a_study_is_replaced_and_the_study_completes(
+    app_client, tmp_path: Path
+) -> None:
     # the dataset is assembled and written by a worker: kill that worker as the task starts
     app, http, data = app_client
     dask = app.state.dask
@@ -143,13 +146,29 @@ ENGINE_REFUSES = {
         # every position given is within the schema's 100 m; the mounts the layout puts around the
         # block's c.g. (x = 99.3 m +- 1.1 m) are not
         "name": "far-mounts",
-        "scene": quick_scene() | {
-            "machine": {"block": {"size": ["2.6 m", "4.2 m", "0.34 m"], "density": "2700 kg/m^3",
-                                  "corner": ["98 m", 0, 0]}},
-            "stages": [{"name": "y", "mass": "1000 kg", "home": ["99.3 m", "0.6 m", "0.47 m"],
-                        "axis": [0, 1, 0],
-                        "profile": {"type": "trapezoid", "travel": "3 m", "velocity": "2 m/s",
-                                    "acceleration": "2 g"}}],
+        "scene": quick_scene()
+        | {
+            "machine": {
+                "block": {
+                    "size": ["2.6 m", "4.2 m", "0.34 m"],
+                    "density": "2700 kg/m^3",
+                    "corner": ["98 m", 0, 0],
+                }
+            },
+            "stages": [
+                {
+                    "name": "y",
+                    "mass": "1000 kg",
+                    "home": ["99.3 m", "0.6 m", "0.47 m"],
+                    "axis": [0, 1, 0],
+                    "profile": {
+                        "type": "trapezoid",
+                        "travel": "3 m",
+                        "velocity": "2 m/s",
+                        "acceleration": "2 g",
+                    },
+                }
+            ],
             "points": {"tool": ["99.3 m", 0.6, 0.6]},
         },
     },

@@ -27,6 +27,8 @@ from starlette.types import Receive, Scope, Send
 from isolab.service.app import create_app
 from isolab.service.settings import Settings
 
+pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
+
 MAX_EXAMPLES = 30
 
 

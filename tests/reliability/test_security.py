@@ -18,6 +18,8 @@ from isolab.service.app import create_app
 from isolab.service.schemas import EXAMPLE_COMPARISON
 from isolab.service.settings import Settings
 
+pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
+
 TOKEN = "s3cret-token-of-the-lab"
 ALLOWED = "https://lab.example"
 FOREIGN = "https://evil.example"
@@ -193,8 +195,9 @@ def wait_until_idle(api: httpx.Client, timeout: float = 90.0) -> None:
 
 
 @pytest.mark.parametrize(("method", "path"), [k for k in ROUTES if "{study_id}" in k[1]])
-def test_study_ids_name_no_path_outside_the_store(server: dict, api: httpx.Client, done: str, method: str,
-                                                  path: str) -> None:
+def test_study_ids_name_no_path_outside_the_store(
+    server: dict, api: httpx.Client, done: str, method: str, path: str
+) -> None:
     wait_until_idle(api)  # the studies earlier tests submitted write their datasets when they end
     spec = ROUTES[(method, path)]
     query = "&".join(f"{k}={v}" for k, v in spec.get("params", {}).items())

@@ -22,6 +22,8 @@ from fastapi.testclient import TestClient
 
 from isolab.engine import simulate
 from isolab.service.app import create_app
+from isolab.service.schemas import EXAMPLE_SCENE
+from isolab.service.settings import Settings
 from isolab.studies.cases import (
     CaseColumns,
     CaseQueryError,
@@ -29,9 +31,9 @@ from isolab.studies.cases import (
     parse_filter,
     select_cases,
 )
-from isolab.service.schemas import EXAMPLE_SCENE
-from isolab.service.settings import Settings
 from isolab.studies.study import Study
+
+pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
 
 G = 9.80665
 MAX_CASES = 500
@@ -324,8 +326,11 @@ def test_a_study_asking_for_an_accuracy_recomputes_its_cases_with_the_chosen_mod
 ) -> None:
     s = scene(duration="1.5 s")
     s["simulation"] = {"accuracy": "fast", "duration": "1.5 s"}
-    study = {"name": "api-accuracy", "scene": s,
-             "parameters": [{"path": "isolators.preset", "values": ["air", "elastomer"]}]}
+    study = {
+        "name": "api-accuracy",
+        "scene": s,
+        "parameters": [{"path": "isolators.preset", "values": ["air", "elastomer"]}],
+    }
     r = http.post("/studies", json=study)
     assert r.status_code == 202, r.text
     info = wait_done(http, r.json()["id"], timeout=120)

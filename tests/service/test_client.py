@@ -26,6 +26,8 @@ from isolab.service.schemas import EXAMPLE_SCENE
 from isolab.service.settings import Settings
 from isolab.studies.study import load_study
 
+pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
+
 G = 9.80665
 
 
@@ -203,8 +205,12 @@ def test_cli_simulate_a_scene_explicit_or_by_accuracy(tmp_path: Path) -> None:
     scene = yaml.safe_load(example.read_text())
     scene["simulation"] = {"duration": "6 s"}
     explicit = tmp_path / "explicit.yaml"
-    explicit.write_text(yaml.safe_dump(scene | {"simulation": {"fidelity": "nonlinear", "integrator": "rk4",
-                                                               "dt": "1 ms", "duration": "6 s"}}))
+    explicit.write_text(
+        yaml.safe_dump(
+            scene
+            | {"simulation": {"fidelity": "nonlinear", "integrator": "rk4", "dt": "1 ms", "duration": "6 s"}}
+        )
+    )
     asked = tmp_path / "asked.yaml"
     asked.write_text(yaml.safe_dump(scene | {"simulation": {"accuracy": "fast", "duration": "6 s"}}))
     r = runner.invoke(cli_app, ["simulate", str(explicit), "--json"])

@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 from fastapi.testclient import TestClient
 
 from isolab.engine import simulate
@@ -16,6 +17,8 @@ from isolab.service.schemas import EXAMPLE_SCENE
 from isolab.service.settings import Settings
 from isolab.studies.store import Store
 from isolab.studies.study import Study
+
+pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
 
 N = 480
 MARK = "kept from the first run"

@@ -34,15 +34,33 @@ from isolab.studies.study import Study, load_scene, load_study, scene_batch
 STEPS = (5e-4, 1e-3, 2e-3, 5e-3)  # a short ladder: the truth at 0.5 ms keeps the tests fast
 
 
-def scene(stage_mass: str, travel: str, accel: str, velocity: str, preset: str = "air",
-          duration: str = "2 s", simulation: dict | None = None) -> dict:
+def scene(
+    stage_mass: str,
+    travel: str,
+    accel: str,
+    velocity: str,
+    preset: str = "air",
+    duration: str = "2 s",
+    simulation: dict | None = None,
+) -> dict:
     """The article's granite base (10 t, 0.5 m above its mounts) with one Y stage doing one move."""
     return {
         "machine": {"block": {"size": ["2.6 m", "4.2 m", "0.34 m"], "density": "2700 kg/m^3"}},
         "isolators": {"preset": preset, "layout": {"span_x": "2.2 m", "span_y": "3.6 m", "height": "0.5 m"}},
-        "stages": [{"name": "y", "mass": stage_mass, "home": ["1.3 m", "0.6 m", "0.47 m"], "axis": [0, 1, 0],
-                    "profile": {"type": "trapezoid", "travel": travel, "velocity": velocity,
-                                "acceleration": accel}}],
+        "stages": [
+            {
+                "name": "y",
+                "mass": stage_mass,
+                "home": ["1.3 m", "0.6 m", "0.47 m"],
+                "axis": [0, 1, 0],
+                "profile": {
+                    "type": "trapezoid",
+                    "travel": travel,
+                    "velocity": velocity,
+                    "acceleration": accel,
+                },
+            }
+        ],
         "points": {"tool": ["1.3 m", "0.6 m", "0.6 m"]},
         "simulation": {"duration": duration, **(simulation or {})},
     }
@@ -83,8 +101,13 @@ def test_tolerance_is_a_length_or_a_relative_error() -> None:
     assert parse_tolerance("1 %") == (pytest.approx(0.01), True)
     assert Simulation.model_validate({"tolerance": "10 um"}).tolerance == "1e-05 m"
     assert Simulation.model_validate({"tolerance": "0.5 %"}).tolerance == "0.5 %"
-    for bad, reason in ((0.01, "give a length"), ("0.01", "has no unit"), ("1 s", "cannot read"),
-                        ("150 %", "(0, 100 %]"), ("-1 um", "(0, 1 m]")):
+    for bad, reason in (
+        (0.01, "give a length"),
+        ("0.01", "has no unit"),
+        ("1 s", "cannot read"),
+        ("150 %", "(0, 100 %]"),
+        ("-1 um", "(0, 1 m]"),
+    ):
         with pytest.raises(ValidationError) as err:
             Study.model_validate({"name": "s", "scene": LIGHT_SHORT, "simulation": {"tolerance": bad}})
         (msg,) = error_messages(err.value)
@@ -92,14 +115,22 @@ def test_tolerance_is_a_length_or_a_relative_error() -> None:
 
 
 def test_a_study_request_replaces_the_scene_model_and_back() -> None:
-    explicit = scene("20 kg", "0.1 m", "0.5 g", "0.5 m/s",
-                     simulation={"fidelity": "lti", "integrator": "exact", "dt": "1 ms"})
+    explicit = scene(
+        "20 kg",
+        "0.1 m",
+        "0.5 g",
+        "0.5 m/s",
+        simulation={"fidelity": "lti", "integrator": "exact", "dt": "1 ms"},
+    )
     study = load_study({"name": "s", "scene": explicit, "simulation": {"accuracy": "fast"}})
     assert (study.simulation.fidelity, study.simulation.accuracy, study.simulation.dt) == (None, "fast", None)
     requested = scene("20 kg", "0.1 m", "0.5 g", "0.5 m/s", simulation={"tolerance": "5 um"})
     back = load_study({"name": "s", "scene": requested, "simulation": {"integrator": "euler"}})
     assert (back.simulation.fidelity, back.simulation.integrator, back.simulation.tolerance) == (
-        "ltv", "euler", None)
+        "ltv",
+        "euler",
+        None,
+    )
     with pytest.raises(ValueError, match="simulation.accuracy"):
         load_study({"name": "s", "scene": requested, "simulation": {"accuracy": "fast", "fidelity": "ltv"}})
     # the definition round-trips (the fan-out rebuilds studies from it)
@@ -110,18 +141,35 @@ def test_a_study_request_replaces_the_scene_model_and_back() -> None:
 # ------------------------------------------------------------------------------------------------ errors
 def _result(disp, rot, force, min_load, settle, static, points=None, status=OK):
     return SimpleNamespace(
-        status=np.array([status]), peak_displacement=np.array([disp]), peak_rotation=np.array([rot]),
-        peak_isolator_force=np.array([force]), min_isolator_load=np.array([min_load]),
-        settling_time=np.array([settle]), static_isolator_load=np.array([static]),
-        peak_point_displacement=np.zeros((1, 0, 3)) if points is None else np.array([points]))
+        status=np.array([status]),
+        peak_displacement=np.array([disp]),
+        peak_rotation=np.array([rot]),
+        peak_isolator_force=np.array([force]),
+        min_isolator_load=np.array([min_load]),
+        settling_time=np.array([settle]),
+        static_isolator_load=np.array([static]),
+        peak_point_displacement=np.zeros((1, 0, 3)) if points is None else np.array([points]),
+    )
 
 
 def test_errors_are_relative_to_the_largest_reference_peak() -> None:
     static = [1000.0, 1000.0, 2000.0]
-    ref = _result([1e-3, 4e-3, 2e-3], [1e-4, 0.0, 0.0], [[10, 10, 50], [5, 5, 5], [1, 1, 1]],
-                  [900, 950, 1500], 0.50, static)
-    got = _result([1.1e-3, 4e-3, 2.2e-3], [1e-4, 1e-10, 0.0], [[10, 10, 45], [5, 5, 5], [1, 1, 1]],
-                  [880, 950, 1500], 0.53, static)
+    ref = _result(
+        [1e-3, 4e-3, 2e-3],
+        [1e-4, 0.0, 0.0],
+        [[10, 10, 50], [5, 5, 5], [1, 1, 1]],
+        [900, 950, 1500],
+        0.50,
+        static,
+    )
+    got = _result(
+        [1.1e-3, 4e-3, 2.2e-3],
+        [1e-4, 1e-10, 0.0],
+        [[10, 10, 45], [5, 5, 5], [1, 1, 1]],
+        [880, 950, 1500],
+        0.53,
+        static,
+    )
     e = output_errors(got, ref)
     assert e["peak_displacement"][0] == pytest.approx(0.2e-3 / 4e-3)  # Z is off by 0.2 mm of a 4 mm peak
     assert e["peak_rotation"][0] == pytest.approx(1e-10 / 1e-4)
@@ -181,8 +229,11 @@ def test_a_tolerance_no_candidate_meets_falls_back_to_the_reference() -> None:
 
 
 def _cost(b, c) -> float:
-    return next(row["cost_s"] for row in c.pilot
-                if (row["fidelity"], row["integrator"], row["dt"]) == (c.fidelity, c.integrator, c.dt))
+    return next(
+        row["cost_s"]
+        for row in c.pilot
+        if (row["fidelity"], row["integrator"], row["dt"]) == (c.fidelity, c.integrator, c.dt)
+    )
 
 
 def _check_measured(b, c, tol: float, relative: bool) -> None:
@@ -205,8 +256,10 @@ def _check_measured(b, c, tol: float, relative: bool) -> None:
 COMPARISON = {
     "name": "types",
     "scene": scene("1000 kg", "1 m", "1 g", "1 m/s", duration="1.5 s"),
-    "parameters": [{"path": "isolators.preset", "values": ["active", "air", "elastomer"]},
-                   {"path": "stages.y.mass", "values": ["300 kg", "1000 kg"]}],
+    "parameters": [
+        {"path": "isolators.preset", "values": ["active", "air", "elastomer"]},
+        {"path": "stages.y.mass", "values": ["300 kg", "1000 kg"]},
+    ],
     "design": {"type": "grid"},
 }
 
@@ -273,7 +326,10 @@ def test_a_requested_study_records_its_choice_and_its_measured_error(client: Cli
     choice = choose(study)
     assert ds.attrs["accuracy_request"] == "balanced" and ds.attrs["accuracy_tolerance"] == "0.5 %"
     assert (ds.attrs["fidelity"], ds.attrs["integrator"], ds.attrs["dt"]) == (
-        choice.fidelity, choice.integrator, choice.dt)
+        choice.fidelity,
+        choice.integrator,
+        choice.dt,
+    )
     assert choice.fidelity != "lti"  # a 1 m stroke of up to 1 t on air and active mounts
     pilot = json.loads(ds.attrs["accuracy_pilot"])
     assert pilot[-1]["meets"] and pilot[-1]["error"] <= 0.005 and "cheapest" in ds.attrs["accuracy_reason"]
@@ -311,15 +367,33 @@ def _check_estimate(ds: xr.Dataset, study, direct, dt: float) -> dict[str, float
     cases = json.loads(ds.attrs["error_estimate_cases"])
     assert cases == error_sample(study)
     est = error_estimate(ds)
-    assert set(est) == {"peak_displacement", "peak_point_displacement", "peak_rotation",
-                        "peak_isolator_force", "min_isolator_load", "settling_time"}
+    assert set(est) == {
+        "peak_displacement",
+        "peak_point_displacement",
+        "peak_rotation",
+        "peak_isolator_force",
+        "min_isolator_load",
+        "settling_time",
+    }
     assert ds.error_estimate_settling_time.attrs["units"] == "s"
     assert ds.error_estimate_peak_rotation.attrs["units"] == "1"
     assert "reference" in ds.error_estimate_peak_rotation.attrs["long_name"]
     ref = simulate(study.batch(cases), "nonlinear", "reference", dt=dt)
-    ours = SimpleNamespace(**{k: np.asarray(getattr(direct, k))[cases] for k in (
-        "status", "peak_displacement", "peak_point_displacement", "peak_rotation", "peak_isolator_force",
-        "min_isolator_load", "settling_time", "static_isolator_load")})
+    ours = SimpleNamespace(
+        **{
+            k: np.asarray(getattr(direct, k))[cases]
+            for k in (
+                "status",
+                "peak_displacement",
+                "peak_point_displacement",
+                "peak_rotation",
+                "peak_isolator_force",
+                "min_isolator_load",
+                "settling_time",
+                "static_isolator_load",
+            )
+        }
+    )
     expected = output_errors(ours, ref)
     for name, value in est.items():
         assert value == pytest.approx(float(np.nanmax(expected[name])), rel=1e-9, abs=1e-15), name

@@ -70,8 +70,9 @@ def grid_design(order: np.ndarray | None = None) -> tuple[Design, list[str], np.
 
 def test_grid_dimensions_and_selection_by_level() -> None:
     design, t, m = grid_design()
-    ds = to_dataset(fake_result(t, m), design, isolator_names=ISOLATORS, point_names=POINTS,
-                    attrs={"title": "t"})
+    ds = to_dataset(
+        fake_result(t, m), design, isolator_names=ISOLATORS, point_names=POINTS, attrs={"title": "t"}
+    )
     assert ds.peak_displacement.dims == ("isolator_type", "stage_y_mass", "axis")
     assert ds.sizes["isolator_type"] == 3 and ds.sizes["stage_y_mass"] == 2
     assert list(ds.isolator_type.values) == ["active", "air", "passive"]
@@ -157,13 +158,20 @@ def test_sampled_design_has_a_case_dimension_with_parameter_coordinates() -> Non
     masses = rng.uniform(200.0, 2000.0, 7)
     types = ["air", "active", "passive", "air", "air", "passive", "active"]
     design = Design(
-        kind="sampled", names=["isolator_type", "stage_y_mass"],
-        values={"isolator_type": np.array(types), "stage_y_mass": masses}, levels={},
+        kind="sampled",
+        names=["isolator_type", "stage_y_mass"],
+        values={"isolator_type": np.array(types), "stage_y_mass": masses},
+        levels={},
         paths={"isolator_type": "isolators.*.type", "stage_y_mass": "stages.y.mass"},
         units={"isolator_type": "", "stage_y_mass": "kg"},
     )
-    ds = to_dataset(fake_result(types, masses), design, isolator_names=ISOLATORS, point_names=POINTS,
-                    attrs={"design": {"seed": 3, "method": "latin_hypercube"}})
+    ds = to_dataset(
+        fake_result(types, masses),
+        design,
+        isolator_names=ISOLATORS,
+        point_names=POINTS,
+        attrs={"design": {"seed": 3, "method": "latin_hypercube"}},
+    )
     assert ds.peak_displacement.dims == ("case", "axis")
     assert ds.case.values.tolist() == list(range(7))
     assert ds.stage_y_mass.dims == ("case",) and "stage_y_mass" not in ds.dims
@@ -178,10 +186,23 @@ def test_sampled_design_has_a_case_dimension_with_parameter_coordinates() -> Non
 def test_dataset_attributes_are_cf_and_pass_through() -> None:
     design, t, m = grid_design()
     definition = {"name": "iso", "design": {"kind": "grid"}}
-    ds = to_dataset(fake_result(t, m), design, isolator_names=ISOLATORS, point_names=POINTS, attrs={
-        "title": "isolator comparison", "study": definition, "engine_version": "0.1.0", "fidelity": "lti",
-        "integrator": "exact", "dt": 2e-3, "added_later": [1, 2], "flag": True, "nothing": None,
-    })
+    ds = to_dataset(
+        fake_result(t, m),
+        design,
+        isolator_names=ISOLATORS,
+        point_names=POINTS,
+        attrs={
+            "title": "isolator comparison",
+            "study": definition,
+            "engine_version": "0.1.0",
+            "fidelity": "lti",
+            "integrator": "exact",
+            "dt": 2e-3,
+            "added_later": [1, 2],
+            "flag": True,
+            "nothing": None,
+        },
+    )
     a = ds.attrs
     assert a["Conventions"] == "CF-1.10"
     assert a["title"] == "isolator comparison"
@@ -194,8 +215,10 @@ def test_dataset_attributes_are_cf_and_pass_through() -> None:
     assert abs((dt.datetime.now(dt.UTC) - created).total_seconds()) < 60
     assert a["created"] in a["history"]
     summary = json.loads(a["design"])
-    assert summary["levels"] == {"isolator_type": ["active", "air", "passive"],
-                                 "stage_y_mass": [500.0, 1000.0]}
+    assert summary["levels"] == {
+        "isolator_type": ["active", "air", "passive"],
+        "stage_y_mass": [500.0, 1000.0],
+    }
     assert summary["paths"]["stage_y_mass"] == "stages.y.mass"
 
 

@@ -33,6 +33,8 @@ from isolab.studies.runner import finish_study, make_client, run_local, run_stud
 from isolab.studies.store import Store
 from isolab.studies.study import load_study
 
+pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
+
 # the tasks below are defined in this test module: ship them to the workers by value
 cloudpickle.register_pickle_by_value(sys.modules[__name__])
 
@@ -75,14 +77,17 @@ def test_plan_chunks_is_deterministic_and_covers_every_case_once() -> None:
         plan_chunks(10, 0)
 
 
-@pytest.mark.parametrize(("n", "workers", "spc", "size"), [
-    (1_000_000, 2, 1e-3, 5_000),   # huge study: capped at 5 s of work per chunk
-    (1000, 2, 0.01, 125),          # 10 s of work: 8 chunks of 1.25 s (4 per worker)
-    (400, 2, 0.01, 100),           # 4 s: 1 s chunks, 4 of them (2 per worker)
-    (10, 2, 0.01, 5),              # 0.1 s: one chunk per worker
-    (100, 2, 0.5, 10),             # 50 s: 10 chunks of 5 s (the cap)
-    (5, 8, 100.0, 1),              # fewer cases than workers: one case per chunk
-])
+@pytest.mark.parametrize(
+    ("n", "workers", "spc", "size"),
+    [
+        (1_000_000, 2, 1e-3, 5_000),  # huge study: capped at 5 s of work per chunk
+        (1000, 2, 0.01, 125),  # 10 s of work: 8 chunks of 1.25 s (4 per worker)
+        (400, 2, 0.01, 100),  # 4 s: 1 s chunks, 4 of them (2 per worker)
+        (10, 2, 0.01, 5),  # 0.1 s: one chunk per worker
+        (100, 2, 0.5, 10),  # 50 s: 10 chunks of 5 s (the cap)
+        (5, 8, 100.0, 1),  # fewer cases than workers: one case per chunk
+    ],
+)
 def test_chunk_size_rule(n: int, workers: int, spc: float, size: int) -> None:
     assert choose_chunk_size(n, workers, spc) == size
 
@@ -117,8 +122,15 @@ def test_every_chunk_arrives_once_with_its_cases(client: Client) -> None:
     chunks = plan_chunks(23, 5)
     got: dict[int, dict] = {}
     seen: list[tuple[int, int]] = []
-    report = run_chunks(client, json.dumps({}), chunks, on_chunk=lambda k, a: got.__setitem__(k, a),
-                        progress=lambda d, t: seen.append((d, t)), task=squares_task, key_prefix="t1")
+    report = run_chunks(
+        client,
+        json.dumps({}),
+        chunks,
+        on_chunk=lambda k, a: got.__setitem__(k, a),
+        progress=lambda d, t: seen.append((d, t)),
+        task=squares_task,
+        key_prefix="t1",
+    )
     assert sorted(got) == [0, 1, 2, 3, 4] and sorted(report.submitted) == [0, 1, 2, 3, 4]
     assert report.failed == {} and not report.cancelled
     for k, arrays in got.items():
@@ -131,9 +143,16 @@ def test_skipped_chunks_are_not_submitted(client: Client) -> None:
     chunks = plan_chunks(20, 5)
     got: dict[int, dict] = {}
     seen: list[int] = []
-    report = run_chunks(client, json.dumps({}), chunks, skip={0, 2},
-                        on_chunk=lambda k, a: got.__setitem__(k, a),
-                        progress=lambda d, t: seen.append(d), task=squares_task, key_prefix="t2")
+    report = run_chunks(
+        client,
+        json.dumps({}),
+        chunks,
+        skip={0, 2},
+        on_chunk=lambda k, a: got.__setitem__(k, a),
+        progress=lambda d, t: seen.append(d),
+        task=squares_task,
+        key_prefix="t2",
+    )
     assert sorted(report.submitted) == [1, 3] and sorted(got) == [1, 3]
     assert seen[0] == 10 and seen[-1] == 20
     nothing = run_chunks(client, "{}", chunks, skip={0, 1, 2, 3}, task=squares_task)
@@ -143,8 +162,14 @@ def test_skipped_chunks_are_not_submitted(client: Client) -> None:
 def test_a_failing_chunk_fails_its_cases_and_the_study_goes_on(client: Client) -> None:
     chunks = plan_chunks(12, 4)
     got: dict[int, dict] = {}
-    report = run_chunks(client, json.dumps({"fail": [4]}), chunks,
-                        on_chunk=lambda k, a: got.__setitem__(k, a), task=squares_task, key_prefix="t3")
+    report = run_chunks(
+        client,
+        json.dumps({"fail": [4]}),
+        chunks,
+        on_chunk=lambda k, a: got.__setitem__(k, a),
+        task=squares_task,
+        key_prefix="t3",
+    )
     assert list(report.failed) == [1]
     assert "ZeroDivisionError: no good at case 4" in report.failed[1]
     assert got[1]["status"].tolist() == [FAILED] * 4
@@ -155,8 +180,9 @@ def test_a_failing_chunk_fails_its_cases_and_the_study_goes_on(client: Client) -
 
 def test_when_every_chunk_fails_the_run_raises(client: Client) -> None:
     with pytest.raises(FanoutError, match="no good at case"):
-        run_chunks(client, json.dumps({"fail": [0, 3]}), plan_chunks(6, 3), task=squares_task,
-                   key_prefix="t4")
+        run_chunks(
+            client, json.dumps({"fail": [0, 3]}), plan_chunks(6, 3), task=squares_task, key_prefix="t4"
+        )
 
 
 def test_cancel_stops_outstanding_chunks(client: Client) -> None:
@@ -169,8 +195,15 @@ def test_cancel_stops_outstanding_chunks(client: Client) -> None:
         cancel.set()
 
     t0 = time.perf_counter()
-    report = run_chunks(client, json.dumps({"sleep": 0.3}), chunks, on_chunk=on_chunk, cancel=cancel,
-                        task=squares_task, key_prefix="t5")
+    report = run_chunks(
+        client,
+        json.dumps({"sleep": 0.3}),
+        chunks,
+        on_chunk=on_chunk,
+        cancel=cancel,
+        task=squares_task,
+        key_prefix="t5",
+    )
     elapsed = time.perf_counter() - t0
     assert report.cancelled
     assert 1 <= len(got) <= 3 and sorted(report.completed) == sorted(got)
@@ -180,26 +213,47 @@ def test_cancel_stops_outstanding_chunks(client: Client) -> None:
 
 
 # ------------------------------------------------------------------------ studies on a real cluster
-def small_study(integrator: str = "rk4", dt: str = "2 ms", masses=("500 kg", "1000 kg"),
-                duration: str = "1.5 s") -> dict:
+def small_study(
+    integrator: str = "rk4", dt: str = "2 ms", masses=("500 kg", "1000 kg"), duration: str = "1.5 s"
+) -> dict:
     """The article's scriber cut down: a 1 m Y move, three isolator types x the given stage masses."""
     return {
         "name": "small-scriber",
         "scene": {
-            "machine": {"block": {"size": ["2.6 m", "4.2 m", "0.34 m"], "density": "2700 kg/m^3",
-                                  "corner": [0, 0, 0]}},
-            "isolators": {"preset": "air",
-                          "layout": {"span_x": "2.2 m", "span_y": "3.6 m", "height": "0.5 m"}},
-            "stages": [{"name": "y", "mass": "1000 kg", "home": ["1.3 m", "0.6 m", "0.47 m"],
-                        "axis": [0, 1, 0],
-                        "profile": {"type": "trapezoid", "travel": "1 m", "velocity": "1 m/s",
-                                    "acceleration": "1 g"}}],
+            "machine": {
+                "block": {"size": ["2.6 m", "4.2 m", "0.34 m"], "density": "2700 kg/m^3", "corner": [0, 0, 0]}
+            },
+            "isolators": {
+                "preset": "air",
+                "layout": {"span_x": "2.2 m", "span_y": "3.6 m", "height": "0.5 m"},
+            },
+            "stages": [
+                {
+                    "name": "y",
+                    "mass": "1000 kg",
+                    "home": ["1.3 m", "0.6 m", "0.47 m"],
+                    "axis": [0, 1, 0],
+                    "profile": {
+                        "type": "trapezoid",
+                        "travel": "1 m",
+                        "velocity": "1 m/s",
+                        "acceleration": "1 g",
+                    },
+                }
+            ],
             "points": {"tool": ["1.3 m", "0.6 m", "0.6 m"], "camera": ["1.3 m", "3.6 m", "0.9 m"]},
-            "simulation": {"fidelity": "lti", "integrator": integrator, "dt": dt, "auto_step": False,
-                           "duration": duration},
+            "simulation": {
+                "fidelity": "lti",
+                "integrator": integrator,
+                "dt": dt,
+                "auto_step": False,
+                "duration": duration,
+            },
         },
-        "parameters": [{"path": "isolators.preset", "values": ["active", "air", "elastomer"]},
-                       {"path": "stages.y.mass", "values": list(masses)}],
+        "parameters": [
+            {"path": "isolators.preset", "values": ["active", "air", "elastomer"]},
+            {"path": "stages.y.mass", "values": list(masses)},
+        ],
         "design": {"type": "grid"},
     }
 
@@ -207,8 +261,13 @@ def small_study(integrator: str = "rk4", dt: str = "2 ms", masses=("500 kg", "10
 def direct_dataset(study) -> xr.Dataset:
     """The same study run by the engine directly on one batch of every case, laid out the same way."""
     sim = study.simulation
-    result = simulate(study.batch(np.arange(study.n_cases)), fidelity=sim.fidelity, integrator=sim.integrator,
-                      dt=sim.dt, auto_step=sim.auto_step)
+    result = simulate(
+        study.batch(np.arange(study.n_cases)),
+        fidelity=sim.fidelity,
+        integrator=sim.integrator,
+        dt=sim.dt,
+        auto_step=sim.auto_step,
+    )
     iso, pts = study_labels(study)
     return to_dataset(result, study.design(), isolator_names=iso, point_names=pts, attrs={})
 
@@ -231,9 +290,11 @@ def test_study_on_the_cluster_gives_the_engine_numbers(client: Client, tmp_path:
     # softer mounts and a heavier stage move the base more
     y = ds.peak_displacement.sel(axis="y")
     assert float(y.sel(isolator_type="active", stage_y_mass=1000)) > float(
-        y.sel(isolator_type="air", stage_y_mass=1000))
+        y.sel(isolator_type="air", stage_y_mass=1000)
+    )
     assert float(y.sel(isolator_type="air", stage_y_mass=1000)) > float(
-        y.sel(isolator_type="air", stage_y_mass=500))
+        y.sel(isolator_type="air", stage_y_mass=500)
+    )
     row = store.get(sid)
     assert (row["status"], row["n_cases"], row["n_done"], row["n_failed"]) == ("done", 6, 6, 2)
     assert row["parameters"] == ["isolator_type", "stage_y_mass"]
@@ -246,23 +307,31 @@ def test_study_on_the_cluster_gives_the_engine_numbers(client: Client, tmp_path:
     assert json.loads(ds.attrs["design"])["type"] == "grid"
 
 
-def test_an_interrupted_study_resumes_without_recomputing(client: Client, tmp_path: Path,
-                                                           monkeypatch) -> None:
+def test_an_interrupted_study_resumes_without_recomputing(
+    client: Client, tmp_path: Path, monkeypatch
+) -> None:
     definition = small_study(masses=[f"{m} kg" for m in range(300, 1500, 150)])  # 3 x 8 = 24 cases
     study = load_study(definition)
     calls: list[dict] = []
 
     def counting_run_chunks(client, definition_json, chunks, skip=(), **kw):
         report = fanout.run_chunks(client, definition_json, chunks, skip=skip, task=slow_chunk, **kw)
-        calls.append({"skip": set(skip), "submitted": set(report.submitted),
-                      "completed": set(report.completed)})
+        calls.append(
+            {"skip": set(skip), "submitted": set(report.submitted), "completed": set(report.completed)}
+        )
         return report
 
     monkeypatch.setattr(runner, "run_chunks", counting_run_chunks)
     store = Store(tmp_path / "interrupted")
     cancel = threading.Event()
-    sid = run_study(study, store, client, chunk_size=2, cancel=cancel,
-                    progress=lambda done, total: cancel.set() if done > 0 else None)
+    sid = run_study(
+        study,
+        store,
+        client,
+        chunk_size=2,
+        cancel=cancel,
+        progress=lambda done, total: cancel.set() if done > 0 else None,
+    )
     row = store.get(sid)
     saved = store.done_chunks(sid)
     assert row["status"] == "cancelled" and row["finished"] is not None
@@ -291,11 +360,13 @@ def test_an_interrupted_study_resumes_without_recomputing(client: Client, tmp_pa
         np.testing.assert_array_equal(a[name].values, direct[name].values, err_msg=name)
 
 
-def test_a_study_whose_every_chunk_fails_is_marked_failed(client: Client, tmp_path: Path,
-                                                           monkeypatch) -> None:
+def test_a_study_whose_every_chunk_fails_is_marked_failed(
+    client: Client, tmp_path: Path, monkeypatch
+) -> None:
     def every_chunk_fails(client, definition_json, chunks, store_target=None, **kw):
-        return fanout.run_chunks(client, json.dumps({"fail": [int(c[0]) for c in chunks]}), chunks,
-                                 task=squares_task, **kw)
+        return fanout.run_chunks(
+            client, json.dumps({"fail": [int(c[0]) for c in chunks]}), chunks, task=squares_task, **kw
+        )
 
     monkeypatch.setattr(runner, "run_chunks", every_chunk_fails)
     store = Store(tmp_path)
@@ -328,8 +399,11 @@ def test_run_local_writes_the_dataset_file(tmp_path: Path) -> None:
     np.testing.assert_array_equal(back.natural_frequency.values, direct.natural_frequency.values)
     # 1 Hz active mounts have the lowest first mode, ~17 Hz elastomer the highest last mode
     f1 = back.natural_frequency.sel(mode=1, stage_y_mass=500)
-    assert float(f1.sel(isolator_type="active")) < float(f1.sel(isolator_type="air")) < float(
-        f1.sel(isolator_type="elastomer"))
+    assert (
+        float(f1.sel(isolator_type="active"))
+        < float(f1.sel(isolator_type="air"))
+        < float(f1.sel(isolator_type="elastomer"))
+    )
 
 
 def test_a_worker_saves_its_chunk_only_where_it_sees_the_store(tmp_path: Path) -> None:

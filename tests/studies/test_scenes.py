@@ -363,7 +363,6 @@ def test_study_reports_a_combination_that_unloads_a_mount_at_validation():
     assert validate_study(data).n_cases == 4
 
 
-
 def test_a_stored_definition_is_rebuilt_by_parsing_alone_and_the_build_still_refuses_a_bad_case():
     """Parse -> check -> build: a worker rebuilds a stored definition without the check step (no dry run);
     a case that is not a physical scene is still refused when it is built."""
@@ -383,6 +382,7 @@ def test_a_stored_definition_is_rebuilt_by_parsing_alone_and_the_build_still_ref
     assert study.batch([0, 1, 2]).n_cases == 3
     with pytest.raises(ValueError, match=r"case 3 \(isolator_span_y, stage_y_mass = 0.6 m, 3000 kg\)"):
         study.batch([3])
+
 
 def test_scene_batch_labels():
     from isolab.studies.study import scene_batch

@@ -55,17 +55,30 @@ def study_dataset(unstable_case: int | None = None, scale: float = 1.0) -> xr.Da
         transmissibility=np.zeros((c, 3)),
     )
     design = Design(
-        kind="grid", names=["isolator_type", "stage_y_mass"],
+        kind="grid",
+        names=["isolator_type", "stage_y_mass"],
         values={"isolator_type": types, "stage_y_mass": masses},
-        levels={"isolator_type": np.array(["active", "air", "passive"]),
-                "stage_y_mass": np.array([500.0, 1000.0])},
+        levels={
+            "isolator_type": np.array(["active", "air", "passive"]),
+            "stage_y_mass": np.array([500.0, 1000.0]),
+        },
         paths={"isolator_type": "isolators.*.type", "stage_y_mass": "stages.y.mass"},
         units={"isolator_type": "", "stage_y_mass": "kg"},
     )
-    return to_dataset(res, design, isolator_names=ISOLATORS, point_names=POINTS, attrs={
-        "title": "isolator comparison", "study": {"name": "iso", "n": 6}, "engine_version": "0.1.0",
-        "fidelity": "lti", "integrator": "exact", "dt": 2e-3,
-    })
+    return to_dataset(
+        res,
+        design,
+        isolator_names=ISOLATORS,
+        point_names=POINTS,
+        attrs={
+            "title": "isolator comparison",
+            "study": {"name": "iso", "n": 6},
+            "engine_version": "0.1.0",
+            "fidelity": "lti",
+            "integrator": "exact",
+            "dt": 2e-3,
+        },
+    )
 
 
 @pytest.fixture
@@ -96,8 +109,16 @@ def test_dataset_round_trips_through_netcdf(store: Store) -> None:
     assert float(sel.settled) == 1.0
     # the unstable case (air, 1000 kg) is missing, not a number; its status and message survive
     bad = back.sel(isolator_type="air", stage_y_mass=1000)
-    for name in ("peak_displacement", "peak_isolator_force", "natural_frequency", "settling_time", "dt",
-                 "settled", "liftoff", "mechanism"):
+    for name in (
+        "peak_displacement",
+        "peak_isolator_force",
+        "natural_frequency",
+        "settling_time",
+        "dt",
+        "settled",
+        "liftoff",
+        "mechanism",
+    ):
         assert np.isnan(bad[name].values).all(), name
     assert int(bad.status) == UNSTABLE and back.status.dtype == np.int8
     assert bad.message.item() == "step too large for the stiffest mode"
@@ -163,8 +184,12 @@ def test_a_write_that_fails_half_way_leaves_the_previous_file(store: Store, monk
     assert float(back.peak_displacement.sel(isolator_type="active", stage_y_mass=500, axis="x")) == 500e-6
     # and a successful rewrite replaces it
     store.write_dataset(sid, study_dataset(scale=2.0))
-    assert float(store.open_dataset(sid).peak_displacement.sel(
-        isolator_type="active", stage_y_mass=500, axis="x")) == 1000e-6
+    assert (
+        float(
+            store.open_dataset(sid).peak_displacement.sel(isolator_type="active", stage_y_mass=500, axis="x")
+        )
+        == 1000e-6
+    )
 
 
 def test_write_netcdf_to_any_path_is_atomic(tmp_path: Path, monkeypatch) -> None:
@@ -180,8 +205,15 @@ def test_write_netcdf_to_any_path_is_atomic(tmp_path: Path, monkeypatch) -> None
 # ----------------------------------------------------------------------------------------- catalog
 def test_catalog_row_and_updates(store: Store) -> None:
     definition = {"name": "iso", "design": {"kind": "grid"}}
-    sid = store.create(definition, name="iso", n_cases=6, parameters=["isolator_type", "stage_y_mass"],
-                       isolator_types=["active", "air"], fidelity="lti", integrator="exact")
+    sid = store.create(
+        definition,
+        name="iso",
+        n_cases=6,
+        parameters=["isolator_type", "stage_y_mass"],
+        isolator_types=["active", "air"],
+        fidelity="lti",
+        integrator="exact",
+    )
     assert check_id(sid) == sid
     row = store.get(sid)
     assert row["status"] == "queued" and row["n_cases"] == 6 and row["n_done"] == 0 and row["n_failed"] == 0
@@ -218,22 +250,38 @@ def test_catalog_list_filters_in_sql(store: Store) -> None:
         ("gamma", "queued", [], 4),
     ]
     for name, status, types, day in specs:
-        ids[(name, day)] = store.create({"name": name}, name=name, n_cases=1, isolator_types=types,
-                                        status=status, created=t0 + dt.timedelta(days=day))
+        ids[(name, day)] = store.create(
+            {"name": name},
+            name=name,
+            n_cases=1,
+            isolator_types=types,
+            status=status,
+            created=t0 + dt.timedelta(days=day),
+        )
 
     def names(rows):
         return [(r["name"], r["status"]) for r in rows]
 
-    assert names(store.list()) == [("gamma", "queued"), ("beta", "running"), ("beta", "done"),
-                                   ("alpha", "failed"), ("alpha", "done")]  # newest first
+    assert names(store.list()) == [
+        ("gamma", "queued"),
+        ("beta", "running"),
+        ("beta", "done"),
+        ("alpha", "failed"),
+        ("alpha", "done"),
+    ]  # newest first
     assert names(store.list(name="alpha")) == [("alpha", "failed"), ("alpha", "done")]
     assert names(store.list(status="done")) == [("beta", "done"), ("alpha", "done")]
     assert names(store.list(isolator_type="active")) == [("beta", "running"), ("alpha", "failed")]
     assert names(store.list(isolator_type="air", status="done")) == [("alpha", "done")]
     assert names(store.list(created_after=t0 + dt.timedelta(days=2))) == [
-        ("gamma", "queued"), ("beta", "running"), ("beta", "done")]
+        ("gamma", "queued"),
+        ("beta", "running"),
+        ("beta", "done"),
+    ]
     assert names(store.list(created_after="2030-05-02T00:00:00Z", created_before="2030-05-03T12:00:00")) == [
-        ("beta", "done"), ("alpha", "failed")]
+        ("beta", "done"),
+        ("alpha", "failed"),
+    ]
     assert names(store.list(limit=2)) == [("gamma", "queued"), ("beta", "running")]
     assert names(store.list(limit=2, offset=2)) == [("beta", "done"), ("alpha", "failed")]
     assert names(store.list(limit=2, offset=4)) == [("alpha", "done")]
@@ -294,14 +342,35 @@ def test_concurrent_writers_from_threads(store: Store) -> None:
 
 
 # ----------------------------------------------------------------------------------------- ids
-@pytest.mark.parametrize("bad", [
-    "../etc", "../../etc/passwd", "A" * 32, "ABCDEF0123456789abcdef0123456789", "a" * 31, "a" * 33,
-    "g" * 32, "/" + "a" * 31, "a" * 31 + "/", "", "a" * 16 + "\0" + "a" * 15, 123,
-])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        "../etc",
+        "../../etc/passwd",
+        "A" * 32,
+        "ABCDEF0123456789abcdef0123456789",
+        "a" * 31,
+        "a" * 33,
+        "g" * 32,
+        "/" + "a" * 31,
+        "a" * 31 + "/",
+        "",
+        "a" * 16 + "\0" + "a" * 15,
+        123,
+    ],
+)
 def test_bad_ids_never_reach_a_path(store: Store, bad) -> None:
-    for call in (store.path, store.get, store.delete, store.open_dataset, store.chunk_dir, store.done_chunks,
-                 store.load_chunks, lambda i: store.update(i, n_done=1),
-                 lambda i: store.save_chunk(i, 0, {"x": np.zeros(1)})):
+    for call in (
+        store.path,
+        store.get,
+        store.delete,
+        store.open_dataset,
+        store.chunk_dir,
+        store.done_chunks,
+        store.load_chunks,
+        lambda i: store.update(i, n_done=1),
+        lambda i: store.save_chunk(i, 0, {"x": np.zeros(1)}),
+    ):
         with pytest.raises(ValueError, match="study_id"):
             call(bad)
     assert all(p.name == "studies" or p.name.startswith("catalog.sqlite") for p in store.root.iterdir())
@@ -312,10 +381,17 @@ def test_bad_ids_never_reach_a_path(store: Store, bad) -> None:
 def test_chunks_persist_and_reload(store: Store) -> None:
     sid = new_id(store)
     assert store.done_chunks(sid) == set() and store.load_chunks(sid) == {}
-    a0 = {"status": np.array([0, 1], np.int8), "message": np.array(["", "unstable at dt 2 ms"]),
-          "peak_displacement": np.array([[1e-6, 2e-6, 3e-6], [np.nan] * 3]), "indices": np.array([0, 1])}
-    a2 = {"status": np.array([3], np.int8), "message": np.array(["chunk 2 failed: KilledWorker"]),
-          "indices": np.array([4])}
+    a0 = {
+        "status": np.array([0, 1], np.int8),
+        "message": np.array(["", "unstable at dt 2 ms"]),
+        "peak_displacement": np.array([[1e-6, 2e-6, 3e-6], [np.nan] * 3]),
+        "indices": np.array([0, 1]),
+    }
+    a2 = {
+        "status": np.array([3], np.int8),
+        "message": np.array(["chunk 2 failed: KilledWorker"]),
+        "indices": np.array([4]),
+    }
     store.save_chunk(sid, 0, a0)
     store.save_chunk(sid, 2, a2)
     assert store.done_chunks(sid) == {0, 2}
@@ -348,8 +424,11 @@ def test_a_catalog_from_before_the_step_column_is_migrated(tmp_path: Path) -> No
     assert "dt REAL" not in old_schema
     with sqlite3.connect(tmp_path / "catalog.sqlite") as con:
         con.executescript(old_schema)
-        con.execute("INSERT INTO studies (id, name, status, created, n_cases, definition) VALUES "
-                    "(?, 'old', 'done', '2026-01-01T00:00:00.000000+00:00', 3, '{}')", ("a" * 32,))
+        con.execute(
+            "INSERT INTO studies (id, name, status, created, n_cases, definition) VALUES "
+            "(?, 'old', 'done', '2026-01-01T00:00:00.000000+00:00', 3, '{}')",
+            ("a" * 32,),
+        )
     s = Store(tmp_path)
     assert s.get("a" * 32)["dt"] is None
     sid = s.create({}, name="new", n_cases=1, fidelity="lti", integrator="exact", dt=0.002)
