@@ -27,7 +27,8 @@ import numpy as np
 
 from isolab.engine import concat, simulate
 from isolab.engine.results import OK, STATUS_NAMES
-from isolab.studies.accuracy import CANDIDATE_PAIRS, STEP_COST, output_errors, sizing_error
+from isolab.studies.accuracy import CANDIDATE_PAIRS, output_errors, sizing_error
+from isolab.studies.costs import STEP_COST
 from isolab.studies.study import load_scene, scene_batch
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -470,7 +471,7 @@ def markdown(results: dict[str, list[Row]], command: str, elapsed: float, choice
         "### Engine time per step",
         "",
         "The chooser ranks candidates with a fixed cost table "
-        "(`studies.accuracy.STEP_COST`); measured on the article scene:",
+        "(`studies.costs.STEP_COST`); measured on the article scene:",
         "",
         step_costs(results.get("article", next(iter(results.values())))),
         "",

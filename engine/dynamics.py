@@ -201,12 +201,16 @@ def advance_pieces(P, c, t, idx, tol):
 
     A piece that starts within ``tol`` s after ``t`` counts as started, so steps that land on a
     breakpoint use the piece that begins there. An index of -1 means "before the first piece": the stage
-    rests at its start position until its profile begins.
+    rests at its start position until its profile begins. Returns True when some stage entered a new
+    piece (the forcing polynomial changed).
     """
     K = P.pt.shape[2]
+    moved = False
     for i in range(P.pt.shape[1]):
         while idx[i] + 1 < K and P.pt[c, i, idx[i] + 1] <= t + tol:
             idx[i] += 1
+            moved = True
+    return moved
 
 
 @njit(cache=True)
@@ -376,150 +380,198 @@ def lti_forcing(P, c, rho, ar, xf, vf, f):
 
 
 @njit(cache=True)
-def accel(P, c, level, t, x, idx, W):
-    """Accelerations of the base at time ``t`` (s) and state ``x``, written to ``W.acc`` (6,).
-
-    ``acc = [d2u/dt2 (m/s^2), dw/dt (rad/s^2)]``. ``W`` is the case's scratch space
-    (``engine.model.Work``). Returns False when the level's mass matrix is not positive definite.
-    """
-    stage_state(P, c, t, idx, W.rho, W.vr, W.ar, W.jr)
-    floor_motion(P, c, t, W.xf, W.vf)
-    if level == LTI:
-        lti_forcing(P, c, W.rho, W.ar, W.xf, W.vf, W.f)
-        for i in range(6):
-            s = 0.0
-            for j in range(6):
-                s += P.a21[c, i, j] * x[j] + P.a22[c, i, j] * x[6 + j] + P.minv[c, i, j] * W.f[j]
-            W.acc[i] = s
-        return True
-
-    g = P.g
-    if level == NONLINEAR:
-        quat_to_matrix(x[3:7], W.R)
-        off = 7
-    else:
-        off = 6
-    w0, w1, w2 = x[off + 3], x[off + 4], x[off + 5]
-    isolator_forces(P, c, level, x, W.R, W.xf, W.vf, W.F)
+def _rigid_mass(P, c, M, acc):
+    """Start the mass matrix ``M`` (6, 6) from the machine's own mass and inertia (c.g. frame) and clear
+    the accelerations ``acc`` (6,)."""
     mt = P.mtot[c]
     for i in range(6):
-        W.acc[i] = 0.0
+        acc[i] = 0.0
         for j in range(6):
-            W.M[i, j] = 0.0
+            M[i, j] = 0.0
     for i in range(3):
-        W.M[i, i] = mt
+        M[i, i] = mt
         for j in range(3):
-            W.M[3 + i, 3 + j] = P.inertia[c, i, j]
-    # isolators: force (floor frame) and moment (body frame) with the vertical preload
+            M[3 + i, 3 + j] = P.inertia[c, i, j]
+
+
+@njit(cache=True)
+def _stage_rotary_mass(M, m, r0, r1, r2):
+    """Add a point mass ``m`` (kg) at ``r`` (m) to the rotation-rotation block of ``M``:
+    ``m [rho]x^T [rho]x = m (|rho|^2 1 - rho rho^T)``."""
+    rr = r0 * r0 + r1 * r1 + r2 * r2
+    M[3, 3] += m * (rr - r0 * r0)
+    M[4, 4] += m * (rr - r1 * r1)
+    M[5, 5] += m * (rr - r2 * r2)
+    M[3, 4] -= m * r0 * r1
+    M[4, 3] -= m * r0 * r1
+    M[3, 5] -= m * r0 * r2
+    M[5, 3] -= m * r0 * r2
+    M[4, 5] -= m * r1 * r2
+    M[5, 4] -= m * r1 * r2
+
+
+@njit(cache=True, inline="always")
+def accel_lti(P, c, x, W):
+    """Accelerations ``W.acc`` (6,) of the LTI level: ``A21 x + A22 v + M^-1 f`` with the stages and the
+    floor as known inputs (``W`` holds their state at the current time). Always True."""
+    lti_forcing(P, c, W.rho, W.ar, W.xf, W.vf, W.f)
+    for i in range(6):
+        s = 0.0
+        for j in range(6):
+            s += P.a21[c, i, j] * x[j] + P.a22[c, i, j] * x[6 + j] + P.minv[c, i, j] * W.f[j]
+        W.acc[i] = s
+    return True
+
+
+@njit(cache=True, inline="always")
+def accel_ltv(P, c, x, W):
+    """Accelerations ``W.acc`` (6,) of the LTV level: small rotations, mass matrix and weight moments
+    following the stages' travel, Coriolis terms of the stages. False on a singular mass matrix."""
+    g = P.g
+    w0, w1, w2 = x[9], x[10], x[11]
+    isolator_forces(P, c, LTV, x, W.R, W.xf, W.vf, W.F)
+    _rigid_mass(P, c, W.M, W.acc)
     for j in range(P.d.shape[1]):
         F0, F1, F2 = W.F[j, 0], W.F[j, 1], W.F[j, 2]
         W.acc[0] += F0
         W.acc[1] += F1
         W.acc[2] += F2
         d0, d1, d2 = P.d[c, j, 0], P.d[c, j, 1], P.d[c, j, 2]
-        if level == NONLINEAR:
-            T2 = F2 + P.f0[c, j]
-            G0 = W.R[0, 0] * F0 + W.R[1, 0] * F1 + W.R[2, 0] * T2
-            G1 = W.R[0, 1] * F0 + W.R[1, 1] * F1 + W.R[2, 1] * T2
-            G2 = W.R[0, 2] * F0 + W.R[1, 2] * F1 + W.R[2, 2] * T2
-            m0, m1, m2 = _cross(d0, d1, d2, G0, G1, G2)
-        else:
-            m0, m1, m2 = _cross(d0, d1, d2, F0, F1, F2)
-            if P.gstiff:
-                # d x (-theta x F0) with F0 = (0, 0, f0)
-                tf0, tf1, tf2 = _cross(x[3], x[4], x[5], 0.0, 0.0, P.f0[c, j])
-                n0, n1, n2 = _cross(d0, d1, d2, -tf0, -tf1, -tf2)
-                m0 += n0
-                m1 += n1
-                m2 += n2
+        m0, m1, m2 = _cross(d0, d1, d2, F0, F1, F2)
+        if P.gstiff:
+            # d x (-theta x F0) with F0 = (0, 0, f0)
+            tf0, tf1, tf2 = _cross(x[3], x[4], x[5], 0.0, 0.0, P.f0[c, j])
+            n0, n1, n2 = _cross(d0, d1, d2, -tf0, -tf1, -tf2)
+            m0 += n0
+            m1 += n1
+            m2 += n2
         W.acc[3] += m0
         W.acc[4] += m1
         W.acc[5] += m2
-    if level == NONLINEAR:
-        # gyroscopic term
-        I0 = P.inertia[c, 0, 0] * w0 + P.inertia[c, 0, 1] * w1 + P.inertia[c, 0, 2] * w2
-        I1 = P.inertia[c, 1, 0] * w0 + P.inertia[c, 1, 1] * w1 + P.inertia[c, 1, 2] * w2
-        I2 = P.inertia[c, 2, 0] * w0 + P.inertia[c, 2, 1] * w1 + P.inertia[c, 2, 2] * w2
-        y0, y1, y2 = _cross(w0, w1, w2, I0, I1, I2)
-        W.acc[3] -= y0
-        W.acc[4] -= y1
-        W.acc[5] -= y2
-        # the machine's own weight acts at its c.g.: no moment; stage weights below
-        gb0, gb1, gb2 = -g * W.R[2, 0], -g * W.R[2, 1], -g * W.R[2, 2]  # R^T (0, 0, -g)
+    for i in range(P.sm.shape[1]):
+        m = P.sm[c, i]
+        r0, r1, r2 = W.rho[i, 0], W.rho[i, 1], W.rho[i, 2]
+        a0, a1, a2 = W.ar[i, 0], W.ar[i, 1], W.ar[i, 2]
+        c0, c1, c2 = _cross(w0, w1, w2, W.vr[i, 0], W.vr[i, 1], W.vr[i, 2])
+        # translation: -m (a_rel + theta x a_rel + 2 w x v_rel)
+        ta0, ta1, ta2 = _cross(x[3], x[4], x[5], a0, a1, a2)
+        W.acc[0] -= m * (a0 + ta0 + 2.0 * c0)
+        W.acc[1] -= m * (a1 + ta1 + 2.0 * c1)
+        W.acc[2] -= m * (a2 + ta2 + 2.0 * c2)
+        # rotation: -m rho x (a_rel + 2 w x v_rel) + m (rho - rho_h) x g + m rho x (-theta x g)
+        h0, h1, h2 = _cross(r0, r1, r2, a0 + 2.0 * c0, a1 + 2.0 * c1, a2 + 2.0 * c2)
+        s0 = r0 - P.rho_h[c, i, 0]
+        s1 = r1 - P.rho_h[c, i, 1]
+        W.acc[3] += -m * h0 - m * s1 * g
+        W.acc[4] += -m * h1 + m * s0 * g
+        W.acc[5] += -m * h2
+        if P.gstiff:
+            # -theta x g = theta x (0, 0, g)
+            tg0, tg1, tg2 = _cross(x[3], x[4], x[5], 0.0, 0.0, g)
+            n0, n1, n2 = _cross(r0, r1, r2, tg0, tg1, tg2)
+            W.acc[3] += m * n0
+            W.acc[4] += m * n1
+            W.acc[5] += m * n2
+        # mass matrix coupling: translation row -m [rho]x, rotation row m [rho]x
+        for col in range(3):
+            e0 = 1.0 if col == 0 else 0.0
+            e1 = 1.0 if col == 1 else 0.0
+            e2 = 1.0 if col == 2 else 0.0
+            x0, x1, x2 = _cross(e0, e1, e2, r0, r1, r2)  # column col of -[rho]x
+            W.M[0, 3 + col] += m * x0
+            W.M[1, 3 + col] += m * x1
+            W.M[2, 3 + col] += m * x2
+            W.M[3 + col, 0] += m * x0
+            W.M[3 + col, 1] += m * x1
+            W.M[3 + col, 2] += m * x2
+        _stage_rotary_mass(W.M, m, r0, r1, r2)
+    return solve_spd(W.M, W.acc, 6)
+
+
+@njit(cache=True, inline="always")
+def accel_nonlinear(P, c, x, W):
+    """Accelerations ``W.acc`` (6,) of the nonlinear level: finite rotation (quaternion), the preload
+    turning with the base, the gyroscopic term and the stages' full relative kinematics. False on a
+    singular mass matrix."""
+    g = P.g
+    quat_to_matrix(x[3:7], W.R)
+    R = W.R
+    w0, w1, w2 = x[10], x[11], x[12]
+    isolator_forces(P, c, NONLINEAR, x, R, W.xf, W.vf, W.F)
+    _rigid_mass(P, c, W.M, W.acc)
+    # isolators: force (floor frame) and moment (body frame) with the vertical preload
+    for j in range(P.d.shape[1]):
+        F0, F1, F2 = W.F[j, 0], W.F[j, 1], W.F[j, 2]
+        W.acc[0] += F0
+        W.acc[1] += F1
+        W.acc[2] += F2
+        T2 = F2 + P.f0[c, j]
+        G0 = R[0, 0] * F0 + R[1, 0] * F1 + R[2, 0] * T2
+        G1 = R[0, 1] * F0 + R[1, 1] * F1 + R[2, 1] * T2
+        G2 = R[0, 2] * F0 + R[1, 2] * F1 + R[2, 2] * T2
+        m0, m1, m2 = _cross(P.d[c, j, 0], P.d[c, j, 1], P.d[c, j, 2], G0, G1, G2)
+        W.acc[3] += m0
+        W.acc[4] += m1
+        W.acc[5] += m2
+    # gyroscopic term
+    I0 = P.inertia[c, 0, 0] * w0 + P.inertia[c, 0, 1] * w1 + P.inertia[c, 0, 2] * w2
+    I1 = P.inertia[c, 1, 0] * w0 + P.inertia[c, 1, 1] * w1 + P.inertia[c, 1, 2] * w2
+    I2 = P.inertia[c, 2, 0] * w0 + P.inertia[c, 2, 1] * w1 + P.inertia[c, 2, 2] * w2
+    y0, y1, y2 = _cross(w0, w1, w2, I0, I1, I2)
+    W.acc[3] -= y0
+    W.acc[4] -= y1
+    W.acc[5] -= y2
+    # the machine's own weight acts at its c.g.: no moment; stage weights below
+    gb0, gb1, gb2 = -g * R[2, 0], -g * R[2, 1], -g * R[2, 2]  # R^T (0, 0, -g)
     for i in range(P.sm.shape[1]):
         m = P.sm[c, i]
         r0, r1, r2 = W.rho[i, 0], W.rho[i, 1], W.rho[i, 2]
         a0, a1, a2 = W.ar[i, 0], W.ar[i, 1], W.ar[i, 2]
         c0, c1, c2 = _cross(w0, w1, w2, W.vr[i, 0], W.vr[i, 1], W.vr[i, 2])
         # body-frame acceleration terms that do not depend on the unknown accelerations
-        if level == NONLINEAR:
-            o0, o1, o2 = _cross(w0, w1, w2, r0, r1, r2)
-            z0, z1, z2 = _cross(w0, w1, w2, o0, o1, o2)
-            k0 = z0 + 2.0 * c0 + a0
-            k1 = z1 + 2.0 * c1 + a1
-            k2 = z2 + 2.0 * c2 + a2
-            # translation (floor frame): -m R k
-            W.acc[0] -= m * (W.R[0, 0] * k0 + W.R[0, 1] * k1 + W.R[0, 2] * k2)
-            W.acc[1] -= m * (W.R[1, 0] * k0 + W.R[1, 1] * k1 + W.R[1, 2] * k2)
-            W.acc[2] -= m * (W.R[2, 0] * k0 + W.R[2, 1] * k1 + W.R[2, 2] * k2)
-            # rotation (body frame): rho x (m R^T g - m k)
-            h0, h1, h2 = _cross(r0, r1, r2, m * gb0 - m * k0, m * gb1 - m * k1, m * gb2 - m * k2)
-            W.acc[3] += h0
-            W.acc[4] += h1
-            W.acc[5] += h2
-            # mass matrix coupling: translation row -m R [rho]x, rotation row m [rho]x R^T
-            for col in range(3):
-                e0 = 1.0 if col == 0 else 0.0
-                e1 = 1.0 if col == 1 else 0.0
-                e2 = 1.0 if col == 2 else 0.0
-                # column col of -[rho]x is e_col x rho
-                x0, x1, x2 = _cross(e0, e1, e2, r0, r1, r2)
-                for row in range(3):
-                    W.M[row, 3 + col] += m * (W.R[row, 0] * x0 + W.R[row, 1] * x1 + W.R[row, 2] * x2)
-                    W.M[3 + col, row] += m * (W.R[row, 0] * x0 + W.R[row, 1] * x1 + W.R[row, 2] * x2)
-        else:
-            # translation: -m (a_rel + theta x a_rel + 2 w x v_rel)
-            ta0, ta1, ta2 = _cross(x[3], x[4], x[5], a0, a1, a2)
-            W.acc[0] -= m * (a0 + ta0 + 2.0 * c0)
-            W.acc[1] -= m * (a1 + ta1 + 2.0 * c1)
-            W.acc[2] -= m * (a2 + ta2 + 2.0 * c2)
-            # rotation: -m rho x (a_rel + 2 w x v_rel) + m (rho - rho_h) x g + m rho x (-theta x g)
-            h0, h1, h2 = _cross(r0, r1, r2, a0 + 2.0 * c0, a1 + 2.0 * c1, a2 + 2.0 * c2)
-            s0 = r0 - P.rho_h[c, i, 0]
-            s1 = r1 - P.rho_h[c, i, 1]
-            W.acc[3] += -m * h0 - m * s1 * g
-            W.acc[4] += -m * h1 + m * s0 * g
-            W.acc[5] += -m * h2
-            if P.gstiff:
-                # -theta x g = theta x (0, 0, g)
-                tg0, tg1, tg2 = _cross(x[3], x[4], x[5], 0.0, 0.0, g)
-                n0, n1, n2 = _cross(r0, r1, r2, tg0, tg1, tg2)
-                W.acc[3] += m * n0
-                W.acc[4] += m * n1
-                W.acc[5] += m * n2
-            for col in range(3):
-                e0 = 1.0 if col == 0 else 0.0
-                e1 = 1.0 if col == 1 else 0.0
-                e2 = 1.0 if col == 2 else 0.0
-                x0, x1, x2 = _cross(e0, e1, e2, r0, r1, r2)
-                W.M[0, 3 + col] += m * x0
-                W.M[1, 3 + col] += m * x1
-                W.M[2, 3 + col] += m * x2
-                W.M[3 + col, 0] += m * x0
-                W.M[3 + col, 1] += m * x1
-                W.M[3 + col, 2] += m * x2
-        # rotation-rotation block: I + m [rho]x^T [rho]x = I + m (|rho|^2 1 - rho rho^T)
-        rr = r0 * r0 + r1 * r1 + r2 * r2
-        W.M[3, 3] += m * (rr - r0 * r0)
-        W.M[4, 4] += m * (rr - r1 * r1)
-        W.M[5, 5] += m * (rr - r2 * r2)
-        W.M[3, 4] -= m * r0 * r1
-        W.M[4, 3] -= m * r0 * r1
-        W.M[3, 5] -= m * r0 * r2
-        W.M[5, 3] -= m * r0 * r2
-        W.M[4, 5] -= m * r1 * r2
-        W.M[5, 4] -= m * r1 * r2
+        o0, o1, o2 = _cross(w0, w1, w2, r0, r1, r2)
+        z0, z1, z2 = _cross(w0, w1, w2, o0, o1, o2)
+        k0 = z0 + 2.0 * c0 + a0
+        k1 = z1 + 2.0 * c1 + a1
+        k2 = z2 + 2.0 * c2 + a2
+        # translation (floor frame): -m R k
+        W.acc[0] -= m * (R[0, 0] * k0 + R[0, 1] * k1 + R[0, 2] * k2)
+        W.acc[1] -= m * (R[1, 0] * k0 + R[1, 1] * k1 + R[1, 2] * k2)
+        W.acc[2] -= m * (R[2, 0] * k0 + R[2, 1] * k1 + R[2, 2] * k2)
+        # rotation (body frame): rho x (m R^T g - m k)
+        h0, h1, h2 = _cross(r0, r1, r2, m * gb0 - m * k0, m * gb1 - m * k1, m * gb2 - m * k2)
+        W.acc[3] += h0
+        W.acc[4] += h1
+        W.acc[5] += h2
+        # mass matrix coupling: translation row -m R [rho]x, rotation row m [rho]x R^T
+        for col in range(3):
+            e0 = 1.0 if col == 0 else 0.0
+            e1 = 1.0 if col == 1 else 0.0
+            e2 = 1.0 if col == 2 else 0.0
+            x0, x1, x2 = _cross(e0, e1, e2, r0, r1, r2)  # column col of -[rho]x
+            for row in range(3):
+                W.M[row, 3 + col] += m * (R[row, 0] * x0 + R[row, 1] * x1 + R[row, 2] * x2)
+                W.M[3 + col, row] += m * (R[row, 0] * x0 + R[row, 1] * x1 + R[row, 2] * x2)
+        _stage_rotary_mass(W.M, m, r0, r1, r2)
     return solve_spd(W.M, W.acc, 6)
+
+
+@njit(cache=True)
+def accel(P, c, level, t, x, idx, W):
+    """Accelerations of the base at time ``t`` (s) and state ``x``, written to ``W.acc`` (6,).
+
+    ``acc = [d2u/dt2 (m/s^2), dw/dt (rad/s^2)]``. ``W`` is the case's scratch space
+    (``engine.model.Work``). Evaluates the stages and the floor at ``t``, then the level's own equations
+    (:func:`accel_lti`, :func:`accel_ltv`, :func:`accel_nonlinear`). Returns False when the level's mass
+    matrix is not positive definite.
+    """
+    stage_state(P, c, t, idx, W.rho, W.vr, W.ar, W.jr)
+    floor_motion(P, c, t, W.xf, W.vf)
+    if level == LTI:
+        return accel_lti(P, c, x, W)
+    if level == LTV:
+        return accel_ltv(P, c, x, W)
+    return accel_nonlinear(P, c, x, W)
 
 
 @njit(cache=True)

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
+from typing import Any
 
 import numpy as np
 
@@ -22,11 +23,30 @@ AXES = DOF_NAMES[:3]
 """Names of the translation axes (the ``axis`` dimension of stored results)."""
 ROTATIONS = DOF_NAMES[3:]
 """Names of the rotations about X, Y, Z (the ``rotation`` dimension of stored results)."""
+N_MODES = len(DOF_NAMES)
+"""Natural modes of the rigid base (one per degree of freedom)."""
+ISOLATOR = "isolator"
+"""Stands for the number of isolators in an output's trailing shape."""
+POINT = "point"
+"""Stands for the number of points of interest in an output's trailing shape."""
+
+
+def _output(*trailing: int | str, flag: bool = False) -> dict[str, Any]:
+    """Field metadata of a per-case output: its shape after the case axis (:data:`ISOLATOR` and
+    :data:`POINT` stand for the scene's counts) and whether it is a yes/no flag (bool) or a number."""
+    return {"trailing": trailing, "flag": flag}
 
 
 @dataclass
 class SimulationResult:
-    """Outputs of ``C`` cases. Values of a case whose ``status`` is not OK are NaN.
+    """Outputs of ``C`` cases.
+
+    A case whose ``status`` is not OK has NaN in ``peak_displacement``, ``peak_rotation``,
+    ``peak_point_displacement``, ``peak_isolator_force``, ``min_isolator_load``, ``rms_displacement``,
+    ``final_displacement``, ``settling_time`` and ``transmissibility``, and ``settled`` False. What does
+    not depend on integrating its motion stays filled: ``dt`` (the step it was or would have been run
+    with), ``static_isolator_load`` and the modal analysis (``natural_frequency``, ``damping_ratio``,
+    ``mode_energy``, ``mechanism``), so an unstable or tipping case still shows its modes and preloads.
 
     Attributes (shapes; units):
         status: (C,) int8, one of OK, UNSTABLE, TIPPING, FAILED.
@@ -44,33 +64,37 @@ class SimulationResult:
         settling_time: (C,) time after the last stage move until the c.g. and every point stay within
             ``settle_tol`` of the final static position, s; a lower bound where ``settled`` is False.
         settled: (C,) bool.
-        natural_frequency: (C, 6) undamped natural frequencies, ascending, Hz (0 for a mechanism).
+        natural_frequency: (C, 6) undamped natural frequencies, ascending, Hz (0 for a mechanism, and for
+            a mode with negative stiffness: the modes a TIPPING case tips in).
         damping_ratio: (C, 6) modal damping ratio of each mode, 1.
         mode_energy: (C, 6, 6) kinetic-energy share of each DOF (last axis, DOF_NAMES) in each mode.
         mechanism: (C, 6) bool, True for a zero-stiffness (rigid-body) mode.
         transmissibility: (C, 3) |c.g. displacement / floor displacement| per axis at the floor
             frequency (sine floor motion only; 0 where there is none), 1.
         history: time histories of recorded cases, or None (see ``simulate(record=...)``).
+
+    The per-case outputs (every field but ``status``, ``message`` and ``history``) are listed, in this
+    order, by :data:`OUTPUT_FIELDS`, with their trailing shapes from :func:`output_shape`.
     """
 
     status: np.ndarray
     message: list[str]
-    dt: np.ndarray
-    peak_displacement: np.ndarray
-    peak_rotation: np.ndarray
-    peak_point_displacement: np.ndarray
-    peak_isolator_force: np.ndarray
-    static_isolator_load: np.ndarray
-    min_isolator_load: np.ndarray
-    rms_displacement: np.ndarray
-    final_displacement: np.ndarray
-    settling_time: np.ndarray
-    settled: np.ndarray
-    natural_frequency: np.ndarray
-    damping_ratio: np.ndarray
-    mode_energy: np.ndarray
-    mechanism: np.ndarray
-    transmissibility: np.ndarray
+    dt: np.ndarray = field(metadata=_output())
+    peak_displacement: np.ndarray = field(metadata=_output(len(AXES)))
+    peak_rotation: np.ndarray = field(metadata=_output(len(ROTATIONS)))
+    peak_point_displacement: np.ndarray = field(metadata=_output(POINT, len(AXES)))
+    peak_isolator_force: np.ndarray = field(metadata=_output(ISOLATOR, len(AXES)))
+    static_isolator_load: np.ndarray = field(metadata=_output(ISOLATOR))
+    min_isolator_load: np.ndarray = field(metadata=_output(ISOLATOR))
+    rms_displacement: np.ndarray = field(metadata=_output(len(AXES)))
+    final_displacement: np.ndarray = field(metadata=_output(len(DOF_NAMES)))
+    settling_time: np.ndarray = field(metadata=_output())
+    settled: np.ndarray = field(metadata=_output(flag=True))
+    natural_frequency: np.ndarray = field(metadata=_output(N_MODES))
+    damping_ratio: np.ndarray = field(metadata=_output(N_MODES))
+    mode_energy: np.ndarray = field(metadata=_output(N_MODES, len(DOF_NAMES)))
+    mechanism: np.ndarray = field(metadata=_output(N_MODES, flag=True))
+    transmissibility: np.ndarray = field(metadata=_output(len(AXES)))
     history: dict[str, np.ndarray] | None = field(default=None)
 
     @property
@@ -84,24 +108,22 @@ class SimulationResult:
     def to_dict(self, case: int = 0) -> dict:
         """One case's outputs as plain JSON-able Python (SI units, keys named for the quantity)."""
         out: dict = {"status": STATUS_NAMES[int(self.status[case])], "message": self.message[case]}
-        for name in (
-            "dt",
-            "peak_displacement",
-            "peak_rotation",
-            "peak_point_displacement",
-            "peak_isolator_force",
-            "static_isolator_load",
-            "min_isolator_load",
-            "rms_displacement",
-            "final_displacement",
-            "settling_time",
-            "settled",
-            "natural_frequency",
-            "damping_ratio",
-            "mode_energy",
-            "mechanism",
-            "transmissibility",
-        ):
+        for name in OUTPUT_FIELDS:
             v = np.asarray(getattr(self, name)[case])
             out[name] = None if v.dtype.kind == "f" and not np.all(np.isfinite(v)) else v.tolist()
         return out
+
+
+_OUTPUTS = {f.name: f.metadata for f in fields(SimulationResult) if "trailing" in f.metadata}
+OUTPUT_FIELDS: tuple[str, ...] = tuple(_OUTPUTS)
+"""Names of the per-case outputs of :class:`SimulationResult`, in declaration order (every field but
+``status``, ``message`` and ``history``)."""
+FLAG_FIELDS: frozenset[str] = frozenset(name for name, meta in _OUTPUTS.items() if meta["flag"])
+"""The yes/no (bool) outputs among :data:`OUTPUT_FIELDS`; the others are floats."""
+
+
+def output_shape(name: str, n_isolators: int, n_points: int) -> tuple[int, ...]:
+    """Shape of one case's value of the output ``name`` in a scene of ``n_isolators`` isolators and
+    ``n_points`` points of interest (``()`` for a scalar)."""
+    size = {ISOLATOR: int(n_isolators), POINT: int(n_points)}
+    return tuple(size[d] if isinstance(d, str) else int(d) for d in _OUTPUTS[name]["trailing"])

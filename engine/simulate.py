@@ -21,7 +21,7 @@ def check_choice(fidelity: str, integrator: str) -> None:
         raise SceneError("fidelity", f"must be one of {sorted(FIDELITIES)}, got {fidelity!r}")
     if integrator not in INTEGRATORS:
         raise SceneError("integrator", f"must be one of {sorted(INTEGRATORS)}, got {integrator!r}")
-    levels = INTEGRATORS[integrator].LEVELS
+    levels = INTEGRATORS[integrator].levels
     if fidelity not in levels:
         raise SceneError(
             "integrator", f"{integrator!r} integrates only the {', '.join(levels)} level, not {fidelity!r}"
@@ -67,7 +67,9 @@ def simulate(
 
     Returns:
         A ``SimulationResult``; cases that went or would go numerically unstable, tip over or fail
-        carry that status and a message, and NaN instead of numbers.
+        carry that status and a message, and NaN instead of their peaks, loads, RMS, final displacement,
+        settling time and transmissibility (the static preloads and the modes stay filled: see
+        ``SimulationResult``).
     """
     check_choice(fidelity, integrator)
     if not (np.isfinite(dt) and dt > 0):
@@ -111,10 +113,11 @@ def simulate(
     # stability guard (fixed-step integrators)
     steps = np.full(C, float(dt))
     n_div = np.ones(C, dtype=np.int64)
-    if integrator in ("euler", "rk4"):
-        n_div = stability.subdivisions(modal.state_matrix(M0, K0, C0), dt, integrator)
+    method = INTEGRATORS[integrator]
+    if method.guarded:
+        n_div = stability.subdivisions(modal.state_matrix(M0, K0, C0), dt, method.step_matrix)
         for M, K in placed:
-            more = stability.subdivisions(modal.state_matrix(M, K, C0), dt, integrator)
+            more = stability.subdivisions(modal.state_matrix(M, K, C0), dt, method.step_matrix)
             n_div = np.where((n_div == 0) | (more == 0), 0, np.maximum(n_div, more))
         fastest = md.frequency.max(axis=1)
         for c in range(C):
@@ -153,18 +156,14 @@ def simulate(
     )
     W = model.work(batch)
     run_status = status.copy()
-    mod = INTEGRATORS[integrator]
-    if integrator == "reference":
-        mod.run(P, level, steps, n_steps, O, W, run_status, messages=message)
-    else:
-        mod.run(P, level, steps, n_steps, O, W, run_status)
+    method.run(P, level, steps, n_steps, O, W, run_status, messages=message)
     for c in range(C):
         if status[c] != OK:
             continue
-        if run_status[c] == 1:
+        if run_status[c] == UNSTABLE:
             status[c] = UNSTABLE
             message[c] = f"diverged at t = {O.diverged[c]:.4g} s: " + _divergence_cause(integrator, steps[c])
-        elif run_status[c] == 3:
+        elif run_status[c] == FAILED:
             status[c] = FAILED
             message[c] = message[c] or (
                 "the mass matrix lost positive definiteness (the base turned "

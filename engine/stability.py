@@ -10,6 +10,8 @@ spectral radius of ``S`` stays at or below one. For one mode ``w``, damping rati
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 RADIUS_TOL = 1e-7
@@ -40,24 +42,12 @@ def rk4_limit(zeta: np.ndarray | float) -> np.ndarray:
 
 def step_matrix(A: np.ndarray, h: np.ndarray, integrator: str) -> np.ndarray:
     """One-step map (C, 12, 12) of ``integrator`` on ``x' = A x`` (A (C, 12, 12), 1/s), steps ``h`` (C,) s."""
-    h = np.asarray(h, dtype=float)[:, None, None]
-    n = A.shape[-1]
-    I = np.eye(n)
-    if integrator == "euler":
-        half = n // 2
-        A21, A22 = A[:, half:, :half], A[:, half:, half:]
-        Ih = np.eye(half)
-        S = np.empty_like(A)
-        S[:, :half, :half] = Ih + h * h * A21
-        S[:, :half, half:] = h * (Ih + h * A22)
-        S[:, half:, :half] = h * A21
-        S[:, half:, half:] = Ih + h * A22
-        return S
-    if integrator == "rk4":
-        Z = h * A
-        Z2 = Z @ Z
-        return I + Z + Z2 / 2 + Z2 @ Z / 6 + Z2 @ Z2 / 24
-    raise ValueError(f"integrator: no step matrix for {integrator!r}")
+    from isolab.engine.integrators import INTEGRATORS
+
+    method = INTEGRATORS.get(integrator)
+    if method is None or method.step_matrix is None:
+        raise ValueError(f"integrator: no step matrix for {integrator!r}")
+    return method.step_matrix(A, h)
 
 
 def spectral_radius(S: np.ndarray) -> np.ndarray:
@@ -66,20 +56,26 @@ def spectral_radius(S: np.ndarray) -> np.ndarray:
 
 
 def subdivisions(
-    A: np.ndarray, dt: float | np.ndarray, integrator: str, margin: float = 1.25, max_div: int = 4096
+    A: np.ndarray,
+    dt: float | np.ndarray,
+    step_map: Callable[[np.ndarray, np.ndarray], np.ndarray] | None,
+    margin: float = 1.25,
+    max_div: int = 4096,
 ) -> np.ndarray:
     """Smallest number of sub-steps (C,) int that makes ``dt`` / n stable with ``margin`` to spare.
 
+    ``A`` (C, 12, 12) 1/s is the state matrix, ``dt`` s the step, ``step_map(A, h)`` the method's
+    one-step map (an ``Integrator.step_matrix``; None for a method that needs no guard: one sub-step).
     The check runs at ``margin * dt / n`` so that the stage-dependent mass of the time-varying levels
     does not push a case over the edge. 0 where even ``max_div`` sub-steps are not enough.
     """
     C = A.shape[0]
     dt = np.broadcast_to(np.asarray(dt, dtype=float), (C,))
-    if integrator not in ("euler", "rk4"):
+    if step_map is None:
         return np.ones(C, dtype=np.int64)
 
     def stable(n: np.ndarray, cases: np.ndarray) -> np.ndarray:
-        S = step_matrix(A[cases], margin * dt[cases] / n, integrator)
+        S = step_map(A[cases], margin * dt[cases] / n)
         return spectral_radius(S) <= 1.0 + RADIUS_TOL
 
     out = np.zeros(C, dtype=np.int64)

@@ -20,7 +20,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from isolab.studies.store import Store, StudyNotFound, utc_now
+from isolab.studies.catalog import CATALOG_FILE, StudyNotFound, utc_now
+from isolab.studies.store import Store
 
 log = logging.getLogger(__name__)
 
@@ -33,8 +34,6 @@ cluster chunk by chunk (see :mod:`studies.fanout`), so a small study submitted w
 for one chunk, not for them to finish; more studies than this wait in the queue."""
 
 _PAGE = 1000
-CATALOG = "catalog.sqlite"
-"""File name of the store's catalog under its root (see :mod:`studies.store`)."""
 
 
 def _default_runner(study: Any, store: Store, client: Any, study_id: str, cancel: threading.Event) -> str:
@@ -139,7 +138,7 @@ class JobQueue:
         self._threads = []
 
     def _unfinished_ids(self) -> list[str]:
-        if self._store is None and not (self._root / CATALOG).exists():
+        if self._store is None and not (self._root / CATALOG_FILE).exists():
             return []  # no catalog yet: nothing to resume
         rows: list[dict[str, Any]] = []
         for status in UNFINISHED:

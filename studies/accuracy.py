@@ -6,13 +6,13 @@
 (:func:`pilot_cases`: the hardest case of each isolator type and the stiffest case, found by a cheap
 screening run) at the reference level (nonlinear model, adaptive reference integrator, at the finest
 candidate step: the "truth"), then tries the candidate fidelity/integrator/step triples in order of their
-estimated cost (:data:`STEP_COST`, stability sub-steps included) and takes the first whose largest error on
-the pilot cases stays inside the tolerance. A relative tolerance applies to every sizing output
-(:data:`SIZING_OUTPUTS`: peak c.g. and point displacement, peak rotation, peak isolator force, relative to
-the reference's largest of each; the smallest isolator load relative to the largest preload); an absolute
-one (metres) to the peak displacements. ``fast`` allows 5 %, ``balanced`` 0.5 %; ``reference`` runs the
-nonlinear level with the reference integrator at the requested step (default 1 ms). When no candidate meets
-the tolerance the reference itself is chosen. Choices are cached per study definition.
+estimated cost (:data:`studies.costs.STEP_COST`, stability sub-steps included) and takes the first whose
+largest error on the pilot cases stays inside the tolerance. A relative tolerance applies to every sizing
+output (:data:`SIZING_OUTPUTS`: peak c.g. and point displacement, peak rotation, peak isolator force,
+relative to the reference's largest of each; the smallest isolator load relative to the largest preload); an
+absolute one (metres) to the peak displacements. ``fast`` allows 5 %, ``balanced`` 0.5 %; ``reference`` runs
+the nonlinear level with the reference integrator at the requested step (default 1 ms). When no candidate
+meets the tolerance the reference itself is chosen. Choices are cached per study definition.
 
 **Measuring.** Every stored study carries the error its outputs carry: :func:`error_sample` picks a few
 cases (seeded, at least one per isolator type), :func:`sample_arrays` runs each with the study's model and
@@ -33,8 +33,10 @@ from typing import Any
 import numpy as np
 
 from isolab.engine import modal, model, simulate, stability
+from isolab.engine.integrators import INTEGRATORS
 from isolab.engine.results import OK, STATUS_NAMES
 from isolab.engine.scene import SceneBatch
+from isolab.studies.costs import step_cost
 from isolab.studies.dataset import result_arrays
 from isolab.studies.schema import ACCURACY_LEVELS, DEFAULT_DT, Simulation, parse_tolerance
 from isolab.studies.study import study_from_json
@@ -52,17 +54,6 @@ CANDIDATE_PAIRS = (
 )
 """Fidelity/integrator pairs the chooser tries, cheapest level first (the order breaks cost ties)."""
 REFERENCE_PAIR = ("nonlinear", "reference")
-STEP_COST: dict[tuple[str, str], float] = {
-    ("lti", "euler"): 0.65e-6,
-    ("lti", "exact"): 0.47e-6,
-    ("lti", "rk4"): 2.24e-6,
-    ("ltv", "euler"): 1.05e-6,
-    ("ltv", "rk4"): 3.28e-6,
-    ("nonlinear", "euler"): 1.10e-6,
-    ("nonlinear", "rk4"): 3.19e-6,
-}
-"""Engine time per step of one case, s, batched, on the article scene (``isolab bench accuracy`` prints the
-current figures). Only the ranking of candidates depends on it."""
 PILOT_MARGIN = 0.5
 """A candidate must meet this fraction of the tolerance on the pilot cases: the other cases of a study
 can err more (on the isolator-comparison example, before the fixed-step integrators split steps at profile
@@ -91,14 +82,7 @@ SIZING_OUTPUTS = (
     "min_isolator_load",
 )
 """Outputs a relative tolerance applies to."""
-ESTIMATED_OUTPUTS = (
-    "peak_displacement",
-    "peak_point_displacement",
-    "peak_rotation",
-    "peak_isolator_force",
-    "min_isolator_load",
-    "settling_time",
-)
+ESTIMATED_OUTPUTS = (*SIZING_OUTPUTS, "settling_time")
 """Outputs whose error every stored study carries (point displacement only where the scene has points)."""
 OUTPUT_UNITS = {name: ("s" if name == "settling_time" else "1") for name in ESTIMATED_OUTPUTS}
 OUTPUT_MEANING = {
@@ -244,8 +228,8 @@ def choose_for_batch(
     stays within ``margin`` times ``tolerance`` (relative, 1, or absolute on peak displacement, m).
 
     The truth is the nonlinear level with the reference integrator at the smallest of ``steps``.
-    Candidates are tried in order of estimated cost (:data:`STEP_COST` times the steps each case takes,
-    stability sub-steps included; a candidate the guard would refuse under ``auto_step=False`` is
+    Candidates are tried in order of estimated cost (:func:`studies.costs.step_cost` times the steps each
+    case takes, stability sub-steps included; a candidate the guard would refuse under ``auto_step=False`` is
     skipped). When none meets the tolerance the reference itself is returned.
     """
     steps = tuple(sorted(float(s) for s in steps))
@@ -280,15 +264,11 @@ def choose_for_batch(
     candidates = []
     for rank, (fid, integ) in enumerate(pairs):
         for dt in steps:
-            n_div = (
-                stability.subdivisions(A, dt, integ)
-                if integ in ("euler", "rk4")
-                else np.ones(len(duration), dtype=np.int64)
-            )
+            n_div = stability.subdivisions(A, dt, INTEGRATORS[integ].step_matrix)
             if np.any(n_div == 0) or (not auto_step and np.any(n_div > 1)):
                 continue  # the guard would refuse a case
             n_steps = np.rint(duration / (dt / n_div))
-            cost = float(np.sum(n_steps) * STEP_COST[(fid, integ)])
+            cost = float(np.sum(n_steps) * step_cost(fid, integ))
             candidates.append((cost, rank, -dt, fid, integ, dt, float(dt / n_div.max())))
     candidates.sort()
     rows: list[dict[str, Any]] = []

@@ -29,7 +29,7 @@ import numpy as np
 import xarray as xr
 
 from isolab.studies.store import NETCDF_LOCK, Store
-from isolab.studies.units import UREG, dimension_of, quantity_problem, to_si
+from isolab.studies.units import dimension_of, quantity_problem, to_si
 
 MAX_CASE_ROWS = 100_000
 """Most rows one page of the case table holds."""
@@ -273,8 +273,6 @@ def _filter_value(table: CaseColumns, column: str, op: str, raw: str) -> Any:
         if problem is not None:
             raise CaseQueryError("filter", f"{where}: {problem}")
         dimension = dimension_of(table.units[column])
-        if table.units[column] == "N":
-            return _force(raw, where)
         if dimension is None:
             raise CaseQueryError(
                 "filter", f"{where}: {column} has unit {table.units[column]!r}; give a number"
@@ -284,14 +282,6 @@ def _filter_value(table: CaseColumns, column: str, op: str, raw: str) -> Any:
         except ValueError as err:
             raise CaseQueryError("filter", str(err)) from None
     raise CaseQueryError("filter", f"{where}: {column} holds numbers; give a number (SI, or with a unit)")
-
-
-def _force(raw: str, where: str) -> float:
-    try:
-        q: Any = UREG.Quantity(raw)
-        return float(q.to("N").magnitude)
-    except Exception:  # pint raises several kinds of errors on text it cannot read
-        raise CaseQueryError("filter", f"{where}: cannot read {raw!r} as a force") from None
 
 
 def _split_clauses(text: str) -> list[str]:

@@ -27,34 +27,22 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from isolab.engine.results import DOF_NAMES, FAILED, OK, STATUS_NAMES, SimulationResult
+from isolab.engine.results import (
+    AXES,
+    DOF_NAMES,
+    FAILED,
+    FLAG_FIELDS,
+    N_MODES,
+    OK,
+    OUTPUT_FIELDS,
+    ROTATIONS,
+    STATUS_NAMES,
+    SimulationResult,
+    output_shape,
+)
 from isolab.studies.designs import Design
 
-AXES = ("x", "y", "z")
-ROTATIONS = ("rx", "ry", "rz")
-N_MODES = 6
 CONVENTIONS = "CF-1.10"
-
-# Per-case fields of SimulationResult, as carried in a chunk: name -> (trailing shape as a function of
-# (n_isolators, n_points), "f" float | "b" bool).
-_RESULT_FIELDS: dict[str, tuple[Any, str]] = {
-    "dt": (lambda n, p: (), "f"),
-    "peak_displacement": (lambda n, p: (3,), "f"),
-    "peak_rotation": (lambda n, p: (3,), "f"),
-    "peak_point_displacement": (lambda n, p: (p, 3), "f"),
-    "peak_isolator_force": (lambda n, p: (n, 3), "f"),
-    "static_isolator_load": (lambda n, p: (n,), "f"),
-    "min_isolator_load": (lambda n, p: (n,), "f"),
-    "rms_displacement": (lambda n, p: (3,), "f"),
-    "final_displacement": (lambda n, p: (6,), "f"),
-    "settling_time": (lambda n, p: (), "f"),
-    "settled": (lambda n, p: (), "b"),
-    "natural_frequency": (lambda n, p: (N_MODES,), "f"),
-    "damping_ratio": (lambda n, p: (N_MODES,), "f"),
-    "mode_energy": (lambda n, p: (N_MODES, 6), "f"),
-    "mechanism": (lambda n, p: (N_MODES,), "b"),
-    "transmissibility": (lambda n, p: (3,), "f"),
-}
 
 # Dataset variables: name -> (per-case dims, units, long_name, "f" float | "b" yes/no).
 _VARIABLES: dict[str, tuple[tuple[str, ...], str, str, str]] = {
@@ -96,15 +84,16 @@ _BOOL_FLAGS = {"flag_values": np.array([0, 1], dtype=np.int8), "flag_meanings": 
 def result_arrays(result: SimulationResult) -> dict[str, np.ndarray]:
     """The per-case outputs of ``result`` as a dict of plain numpy arrays (no pickled objects).
 
-    Keys: ``status`` (int8), ``message`` (unicode array) and every field of ``_RESULT_FIELDS``.
+    Keys: ``status`` (int8), ``message`` (unicode array) and every per-case output
+    (:data:`~isolab.engine.results.OUTPUT_FIELDS`: bool for the yes/no ones, float64 for the others).
     Time histories are not carried.
     """
     out: dict[str, np.ndarray] = {
         "status": np.asarray(result.status, dtype=np.int8),
         "message": np.asarray([str(m) for m in result.message], dtype=np.str_).reshape(-1),
     }
-    for name, (_, kind) in _RESULT_FIELDS.items():
-        out[name] = np.asarray(getattr(result, name), dtype=bool if kind == "b" else np.float64)
+    for name in OUTPUT_FIELDS:
+        out[name] = np.asarray(getattr(result, name), dtype=bool if name in FLAG_FIELDS else np.float64)
     return out
 
 
@@ -147,9 +136,11 @@ def from_chunks(
     status = np.full(n, FAILED, dtype=np.int8)
     message = [""] * n
     fields: dict[str, np.ndarray] = {}
-    for name, (shape, kind) in _RESULT_FIELDS.items():
-        trail = shape(n_isolators, n_points)
-        fields[name] = np.zeros((n, *trail), dtype=bool) if kind == "b" else np.full((n, *trail), np.nan)
+    for name in OUTPUT_FIELDS:
+        trail = output_shape(name, n_isolators, n_points)
+        fields[name] = (
+            np.zeros((n, *trail), dtype=bool) if name in FLAG_FIELDS else np.full((n, *trail), np.nan)
+        )
 
     for k, idx in enumerate(chunks):
         idx = np.asarray(idx, dtype=np.int64)
@@ -164,10 +155,10 @@ def from_chunks(
         status[idx] = st
         for i, m in zip(idx, np.asarray(arrays["message"]).reshape(-1).tolist(), strict=True):
             message[int(i)] = str(m)
-        for name, (shape, _) in _RESULT_FIELDS.items():
+        for name in OUTPUT_FIELDS:
             if name in arrays:
                 v = np.asarray(arrays[name])
-                want = (len(idx), *shape(n_isolators, n_points))
+                want = (len(idx), *output_shape(name, n_isolators, n_points))
                 if v.shape != want:
                     raise ValueError(f"parts[{k}]: {name} has shape {v.shape}, expected {want}")
                 fields[name][idx] = v

@@ -223,6 +223,12 @@ def stored_definition(study: Study) -> dict[str, Any]:
     return study.model_dump(mode="json", by_alias=True, exclude_none=True)
 
 
+def definition_json(row: dict[str, Any]) -> str:
+    """The stored definition of a catalog row as canonical JSON (sorted keys): the key that
+    :func:`studies.study.study_from_json` caches a parsed study under."""
+    return json.dumps(row["definition"], sort_keys=True)
+
+
 def study_of(row: dict[str, Any]) -> Study:
     """The study object of a catalog row (parsed once per definition and process)."""
-    return study_from_json(json.dumps(row["definition"], sort_keys=True))
+    return study_from_json(definition_json(row))

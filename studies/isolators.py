@@ -45,6 +45,12 @@ PRESETS: dict[str, IsolatorPreset] = {
 ratio): active ~1 Hz, air ~3 Hz, elastomer ~10 Hz, as quoted for precision machine bases."""
 
 
+def mount_labels(count: int) -> list[str]:
+    """Labels of a scene's ``count`` isolators, in batch order: ``mount_0``, ``mount_1``, ... (the
+    ``isolator`` coordinate of a study's dataset and the keys of its per-isolator outputs)."""
+    return [f"mount_{j}" for j in range(int(count))]
+
+
 class CollinearIsolatorsError(ValueError):
     """The mounts lie on one line (or at one point): they cannot carry a rigid base."""
 

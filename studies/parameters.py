@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from isolab.engine.results import AXES
 from isolab.studies.isolators import PRESETS
 from isolab.studies.schema import (
     MoveSegment,
@@ -38,7 +39,6 @@ from isolab.studies.schema import (
 )
 from isolab.studies.units import si_unit
 
-AXES = ("x", "y", "z")
 CATEGORICAL = "categorical"
 
 # last key -> (dimension, lower bound: "gt0" | "ge0" | None)

@@ -52,41 +52,15 @@ from isolab.studies.accuracy import (
     resolved_definition,
     sample_arrays,
 )
+from isolab.studies.costs import estimate_seconds_per_case
 from isolab.studies.dataset import add_error_estimate, from_chunks, to_dataset
 from isolab.studies.fanout import TASK_RETRIES, choose_chunk_size, plan_chunks, run_chunks
 from isolab.studies.store import Store, copy_atomic, utc_now
-from isolab.studies.study import study_from_json
+from isolab.studies.study import isolator_names, study_from_json
 
 log = logging.getLogger(__name__)
 
 Progress = Callable[[int, int], None]
-
-# Engine cost model for the chunk size: seconds per case = fixed cost + steps x cost per step, measured
-# on one core for the article's scene (`python -m benchmarks kernels`: euler 0.6-1.0 us/step, rk4 1.9-3.0,
-# exact 0.4 plus ~1 ms per case for its step maps); fidelity matters little.
-_CASE_OVERHEAD_S = 1e-3
-_STEP_COST_S = {"euler": 0.9e-6, "rk4": 2.7e-6, "exact": 0.5e-6, "reference": 25e-6}
-_FIDELITY_FACTOR = {"lti": 1.0, "ltv": 1.0, "nonlinear": 1.2}
-
-
-def estimate_seconds_per_case(study: Any) -> float:
-    """Rough engine time per case, s: a fixed cost plus (duration / dt) steps at a per-step cost that
-    depends on the integrator and fidelity. Only used to size chunks, so a factor of a few is fine."""
-    sim = study.simulation
-    steps = max(1.0, _duration(study) / float(sim.dt if sim.dt is not None else 1e-3))
-    per_step = _STEP_COST_S.get(sim.integrator, 25e-6) * _FIDELITY_FACTOR.get(sim.fidelity, 1.2)
-    return _CASE_OVERHEAD_S + steps * per_step
-
-
-def _duration(study: Any) -> float:
-    """Simulated time of the study's first case, s (``duration: auto`` depends on the motion)."""
-    d = study.simulation.duration
-    if isinstance(d, int | float):
-        return float(d)
-    try:
-        return float(np.max(study.batch(np.array([0])).duration))
-    except Exception:  # sizing only: a case that cannot be built fails in its own chunk
-        return 10.0
 
 
 def _worker_count(client: Any) -> int:
@@ -99,10 +73,10 @@ def _worker_count(client: Any) -> int:
 
 
 def study_labels(study: Any) -> tuple[list[str], list[str]]:
-    """(isolator names, point names) of a study's scene: ``mount_<j>`` in the scene's mount order (a
-    layout's order is (-x,-y), (+x,-y), (+x,+y), (-x,+y)) and the points' own names."""
+    """(isolator names, point names) of a study's scene: :func:`studies.study.isolator_names` and the
+    points' own names."""
     scene = study.scene
-    return [f"mount_{j}" for j in range(scene.isolators.count)], [str(p) for p in scene.points]
+    return isolator_names(scene), [str(p) for p in scene.points]
 
 
 def isolator_types(study: Any) -> list[str]:
@@ -188,7 +162,7 @@ def run_study(
             run_json, run = definition_json, study
         else:
             run_json = json.dumps(resolved_definition(study, choice))
-            run = type(study).model_validate(json.loads(run_json))
+            run = study_from_json(run_json)
             store.update(study_id, fidelity=choice.fidelity, integrator=choice.integrator, dt=choice.dt)
         chunks = store.load_chunk_plan(study_id)
         if chunks is None or int(sum(len(c) for c in chunks)) != n_cases:

@@ -6,8 +6,7 @@ single scene plus per-case ``overrides``: arrays of the continuous values its pa
 canonical leaf path (see :mod:`studies.parameters`), so thousands of cases need no per-case validation.
 
 What the builder works out:
-- machine mass, inertia and c.g. (from a block: ``m = rho lx ly lz``, ``I = m diag(ly^2+lz^2,
-  lx^2+lz^2, lx^2+ly^2) / 12``, c.g. at the block's centre);
+- machine mass, inertia and c.g. (from a block: :func:`studies.block.block_properties`);
 - mount positions (a layout puts four mounts at ``cg_x +- span_x/2, cg_y +- span_y/2, cg_z - height``
   around the machine's c.g., order :data:`studies.schema.LAYOUT_ORDER`);
 - the static load of each mount under the total weight of machine and stages at home
@@ -23,7 +22,9 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 
 from isolab.engine import profiles
+from isolab.engine.results import AXES
 from isolab.engine.scene import GRAVITY, SceneBatch, SceneError
+from isolab.studies.block import MAX_TRAVEL, beyond_travel, block_properties, travel_bound
 from isolab.studies.isolators import (
     CollinearIsolatorsError,
     damping_from_ratio,
@@ -35,7 +36,6 @@ from isolab.studies.schema import (
     AUTO_DURATION_CAP,
     AUTO_DURATION_DECAYS,
     AUTO_DURATION_MARGIN,
-    MAX_TRAVEL,
     MoveSegment,
     ScanProfile,
     Scene,
@@ -136,13 +136,8 @@ def _machine(cases: _Cases) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndar
         size = cases.vec("machine.block.size", lambda s: s.machine.block.size)
         rho = cases.get("machine.block.density", lambda s: s.machine.block.density)
         corner = cases.vec("machine.block.corner", lambda s: s.machine.block.corner)
-        mass = rho * size.prod(axis=-1)
-        sq = size**2
-        inertia = np.zeros((c, 3, 3))
-        inertia[:, 0, 0] = mass * (sq[:, 1] + sq[:, 2]) / 12.0
-        inertia[:, 1, 1] = mass * (sq[:, 0] + sq[:, 2]) / 12.0
-        inertia[:, 2, 2] = mass * (sq[:, 0] + sq[:, 1]) / 12.0
-        return mass, inertia, corner + size / 2.0, size
+        mass, inertia, cg = block_properties(size, rho, corner)
+        return mass, inertia, cg, size
     mass = cases.get("machine.mass", lambda s: s.machine.mass)
     cg = cases.vec("machine.cg", lambda s: s.machine.cg)
     if m0.inertia is not None:
@@ -372,7 +367,7 @@ def build_batch(
     f_v, f_h, zeta, skyhook = _mount_values(cases, n)
     k_explicit = np.full((c, n, 3), np.nan)
     c_explicit = np.full((c, n, 3), np.nan)
-    for a, axis in enumerate("xyz"):
+    for a, axis in enumerate(AXES):
         k_explicit[:, :, a] = cases.get(
             f"isolators.k.{axis}", lambda s, axis=axis: _axis(s.isolators.k, axis)
         )[:, None]
@@ -413,10 +408,8 @@ def build_batch(
     pieces = _profiles(cases)
     if m:
         reach = np.abs(pieces.s).max(axis=-1)  # (C, m): farthest from home (moves are monotonic in a piece)
-        bound = (
-            np.einsum("cmi,ci->cm", np.abs(stage_axis), block_size) if block_size is not None else MAX_TRAVEL
-        )
-        over = reach > np.broadcast_to(bound, reach.shape) * (1.0 + 1e-12)
+        bound = travel_bound(stage_axis, block_size[:, None, :] if block_size is not None else None)
+        over = beyond_travel(reach, bound)
         if over.any():
             i = int(np.flatnonzero(over.any(axis=0))[0])
             _fail(

@@ -31,6 +31,8 @@ from pydantic import (
     model_validator,
 )
 
+from isolab.engine.results import AXES
+from isolab.studies.block import MAX_TRAVEL, beyond_travel, block_properties, travel_bound
 from isolab.studies.isolators import PRESETS, CollinearIsolatorsError, IsolatorPreset, load_share
 from isolab.studies.units import (
     Acceleration,
@@ -46,11 +48,10 @@ from isolab.studies.units import (
     Stiffness,
     Time,
     Velocity,
+    si_unit,
     to_si,
 )
 
-MAX_TRAVEL = 20.0
-"""Largest stage travel accepted when the machine's size is not known, m."""
 AUTO_DURATION_MARGIN = 3.0
 """``duration: auto`` simulates at least this long after the last stage move ends, s."""
 AUTO_DURATION_DECAYS = 9.2
@@ -93,8 +94,9 @@ reach kHz, and they shift with the stages' positions faster than the stability g
 # from: within them every result is finite and bounded, or flagged unstable/tipping, or refused.
 
 
-def _within(low: float, high: float, unit: str, why: str) -> AfterValidator:
-    """Refuse a value outside [low, high] (SI), saying ``why`` the range is what it is."""
+def _within(low: float, high: float, dimension: str, why: str) -> AfterValidator:
+    """Refuse a value of ``dimension`` outside [low, high] (SI), saying ``why`` the range is what it is."""
+    unit = si_unit(dimension)
 
     def check(value: float) -> float:
         if not low <= value <= high:
@@ -105,9 +107,10 @@ def _within(low: float, high: float, unit: str, why: str) -> AfterValidator:
     return AfterValidator(check)
 
 
-def _tested_range(low: float, high: float, unit: str) -> AfterValidator:
-    """Refuse a value outside [low, high] (SI): the range tests/engine/test_extremes.py covers."""
-    return _within(low, high, unit, "the range the engine is tested over")
+def _tested_range(low: float, high: float, dimension: str) -> AfterValidator:
+    """Refuse a value of ``dimension`` outside [low, high] (SI): the range tests/engine/test_extremes.py
+    covers."""
+    return _within(low, high, dimension, "the range the engine is tested over")
 
 
 PresetName = Literal["active", "air", "elastomer"]
@@ -116,34 +119,38 @@ Name = Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$", max_length=64)]
 paths and dataset coordinates)."""
 
 PositiveLength = Annotated[Length, Field(gt=0)]
-BaseSize = Annotated[Length, Field(gt=0), _tested_range(MIN_BASE_SIZE, MAX_BASE_SIZE, "m")]
-Span = Annotated[Length, Field(gt=0), _tested_range(MIN_SPAN, MAX_SPAN, "m")]
-MachineMass = Annotated[Mass, Field(gt=0), _tested_range(MIN_MACHINE_MASS, MAX_MACHINE_MASS, "kg")]
-StageMass = Annotated[Mass, Field(gt=0), _tested_range(MIN_STAGE_MASS, MAX_STAGE_MASS, "kg")]
+BaseSize = Annotated[Length, Field(gt=0), _tested_range(MIN_BASE_SIZE, MAX_BASE_SIZE, "length")]
+Span = Annotated[Length, Field(gt=0), _tested_range(MIN_SPAN, MAX_SPAN, "length")]
+MachineMass = Annotated[Mass, Field(gt=0), _tested_range(MIN_MACHINE_MASS, MAX_MACHINE_MASS, "mass")]
+StageMass = Annotated[Mass, Field(gt=0), _tested_range(MIN_STAGE_MASS, MAX_STAGE_MASS, "mass")]
 PositiveTime = Annotated[Time, Field(gt=0)]
 NonNegativeTime = Annotated[Time, Field(ge=0)]
-StageVelocity = Annotated[Velocity, Field(gt=0), _tested_range(MIN_STAGE_VELOCITY, MAX_STAGE_VELOCITY, "m/s")]
-StageAcceleration = Annotated[
-    Acceleration, Field(gt=0), _tested_range(MIN_STAGE_ACCELERATION, MAX_STAGE_ACCELERATION, "m/s^2")
+StageVelocity = Annotated[
+    Velocity, Field(gt=0), _tested_range(MIN_STAGE_VELOCITY, MAX_STAGE_VELOCITY, "velocity")
 ]
-StageJerk = Annotated[Jerk, Field(gt=0), _tested_range(MIN_STAGE_JERK, MAX_STAGE_JERK, "m/s^3")]
+StageAcceleration = Annotated[
+    Acceleration, Field(gt=0), _tested_range(MIN_STAGE_ACCELERATION, MAX_STAGE_ACCELERATION, "acceleration")
+]
+StageJerk = Annotated[Jerk, Field(gt=0), _tested_range(MIN_STAGE_JERK, MAX_STAGE_JERK, "jerk")]
 MountFrequency = Annotated[
-    Frequency, Field(gt=0), _tested_range(MIN_MOUNT_FREQUENCY, MAX_MOUNT_FREQUENCY, "Hz")
+    Frequency, Field(gt=0), _tested_range(MIN_MOUNT_FREQUENCY, MAX_MOUNT_FREQUENCY, "frequency")
 ]
 NonNegativeFrequency = Annotated[Frequency, Field(ge=0)]
 NonNegativeStiffness = Annotated[Stiffness, Field(ge=0)]
 NonNegativeDamping = Annotated[Damping, Field(ge=0)]
 PositiveDensity = Annotated[Density, Field(gt=0)]
 PositiveInertia = Annotated[Inertia, Field(gt=0)]
-DampingRatio = Annotated[Dimensionless, Field(ge=0), _tested_range(0.0, MAX_DAMPING_RATIO, "")]
+DampingRatio = Annotated[Dimensionless, Field(ge=0), _tested_range(0.0, MAX_DAMPING_RATIO, "dimensionless")]
 Coordinate = Annotated[
-    Length, _within(-MAX_COORDINATE, MAX_COORDINATE, "m", "coordinates of a machine on its floor")
+    Length, _within(-MAX_COORDINATE, MAX_COORDINATE, "length", "coordinates of a machine on its floor")
 ]
 Position = tuple[Coordinate, Coordinate, Coordinate]
 """A position [x, y, z] in the floor frame, m, each coordinate within :data:`MAX_COORDINATE`."""
 FloorDisplacement = Annotated[
     Length,
-    _within(-MAX_FLOOR_DISPLACEMENT, MAX_FLOOR_DISPLACEMENT, "m", "a floor vibration, not an earthquake"),
+    _within(
+        -MAX_FLOOR_DISPLACEMENT, MAX_FLOOR_DISPLACEMENT, "length", "a floor vibration, not an earthquake"
+    ),
 ]
 
 
@@ -173,11 +180,10 @@ class Block(_Model):
     corner: Position = Field((0.0, 0.0, 0.0), description="position of the block's minimum corner, m")
 
     def properties(self) -> tuple[float, np.ndarray, np.ndarray]:
-        """Mass (kg), inertia about the c.g. (3, 3) kg m^2 and c.g. (3,) m of the block."""
-        lx, ly, lz = self.size
-        m = self.density * lx * ly * lz
-        inertia = np.diag([m * (ly**2 + lz**2), m * (lx**2 + lz**2), m * (lx**2 + ly**2)]) / 12.0
-        return m, inertia, np.asarray(self.corner, dtype=float) + np.asarray(self.size, dtype=float) / 2.0
+        """Mass (kg), inertia about the c.g. (3, 3) kg m^2 and c.g. (3,) m of the block
+        (:func:`studies.block.block_properties`)."""
+        mass, inertia, cg = block_properties(self.size, self.density, self.corner)
+        return float(mass), inertia, cg
 
 
 class Machine(_Model):
@@ -312,7 +318,7 @@ class Layout(_Model):
 
     span_x: Span = Field(description="distance between the mounts along X, m")
     span_y: Span = Field(description="distance between the mounts along Y, m")
-    height: Annotated[Length, _tested_range(-MAX_MOUNT_HEIGHT, MAX_MOUNT_HEIGHT, "m")] = Field(
+    height: Annotated[Length, _tested_range(-MAX_MOUNT_HEIGHT, MAX_MOUNT_HEIGHT, "length")] = Field(
         description="how far the machine's c.g. sits above the mounts, m"
     )
 
@@ -533,7 +539,7 @@ class RecordedDisplacement(_Model):
 
     @model_validator(mode="after")
     def _equal_lengths(self) -> RecordedDisplacement:
-        lengths = {a: len(getattr(self, a)) for a in "xyz" if getattr(self, a) is not None}
+        lengths = {a: len(getattr(self, a)) for a in AXES if getattr(self, a) is not None}
         if not lengths:
             raise ValueError("floor.recorded.displacement: give at least one of x, y, z")
         if len(set(lengths.values())) != 1:
@@ -544,8 +550,8 @@ class RecordedDisplacement(_Model):
 
     def samples(self) -> np.ndarray:
         """(3, F) displacement, m."""
-        n = next(len(getattr(self, a)) for a in "xyz" if getattr(self, a) is not None)
-        return np.array([getattr(self, a) if getattr(self, a) is not None else np.zeros(n) for a in "xyz"])
+        n = next(len(getattr(self, a)) for a in AXES if getattr(self, a) is not None)
+        return np.array([getattr(self, a) if getattr(self, a) is not None else np.zeros(n) for a in AXES])
 
 
 class RecordedFloor(_Model):
@@ -643,7 +649,7 @@ class Simulation(_Model):
     integrator: Literal["euler", "rk4", "exact", "reference"] | None = Field(
         None, description=f"time integrator (default {DEFAULT_INTEGRATOR}); not with accuracy/tolerance"
     )
-    dt: Annotated[Time, Field(gt=0), _tested_range(MIN_DT, MAX_DT, "s")] | None = Field(
+    dt: Annotated[Time, Field(gt=0), _tested_range(MIN_DT, MAX_DT, "time")] | None = Field(
         None,
         description=f"time step, s ({MIN_DT * 1e3:g} to {MAX_DT * 1e3:g} ms; default "
         f"{DEFAULT_DT * 1e3:g} ms); with an accuracy request the largest step it may pick",
@@ -798,13 +804,13 @@ class Scene(_Model):
         machine = info.data.get("machine")
         block = machine.block if machine is not None else None
         for i, s in enumerate(stages):
+            bound = float(travel_bound(s.axis, block.size if block is not None else None))
             if block is not None:
-                bound = float(np.dot(np.abs(s.axis), block.size))
                 where = f"the base's {bound:.6g} m extent along the stage axis"
             else:
-                bound, where = MAX_TRAVEL, f"{MAX_TRAVEL:g} m"
+                where = f"{MAX_TRAVEL:g} m"
             far = profile_excursion(s.profile)
-            if far > bound * (1.0 + 1e-12):
+            if beyond_travel(far, bound):
                 raise ValueError(
                     f"stages[{i}].profile.travel: the stage would travel {far:.6g} m from home, "
                     f"more than {where}"

@@ -1,4 +1,5 @@
-"""Where studies live: one netCDF file per study plus a SQLite catalog to find them.
+"""Where studies live: the study files (one netCDF dataset per study, chunk results while it runs) beside
+the SQLite catalog that finds them (:mod:`isolab.studies.catalog`).
 
 Layout under ``root``::
 
@@ -12,8 +13,10 @@ path, so no path outside ``root`` can be named. Files are written atomically: to
 the same directory, flushed and fsynced, then renamed over the target with ``os.replace``; a write that
 fails half-way leaves the previous file untouched and removes its temporary file.
 
-The catalog opens a fresh connection per call, so one :class:`Store` can be shared between threads;
-listing and filtering run in SQL and never open a netCDF file.
+:class:`Store` keeps both: the files itself, the catalog through a :class:`~isolab.studies.catalog.Catalog`
+(whose methods it passes on), so one object names a study's row and its files. Both open files per call,
+so one :class:`Store` can be shared between threads; listing and filtering run in SQL and never open a
+netCDF file.
 
 Writing and reading chunks and writing datasets record their durations in the timing journal when one is
 configured (see :func:`isolab.studies.timings.record_timing`).
@@ -23,16 +26,11 @@ from __future__ import annotations
 
 import builtins
 import contextlib
-import datetime as _dt
-import json
 import os
-import re
 import shutil
-import sqlite3
 import tempfile
 import threading
 import time
-import uuid
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -40,85 +38,31 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from isolab.studies.catalog import (
+    CATALOG_FILE,
+    STATUSES,
+    STUDY_ID,
+    Catalog,
+    StudyNotFound,
+    check_id,
+    utc_now,
+)
 from isolab.studies.dataset import netcdf_encoding
 from isolab.studies.timings import record_timing
 
-STATUSES = ("queued", "running", "done", "failed", "cancelled")
-_ID = re.compile(r"[0-9a-f]{32}")
-_JSON_COLUMNS = ("parameters", "isolator_types", "definition")
-_COLUMNS = (
-    "id",
-    "name",
-    "status",
-    "created",
-    "started",
-    "finished",
-    "n_cases",
-    "n_done",
-    "n_failed",
-    "parameters",
-    "isolator_types",
-    "fidelity",
-    "integrator",
-    "dt",
-    "error",
-    "definition",
-)
-_UPDATABLE = frozenset(_COLUMNS) - {"id", "created"}
-
-_SCHEMA = """
-CREATE TABLE IF NOT EXISTS studies (
-    id TEXT PRIMARY KEY,
-    name TEXT NOT NULL,
-    status TEXT NOT NULL CHECK (status IN ('queued', 'running', 'done', 'failed', 'cancelled')),
-    created TEXT NOT NULL,
-    started TEXT,
-    finished TEXT,
-    n_cases INTEGER NOT NULL,
-    n_done INTEGER NOT NULL DEFAULT 0,
-    n_failed INTEGER NOT NULL DEFAULT 0,
-    parameters TEXT NOT NULL DEFAULT '[]',
-    isolator_types TEXT NOT NULL DEFAULT '[]',
-    fidelity TEXT,
-    integrator TEXT,
-    dt REAL,
-    error TEXT,
-    definition TEXT NOT NULL
-);
-CREATE INDEX IF NOT EXISTS studies_created ON studies (created);
-CREATE INDEX IF NOT EXISTS studies_name ON studies (name);
-CREATE INDEX IF NOT EXISTS studies_status ON studies (status);
-"""
-
-
-class StudyNotFound(KeyError):
-    """No study with this id in the catalog (or no dataset file for it)."""
-
-
-def check_id(study_id: str) -> str:
-    """``study_id`` if it is 32 lowercase hex digits, else ValueError (it never reaches a path)."""
-    if not isinstance(study_id, str) or not _ID.fullmatch(study_id):
-        raise ValueError(f"study_id: {study_id!r} is not a study id (32 lowercase hex digits)")
-    return study_id
-
-
-def utc_now() -> str:
-    """Current time, ISO 8601 UTC with microseconds (``2025-01-31T12:00:00.000000+00:00``)."""
-    return _dt.datetime.now(_dt.UTC).isoformat(timespec="microseconds")
-
-
-def _utc_text(value: str | _dt.datetime, field: str) -> str:
-    """A time as the catalog stores it (ISO 8601 UTC, microseconds); naive times are taken as UTC."""
-    if isinstance(value, str):
-        try:
-            value = _dt.datetime.fromisoformat(value.replace("Z", "+00:00"))
-        except ValueError:
-            raise ValueError(f"{field}: {value!r} is not an ISO 8601 time") from None
-    if not isinstance(value, _dt.datetime):
-        raise ValueError(f"{field}: expected an ISO 8601 time or datetime, got {type(value).__name__}")
-    if value.tzinfo is None:
-        value = value.replace(tzinfo=_dt.UTC)
-    return value.astimezone(_dt.UTC).isoformat(timespec="microseconds")
+__all__ = [
+    "NETCDF_LOCK",
+    "STATUSES",
+    "Store",
+    "StudyNotFound",
+    "atomic_path",
+    "check_id",
+    "copy_atomic",
+    "utc_now",
+    "write_netcdf",
+]
+"""The catalog's names callers reach through the store (``STATUSES``, ``StudyNotFound``, ``check_id``,
+``utc_now``) live in :mod:`isolab.studies.catalog`."""
 
 
 def _fsync_dir(path: Path) -> None:
@@ -176,197 +120,50 @@ def copy_atomic(source: str | Path, target: str | Path) -> Path:
 
 
 class Store:
-    """netCDF files and the SQLite catalog under ``root`` (created if missing)."""
+    """The study files under ``root`` and, through :attr:`catalog`, the SQLite catalog beside them."""
 
     def __init__(self, root: str | Path, *, catalog: bool = True):
         """Open (or create) the store under ``root``. With ``catalog=False`` only the files are used (a
         Dask worker that saves chunks and writes datasets): nothing is created, the catalog is not
-        opened."""
+        opened (:attr:`catalog` is None)."""
         self.root = Path(root).resolve()
         self.studies_dir = self.root / "studies"
-        self.catalog_path = self.root / "catalog.sqlite"
+        self.catalog_path = self.root / CATALOG_FILE
+        self.catalog: Catalog | None = None
         if not catalog:
             return
         self.studies_dir.mkdir(parents=True, exist_ok=True)
-        with self._connect() as con:
-            con.execute("PRAGMA journal_mode=WAL")
-            con.executescript(_SCHEMA)
-            have = {r["name"] for r in con.execute("PRAGMA table_info(studies)")}
-            if "dt" not in have:  # a catalog written before the step was recorded
-                con.execute("ALTER TABLE studies ADD COLUMN dt REAL")
+        self.catalog = Catalog(self.catalog_path)
 
     # ------------------------------------------------------------------------------------- catalog
-    @contextlib.contextmanager
-    def _connect(self) -> Iterator[sqlite3.Connection]:
-        con = sqlite3.connect(self.catalog_path, timeout=30.0)
-        con.row_factory = sqlite3.Row
-        try:
-            con.execute("PRAGMA busy_timeout=30000")
-            with con:  # commits, or rolls back on error
-                yield con
-        finally:
-            con.close()
+    def _rows(self) -> Catalog:
+        if self.catalog is None:
+            raise RuntimeError(f"the store under {self.root} was opened without its catalog")
+        return self.catalog
 
-    def create(
-        self,
-        definition: Mapping[str, Any] | str,
-        name: str,
-        n_cases: int,
-        parameters: Sequence[str] = (),
-        isolator_types: Sequence[str] = (),
-        fidelity: str | None = None,
-        integrator: str | None = None,
-        dt: float | None = None,
-        status: str = "queued",
-        created: str | _dt.datetime | None = None,
-    ) -> str:
-        """Add a study to the catalog; returns its new id (uuid4 hex).
-
-        Args:
-            definition: the study definition (JSON-able dict, or a JSON string).
-            name: study name.
-            n_cases: number of cases, >= 0.
-            parameters: names of the varied parameters.
-            isolator_types: isolator types the study involves.
-            fidelity, integrator, dt: the simulation settings (dt in s); for a study that asks for an
-                accuracy instead, None until the runner has chosen them.
-            status: initial status (one of STATUSES).
-            created: creation time (default now), ISO 8601 or datetime; naive times are UTC.
-        """
-        if status not in STATUSES:
-            raise ValueError(f"status: {status!r} is not one of {', '.join(STATUSES)}")
-        if int(n_cases) < 0:
-            raise ValueError(f"n_cases: {n_cases} is negative")
-        study_id = uuid.uuid4().hex
-        row = {
-            "id": study_id,
-            "name": str(name),
-            "status": status,
-            "created": utc_now() if created is None else _utc_text(created, "created"),
-            "n_cases": int(n_cases),
-            "n_done": 0,
-            "n_failed": 0,
-            "parameters": json.dumps(list(parameters)),
-            "isolator_types": json.dumps(list(isolator_types)),
-            "fidelity": fidelity,
-            "integrator": integrator,
-            "dt": None if dt is None else float(dt),
-            "definition": (definition if isinstance(definition, str) else json.dumps(definition)),
-        }
-        cols = ", ".join(row)
-        marks = ", ".join("?" for _ in row)
-        with self._connect() as con:
-            con.execute(f"INSERT INTO studies ({cols}) VALUES ({marks})", tuple(row.values()))
-        return study_id
+    def create(self, *args: Any, **kwargs: Any) -> str:
+        """Add a study to the catalog; returns its new id (see :meth:`Catalog.create`)."""
+        return self._rows().create(*args, **kwargs)
 
     def get(self, study_id: str) -> dict[str, Any]:
-        """The catalog row of a study (JSON columns decoded). Raises StudyNotFound."""
-        check_id(study_id)
-        with self._connect() as con:
-            row = con.execute("SELECT * FROM studies WHERE id = ?", (study_id,)).fetchone()
-        if row is None:
-            raise StudyNotFound(study_id)
-        return _decode(row)
+        """The catalog row of a study (see :meth:`Catalog.get`). Raises StudyNotFound."""
+        return self._rows().get(study_id)
 
     def update(self, study_id: str, **fields: Any) -> None:
-        """Set catalog fields of a study (any column but id and created). Raises StudyNotFound.
+        """Set catalog fields of a study (see :meth:`Catalog.update`). Raises StudyNotFound."""
+        self._rows().update(study_id, **fields)
 
-        Lists/dicts for ``parameters``, ``isolator_types`` and ``definition`` are stored as JSON; times
-        (``started``, ``finished``) may be datetimes or ISO 8601 strings.
-        """
-        check_id(study_id)
-        if not fields:
-            return
-        unknown = sorted(set(fields) - _UPDATABLE)
-        if unknown:
-            raise ValueError(f"{unknown[0]}: not a catalog field that can be updated")
-        if "status" in fields and fields["status"] not in STATUSES:
-            raise ValueError(f"status: {fields['status']!r} is not one of {', '.join(STATUSES)}")
-        values = {}
-        for key, value in fields.items():
-            if key in _JSON_COLUMNS and not isinstance(value, str):
-                value = json.dumps(value)
-            elif key in ("started", "finished") and value is not None:
-                value = _utc_text(value, key)
-            values[key] = value
-        sets = ", ".join(f"{k} = ?" for k in values)
-        with self._connect() as con:
-            cur = con.execute(f"UPDATE studies SET {sets} WHERE id = ?", (*values.values(), study_id))
-            if cur.rowcount == 0:
-                raise StudyNotFound(study_id)
+    def list(self, *args: Any, **kwargs: Any) -> builtins.list[dict[str, Any]]:
+        """Catalog rows, newest first, filtered in SQL (see :meth:`Catalog.list`)."""
+        return self._rows().list(*args, **kwargs)
 
-    def list(
-        self,
-        name: str | None = None,
-        status: str | None = None,
-        isolator_type: str | None = None,
-        created_after: str | _dt.datetime | None = None,
-        created_before: str | _dt.datetime | None = None,
-        limit: int = 50,
-        offset: int = 0,
-    ) -> builtins.list[dict[str, Any]]:
-        """Catalog rows, newest first, filtered in SQL.
-
-        Args:
-            name: exact study name.
-            status: one of STATUSES.
-            isolator_type: studies whose ``isolator_types`` include it.
-            created_after, created_before: creation time bounds (inclusive), ISO 8601 or datetime.
-            limit: at most this many rows (1..1000); offset: skip this many first.
-        """
-        where, args = self._where(name, status, isolator_type, created_after, created_before)
-        if not 1 <= int(limit) <= 1000:
-            raise ValueError(f"limit: {limit} is outside 1..1000")
-        if int(offset) < 0:
-            raise ValueError(f"offset: {offset} is negative")
-        sql = f"SELECT * FROM studies{where} ORDER BY created DESC, rowid DESC LIMIT ? OFFSET ?"
-        with self._connect() as con:
-            rows = con.execute(sql, (*args, int(limit), int(offset))).fetchall()
-        return [_decode(r) for r in rows]
-
-    def count(
-        self,
-        name: str | None = None,
-        status: str | None = None,
-        isolator_type: str | None = None,
-        created_after: str | _dt.datetime | None = None,
-        created_before: str | _dt.datetime | None = None,
-    ) -> int:
-        """Number of catalog rows matching the same filters as :meth:`list`."""
-        where, args = self._where(name, status, isolator_type, created_after, created_before)
-        with self._connect() as con:
-            return int(con.execute(f"SELECT COUNT(*) FROM studies{where}", args).fetchone()[0])
-
-    @staticmethod
-    def _where(name, status, isolator_type, created_after, created_before) -> tuple[str, tuple]:
-        clauses: list[str] = []
-        args: list[Any] = []
-        if name is not None:
-            clauses.append("name = ?")
-            args.append(str(name))
-        if status is not None:
-            if status not in STATUSES:
-                raise ValueError(f"status: {status!r} is not one of {', '.join(STATUSES)}")
-            clauses.append("status = ?")
-            args.append(status)
-        if isolator_type is not None:
-            clauses.append(
-                "EXISTS (SELECT 1 FROM json_each(studies.isolator_types) WHERE json_each.value = ?)"
-            )
-            args.append(str(isolator_type))
-        if created_after is not None:
-            clauses.append("created >= ?")
-            args.append(_utc_text(created_after, "created_after"))
-        if created_before is not None:
-            clauses.append("created <= ?")
-            args.append(_utc_text(created_before, "created_before"))
-        return (" WHERE " + " AND ".join(clauses) if clauses else ""), tuple(args)
+    def count(self, *args: Any, **kwargs: Any) -> int:
+        """Number of catalog rows matching the filters of :meth:`list` (see :meth:`Catalog.count`)."""
+        return self._rows().count(*args, **kwargs)
 
     def delete(self, study_id: str) -> bool:
         """Remove a study's catalog row, dataset file and chunks. False if there was nothing to remove."""
-        check_id(study_id)
-        with self._connect() as con:
-            found = con.execute("DELETE FROM studies WHERE id = ?", (study_id,)).rowcount > 0
+        found = self._rows().delete(study_id)
         path = self.path(study_id)
         if path.exists():
             path.unlink()
@@ -401,7 +198,7 @@ class Store:
 
     def dataset_ids(self) -> builtins.list[str]:
         """Ids of the studies that have a dataset file, sorted."""
-        return sorted(p.stem for p in self.studies_dir.glob("*.nc") if _ID.fullmatch(p.stem))
+        return sorted(p.stem for p in self.studies_dir.glob("*.nc") if STUDY_ID.fullmatch(p.stem))
 
     # -------------------------------------------------------------------------------------- chunks
     def chunk_dir(self, study_id: str) -> Path:
@@ -484,11 +281,3 @@ def _save_npz(path: Path, arrays: Mapping[str, np.ndarray]) -> None:
         checked[str(name)] = a
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         np.savez(f, **checked)  # type: ignore[arg-type]  # numpy's stub types the keywords as flags
-
-
-def _decode(row: sqlite3.Row) -> dict[str, Any]:
-    out = {k: row[k] for k in row.keys()}  # noqa: SIM118 (sqlite3.Row)
-    for key in _JSON_COLUMNS:
-        if out.get(key) is not None:
-            out[key] = json.loads(out[key])
-    return out

@@ -26,6 +26,7 @@ from pydantic import Field, PrivateAttr, ValidationError, model_validator
 from isolab.engine.scene import SceneBatch, concat
 from isolab.studies import designs
 from isolab.studies.designs import Design, Factor
+from isolab.studies.isolators import mount_labels
 from isolab.studies.parameters import Target, apply, resolve, scene_dict
 from isolab.studies.scenes import build_batch, check_scene
 from isolab.studies.schema import DesignSpec, ParameterSpec, Scene, Simulation, _Model, error_messages
@@ -427,9 +428,9 @@ def load_study(source: str | Path | Mapping[str, Any], base_dir: str | Path | No
 
 
 def isolator_names(scene: Scene) -> list[str]:
-    """Labels of the scene's isolators, in batch order: ``mount_0`` ... (a layout's order is
-    (-x,-y), (+x,-y), (+x,+y), (-x,+y))."""
-    return [f"mount_{j}" for j in range(scene.isolators.count)]
+    """Labels of the scene's isolators, in batch order (:func:`studies.isolators.mount_labels`; a layout's
+    order is :data:`studies.schema.LAYOUT_ORDER`)."""
+    return mount_labels(scene.isolators.count)
 
 
 def scene_batch(scene: Scene) -> tuple[SceneBatch, dict[str, list[str]]]:

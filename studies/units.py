@@ -40,6 +40,7 @@ DIMENSIONS: dict[str, tuple[str, str, str]] = {
     "damping": ("N s/m", "[mass]/[time]", "2e4 N s/m"),
     "density": ("kg/m^3", "[mass]/[length]**3", "2700 kg/m^3"),
     "inertia": ("kg m^2", "[mass]*[length]**2", "1e4 kg m^2"),
+    "force": ("N", "[mass]*[length]/[time]**2", "2 kN"),
     "angle": ("rad", "", "3 mrad"),
     "dimensionless": ("", "", "5 %"),
 }
@@ -60,7 +61,7 @@ _GRAVITY_TOKEN = re.compile(r"(?<![A-Za-z_])(gn|g)(?![A-Za-z_0-9])")
 
 def dimension_of(unit: str) -> str | None:
     """The dimension whose SI unit is ``unit`` (``"m/s^2"`` -> ``"acceleration"``; ``"1"`` or ``""`` ->
-    ``"dimensionless"``), or None for a unit no dimension of :data:`DIMENSIONS` has (``"N"``)."""
+    ``"dimensionless"``), or None for a unit no dimension of :data:`DIMENSIONS` has (``"kg/s^3"``)."""
     if unit in ("", "1"):
         return "dimensionless"
     return next((name for name, spec in DIMENSIONS.items() if spec[0] == unit), None)
@@ -147,7 +148,7 @@ def to_si(value: Any, dimension: str, field: str) -> float:
     Args:
         value: a number (SI as is), a numeric string, a string with units (``"2 g"``) or a pint quantity.
         dimension: one of :data:`DIMENSIONS` (length, mass, time, velocity, acceleration, jerk, frequency,
-            stiffness, damping, density, inertia, angle, dimensionless).
+            stiffness, damping, density, inertia, force, angle, dimensionless).
         field: the name of the input, used in error messages.
 
     Raises:

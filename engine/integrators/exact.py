@@ -19,19 +19,15 @@ import numpy as np
 import scipy.linalg
 from numba import njit
 
-from isolab.engine.dynamics import (
-    _cross,
-    advance_pieces,
-    kernel_struct,
-    lti_forcing,
-    next_breakpoint,
-    recorded_floor,
-    stage_state,
-)
-from isolab.engine.peaks import observe
+from isolab.engine.dynamics import _cross, lti_forcing, recorded_floor, stage_state
 
-ORDER = None  # exact
+NAME = "exact"
 LEVELS = ("lti",)
+ORDER = None
+"""No step-size error: the step map is exact for the polynomial forcing."""
+EXACT = True
+GUARDED = False
+"""Unconditionally stable: no stability guard."""
 PREPARE_BLOCK = 256
 """Cases whose full split-step exponentials are held at once while the step maps are prepared."""
 
@@ -272,71 +268,38 @@ def _apply(ET, z, osc_on, t, P, c, xn):
                 xn[i] += ET[nz + 2 * a, i] * sa + ET[nz + 2 * a + 1, i] * ca
 
 
-@njit(cache=True, nogil=True)
-def run_exact(P, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc_on):
-    C = dt.shape[0]
-    m = P.sm.shape[1]
-    nF = 6 * (deg + 1)
-    z = np.zeros(12 + nF)  # [x, F0..F_deg]
-    x = z[:12]
+@njit(cache=True, inline="always")
+def next_split(ev, c, passed, t_end, tol):
+    """End of the current sub-step: the next breakpoint of case ``c`` (the ``passed``-th of ``ev``, which
+    holds the profile breakpoints and the recorded floor's samples off the step grid), or ``t_end`` (s)."""
+    if passed < ev.shape[1] and ev[c, passed] < t_end - tol:
+        return ev[c, passed]
+    return t_end
+
+
+@njit(cache=True)
+def step(P, c, ta, tb, t0, t1, fresh, passed, z, xn, idx, W, full, sub_b, sub_a, deg, osc_on):
+    """Advance ``x`` (12,) exactly from ``ta`` to ``tb`` (s) inside the step ``[t0, t1]``.
+
+    ``passed`` breakpoints of the case are behind ``ta``; ``fresh`` says a stage entered a new piece at
+    ``ta``. ``z`` is ``[x (12), F0..F_deg (6 each)]``: the state and the forcing derivatives carried
+    between steps; ``xn`` (12,) is scratch for the new state. A sub-step that ends on a breakpoint takes
+    that breakpoint's map from ``sub_b``; the rest of a split step its map from ``sub_a``; an unsplit step
+    the full map. Always True.
+    """
     Fv = z[12:]
-    xn = np.zeros(12)
-    idx = np.zeros(m, dtype=np.int64)
-    ne = ev.shape[1]
-    recorded = P.ft.shape[0] > 0
-    for c in range(C):
-        if status[c] != 0:
-            continue
-        z[:] = 0.0
-        idx[:] = -1
-        h = dt[c]
-        tol = 1e-6 * h
-        e = 0
-        piece_end = -1.0  # the forcing polynomial in Fv holds until then (s)
-        observe(P, c, 0, 0.0, x, W, O, 0)
-        for k in range(n_steps[c]):
-            t0 = k * h
-            t1 = (k + 1) * h
-            cur = t0
-            split = False
-            while e < ne and ev[c, e] < t1 - tol:
-                advance_pieces(P, c, cur, idx, tol)
-                _forcing_poly(P, c, cur, idx, W, deg, Fv)
-                _apply(sub_b[c, e], z, osc_on, cur, P, c, xn)
-                x[:] = xn
-                cur = ev[c, e]
-                e += 1
-                split = True
-            if split or recorded or cur >= piece_end - tol:
-                advance_pieces(P, c, cur, idx, tol)
-                _forcing_poly(P, c, cur, idx, W, deg, Fv)
-                piece_end = next_breakpoint(P, c, idx, np.inf, tol)
-            if split:
-                _apply(sub_a[c, e - 1], z, osc_on, cur, P, c, xn)
-            else:
-                _apply(full[c], z, osc_on, cur, P, c, xn)
-            x[:] = xn
-            _shift(Fv, deg, t1 - cur)
-            if not observe(P, c, 0, t1, x, W, O, k + 1):
-                status[c] = 1
-                break
-
-
-def run(P, level, dt, n_steps, O, W, status):
-    """Integrate every case exactly at the output step ``dt[c]`` s (LTI level only)."""
-    duration = dt * n_steps
-    full, ev, sub_b, sub_a, deg, osc = prepare(P, dt, duration)
-    run_exact(
-        kernel_struct(P),
-        dt,
-        n_steps,
-        kernel_struct(O),
-        kernel_struct(W),
-        status,
-        full,
-        ev,
-        sub_b,
-        sub_a,
-        deg,
-        bool(osc),
-    )
+    if tb < t1:
+        _forcing_poly(P, c, ta, idx, W, deg, Fv)
+        _apply(sub_b[c, passed], z, osc_on, ta, P, c, xn)
+        z[:12] = xn
+        return True
+    split = ta > t0
+    if split or fresh or P.ft.shape[0] > 0:
+        _forcing_poly(P, c, ta, idx, W, deg, Fv)
+    if split:
+        _apply(sub_a[c, passed - 1], z, osc_on, ta, P, c, xn)
+    else:
+        _apply(full[c], z, osc_on, ta, P, c, xn)
+    z[:12] = xn
+    _shift(Fv, deg, t1 - ta)
+    return True

@@ -12,21 +12,27 @@ from scipy.integrate import solve_ivp
 
 from isolab.engine.dynamics import NONLINEAR, advance_pieces, derivative, kernel_struct
 from isolab.engine.peaks import observe
+from isolab.engine.results import FAILED, OK, UNSTABLE
 
-ORDER = None
+NAME = "reference"
 LEVELS = ("lti", "ltv", "nonlinear")
+ORDER = None
+"""Adaptive: its error follows the tolerances, not a step."""
+EXACT = False
+GUARDED = False
 RTOL = 1e-10
 ATOL = 1e-13
 
 
 def run(P, level, dt, n_steps, O, W, status, rtol: float = RTOL, atol: float = ATOL, messages=None):
-    """Integrate every case, sampling the outputs every ``dt[c]`` s; set ``status[c]``."""
+    """Integrate every OK case, sampling the outputs every ``dt[c]`` s; set ``status[c]`` (UNSTABLE when
+    the base runs away, FAILED when ``solve_ivp`` fails, with the reason in ``messages[c]``)."""
     C = dt.shape[0]
     m = P.sm.shape[1]
     KP, KO, KW = kernel_struct(P), kernel_struct(O), kernel_struct(W)
     nx = 13 if level == NONLINEAR else 12
     for c in range(C):
-        if status[c] != 0:
+        if status[c] != OK:
             continue
         h = float(dt[c])
         N = int(n_steps[c])
@@ -57,7 +63,7 @@ def run(P, level, dt, n_steps, O, W, status, rtol: float = RTOL, atol: float = A
             t_eval = np.clip(sel, a, b) if ends_on_grid else np.append(np.clip(sel, a, b), b)
             sol = solve_ivp(rhs, (a, b), x, method="DOP853", rtol=rtol, atol=atol, t_eval=t_eval)
             if not sol.success:
-                status[c] = 3
+                status[c] = FAILED
                 if messages is not None:
                     messages[c] = f"reference integration failed at t = {sol.t[-1]:.6g} s: {sol.message}"
                 failed = True
@@ -67,7 +73,7 @@ def run(P, level, dt, n_steps, O, W, status, rtol: float = RTOL, atol: float = A
                 if level == NONLINEAR:
                     y[3:7] /= np.linalg.norm(y[3:7])
                 if not observe(KP, c, level, sel[j], y, KW, KO, k_next):
-                    status[c] = 1
+                    status[c] = UNSTABLE
                     failed = True
                     break
                 k_next += 1

@@ -12,6 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from isolab.engine import GRAVITY, concat, simulate
 from isolab.engine.profiles import Pieces, evaluate, trapezoid
+from isolab.engine.results import DOF_NAMES
 
 TWO_PI = 2 * np.pi
 M = 10_000.0
@@ -20,13 +21,12 @@ SPAN = (2.2, 3.6)
 A_HALF, B_HALF = SPAN[0] / 2, SPAN[1] / 2  # mount lever arms along X (a) and Y (b), m
 K_MOUNT = (1.0e6, 1.5e6, 2.0e6)  # distinct per axis so that no two modes share a frequency
 C_MOUNT = (1.0e3, 2.0e3, 3.0e3)
-DOF = ("x", "y", "z", "rx", "ry", "rz")
 
 
 def _mode_of(result, dof: int, share: float) -> int:
     """Index of the mode whose kinetic energy lies in ``dof`` by more than ``share``."""
     hits = np.flatnonzero(result.mode_energy[0, :, dof] > share)
-    assert hits.size == 1, f"no single mode dominated by {DOF[dof]}: {result.mode_energy[0, :, dof]}"
+    assert hits.size == 1, f"no single mode dominated by {DOF_NAMES[dof]}: {result.mode_energy[0, :, dof]}"
     return int(hits[0])
 
 
@@ -47,8 +47,8 @@ def test_symmetric_layout_in_cg_plane_has_the_six_textbook_frequencies_and_dampi
         f = np.sqrt(stiff[dof] / inert[dof]) / TWO_PI
         zeta = damp[dof] / (2 * np.sqrt(stiff[dof] * inert[dof]))
         # a 6x6 symmetric eigenproblem with well-separated roots: accurate to ~1e-14; 1e-9 leaves room
-        assert r.natural_frequency[0, j] == pytest.approx(f, rel=1e-9), DOF[dof]
-        assert r.damping_ratio[0, j] == pytest.approx(zeta, rel=1e-9), DOF[dof]
+        assert r.natural_frequency[0, j] == pytest.approx(f, rel=1e-9), DOF_NAMES[dof]
+        assert r.damping_ratio[0, j] == pytest.approx(zeta, rel=1e-9), DOF_NAMES[dof]
     # the brief's vertical damping check in the vendor's per-mount terms: 4 cz / (2 sqrt(4 kz M))
     jz = _mode_of(r, 2, 1 - 1e-9)
     assert r.damping_ratio[0, jz] == pytest.approx(cz / np.sqrt(kz * M), rel=1e-9)

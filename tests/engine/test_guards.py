@@ -22,7 +22,7 @@ from scenes import (
 from isolab.engine import GRAVITY, SceneError, model, simulate
 from isolab.engine.modal import state_matrix
 from isolab.engine.profiles import scurve
-from isolab.engine.results import OK, TIPPING, UNSTABLE
+from isolab.engine.results import OK, OUTPUT_FIELDS, TIPPING, UNSTABLE
 from isolab.engine.stability import euler_limit, rk4_limit, spectral_radius, step_matrix
 
 # ------------------------------------------------------------------------------------ stability guard
@@ -265,6 +265,37 @@ def test_mounts_too_narrow_under_a_high_cg_tip() -> None:
     # the option: without the weights' rocking stiffness the narrow base stands
     loose = simulate(_narrow_scene(np.array([0.95]), gravity_stiffness=False), "lti", "exact", dt=1e-3)
     assert loose.status[0] == OK
+
+
+NAN_WHEN_NOT_OK = {
+    "peak_displacement",
+    "peak_rotation",
+    "peak_point_displacement",
+    "peak_isolator_force",
+    "min_isolator_load",
+    "rms_displacement",
+    "final_displacement",
+    "settling_time",
+    "transmissibility",
+}
+"""The outputs SimulationResult's docstring says are NaN for a case that is not OK."""
+
+
+@pytest.mark.parametrize("status", [UNSTABLE, TIPPING])
+def test_a_case_that_is_not_ok_is_nan_exactly_where_the_result_says(status: int) -> None:
+    if status == UNSTABLE:
+        r = simulate(_stiff_scene(), "lti", "euler", dt=1e-3, auto_step=False)
+    else:
+        r = simulate(_narrow_scene(np.array([0.95])), "ltv", "rk4", dt=1e-3)
+    assert r.status[0] == status
+    for name in OUTPUT_FIELDS:
+        value = np.asarray(getattr(r, name)[0], dtype=float)
+        if name in NAN_WHEN_NOT_OK:
+            assert np.isnan(value).all(), name
+        else:  # dt, the preloads, the modal analysis; settled is False
+            assert np.isfinite(value).all(), name
+    assert not r.settled[0]
+    assert set(r.to_dict(0)) == {"status", "message", *OUTPUT_FIELDS}
 
 
 def test_tipping_case_reports_a_finite_step_without_warnings() -> None:

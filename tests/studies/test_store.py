@@ -418,9 +418,9 @@ def test_chunks_persist_and_reload(store: Store) -> None:
 
 def test_a_catalog_from_before_the_step_column_is_migrated(tmp_path: Path) -> None:
     # a catalog written before `dt` was recorded: opening it adds the column, old rows read None
-    from isolab.studies import store as store_module
+    from isolab.studies import catalog as catalog_module
 
-    old_schema = store_module._SCHEMA.replace("    dt REAL,\n", "")
+    old_schema = catalog_module._SCHEMA.replace("    dt REAL,\n", "")
     assert "dt REAL" not in old_schema
     with sqlite3.connect(tmp_path / "catalog.sqlite") as con:
         con.executescript(old_schema)

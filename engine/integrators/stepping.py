@@ -1,0 +1,176 @@
+"""The one driver loop of the fixed-step integrators: cases, steps, breakpoints, peaks, status.
+
+Like scipy's ``OdeSolver.step`` over each method's ``_step_impl``, :func:`drive` owns everything that is
+the same for every method: the loop over cases and output steps, splitting a step where a stage enters a
+new piece of its motion profile, observing the outputs after each step, and the status of each case. A
+method supplies only its step (``euler.step``, ``rk4.step``, ``exact.step``) and, for ``exact``, where
+its sub-steps end and the maps it prepared. The method is named by a code (:data:`EULER`, :data:`RK4`,
+:data:`EXACT`): numba compiles a driver that takes the step kernel as an argument (or a closure over it
+from a factory) anew in every process, since neither is cacheable, while a driver specialised on the
+literal code and level (``numba.literally``) is cached, one compiled loop per method and level with no
+branch on either left inside.
+
+The adaptive ``reference`` method is not stepped here: scipy's ``solve_ivp`` owns its own loop between
+breakpoints (``engine.integrators.reference``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import literally, njit
+
+from isolab.engine.dynamics import LTI, LTV, NONLINEAR, advance_pieces, kernel_struct, next_breakpoint
+from isolab.engine.integrators import euler, exact, rk4
+from isolab.engine.peaks import observe
+from isolab.engine.results import FAILED, OK, UNSTABLE
+
+EULER, RK4, EXACT = 0, 1, 2
+"""Codes of the stepped methods inside the driver."""
+SCRATCH_ROWS = 5
+"""State-sized rows of RK4's scratch: the stage state and the four slopes."""
+
+
+@njit(cache=True, nogil=True)
+def drive(method, P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc):
+    """Integrate every case ``c`` whose ``status[c]`` is OK over ``n_steps[c]`` steps of ``dt[c]`` s.
+
+    Each step ``[k h, (k + 1) h]`` is split at the breakpoints inside it, so every sub-step sees one
+    polynomial piece of every profile; the outputs are observed at the end of each step. ``status[c]``
+    becomes UNSTABLE when the base runs away (``engine.peaks.observe``) and FAILED on a singular mass
+    matrix; the case stops there. ``full``, ``ev``, ``sub_b``, ``sub_a``, ``deg``, ``osc`` are the exact
+    method's prepared maps (empty for the others).
+    """
+    literally(method)  # one compiled (and cached) loop per method and level, with no branch on either
+    literally(level)
+    C = dt.shape[0]
+    nx = 13 if level == NONLINEAR else 12
+    z = np.zeros(nx + 6 * (deg + 1))  # the state, then exact's forcing derivatives carried between steps
+    x = z[:nx]
+    Fv = z[nx:]
+    S = np.zeros((SCRATCH_ROWS, nx))  # RK4's stage state and slopes
+    xn = np.zeros(nx)  # exact: the new state
+    idx = np.zeros(P.sm.shape[1], dtype=np.int64)
+    for c in range(C):
+        if status[c] != OK:
+            continue
+        x[:] = 0.0
+        if level == NONLINEAR:
+            x[3] = 1.0
+        Fv[:] = 0.0
+        idx[:] = -1
+        h = dt[c]
+        tol = 1e-6 * h
+        passed = 0
+        piece_end = -np.inf  # the earliest start of a stage's next piece, s
+        observe(P, c, level, 0.0, x, W, O, 0)
+        for k in range(n_steps[c]):
+            t0 = k * h
+            t1 = (k + 1) * h
+            ta = t0
+            fresh = k == 0
+            if piece_end <= ta + tol:  # a stage enters a new piece: move to it
+                advance_pieces(P, c, ta, idx, tol)
+                piece_end = next_breakpoint(P, c, idx, np.inf, tol)
+                fresh = True
+            while True:
+                if method == EXACT:
+                    tb = exact.next_split(ev, c, passed, t1, tol)
+                    ok = exact.step(
+                        P, c, ta, tb, t0, t1, fresh, passed, z, xn, idx, W, full, sub_b, sub_a, deg, osc
+                    )
+                else:
+                    tb = piece_end if piece_end < t1 - tol else t1
+                    if method == RK4:
+                        ok = rk4.step(P, c, level, ta, tb - ta, x, S, idx, W)
+                    else:
+                        ok = euler.step(P, c, level, ta, tb - ta, x, idx, W)
+                if not ok or tb == t1:
+                    break
+                passed += 1
+                ta = tb
+                fresh = False
+                if piece_end <= ta + tol:
+                    advance_pieces(P, c, ta, idx, tol)
+                    piece_end = next_breakpoint(P, c, idx, np.inf, tol)
+                    fresh = True
+            if not ok:
+                status[c] = FAILED
+                break
+            if not observe(P, c, level, t1, x, W, O, k + 1):
+                status[c] = UNSTABLE
+                break
+
+
+# Entry points: a call from Python with plain ints would send numba through its literal dispatch on every
+# call (milliseconds each); called from these cached kernels, the codes are compile-time constants.
+@njit(cache=True, nogil=True)
+def _run_euler(P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc):
+    if level == LTI:
+        drive(EULER, P, LTI, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc)
+    elif level == LTV:
+        drive(EULER, P, LTV, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc)
+    else:
+        drive(EULER, P, NONLINEAR, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc)
+
+
+@njit(cache=True, nogil=True)
+def _run_rk4(P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc):
+    if level == LTI:
+        drive(RK4, P, LTI, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc)
+    elif level == LTV:
+        drive(RK4, P, LTV, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc)
+    else:
+        drive(RK4, P, NONLINEAR, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc)
+
+
+@njit(cache=True, nogil=True)
+def _run_exact(P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc):
+    drive(EXACT, P, LTI, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc)
+
+
+_ENTRIES = {"euler": _run_euler, "rk4": _run_rk4, "exact": _run_exact}
+
+_NO_MAPS = (
+    np.zeros((0, 0, 12)),
+    np.zeros((0, 1)),
+    np.zeros((0, 1, 0, 12)),
+    np.zeros((0, 1, 0, 12)),
+    0,
+    False,
+)
+
+
+def run(
+    name: str,
+    P,
+    level: int,
+    dt: np.ndarray,
+    n_steps: np.ndarray,
+    O,
+    W,
+    status: np.ndarray,
+    messages: list[str] | None = None,
+) -> None:
+    """Integrate every OK case with the stepped method ``name`` (``euler``, ``rk4`` or ``exact``).
+
+    ``dt`` (C,) s and ``n_steps`` (C,) per case; ``O`` the peak accumulators, ``W`` scratch, ``status``
+    (C,) int8 updated in place (see :func:`drive`). ``messages`` is accepted for the common interface; the
+    status says all a stepped method has to say.
+    """
+    maps = exact.prepare(P, dt, dt * n_steps) if name == "exact" else _NO_MAPS
+    full, ev, sub_b, sub_a, deg, osc = maps
+    _ENTRIES[name](
+        kernel_struct(P),
+        level,
+        dt,
+        n_steps,
+        kernel_struct(O),
+        kernel_struct(W),
+        status,
+        full,
+        ev,
+        sub_b,
+        sub_a,
+        int(deg),
+        bool(osc),
+    )
