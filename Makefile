@@ -12,7 +12,7 @@ PORT ?= 8000
 WORKERS ?= 2
 DATA ?= ./data
 
-.PHONY: install serve test test-fast bench load lint typecheck format
+.PHONY: install serve test test-fast bench load lint typecheck format browser
 
 install: $(STAMP)
 
@@ -58,3 +58,10 @@ typecheck: $(STAMP)
 	mkdir -p .typecheck/isolab
 	for p in engine studies service; do ln -sfn ../../$$p .typecheck/isolab/$$p; done
 	cd .typecheck && ../$(VENV)/bin/mypy --config-file ../pyproject.toml -p isolab.studies -p isolab.service
+
+# The browser tests (tests/browser) drive Debian's Chromium through Playwright; install it where missing
+# (root, or sudo when there is one). Playwright's own browser download is never used.
+CHROMIUM ?= /usr/bin/chromium
+SUDO := $(shell test "$$(id -u)" -eq 0 || command -v sudo)
+browser:
+	test -x $(CHROMIUM) || ($(SUDO) apt-get update && $(SUDO) apt-get install -y chromium)

@@ -10,6 +10,8 @@ When ``ISOLAB_API_TOKEN`` is set, every route but ``/health`` (and the API descr
 ``/redoc``, ``/openapi.json``) wants ``Authorization: Bearer <token>``; request bodies larger than
 ``ISOLAB_MAX_BODY_BYTES`` are refused with 413 before they are read, JSON nested too deep with 422
 (:class:`service.request_limits.RequestLimits`). CORS answers only the origins of ``ISOLAB_CORS_ORIGINS``.
+The web page (``/ui/``, :mod:`service.routes.ui`) is static: its shells and assets need no token, and all
+its data comes from the API above, with the token.
 """
 
 from __future__ import annotations
@@ -31,7 +33,16 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from isolab.service.jobs import RUNNING_STUDIES, JobQueue
 from isolab.service.request_limits import RequestLimits, unreadable_body_is_422
-from isolab.service.routes import cases, comparisons, health, heavy_work_limiter, studies
+from isolab.service.routes import (
+    authoring,
+    calibrations,
+    cases,
+    comparisons,
+    health,
+    heavy_work_limiter,
+    studies,
+    ui,
+)
 from isolab.service.settings import Settings, load_settings
 from isolab.service.worker_priority import LowerPriority
 
@@ -158,6 +169,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         summary="Batch design-of-experiments service for machines on vibration isolators",
         version=service_version(),
         lifespan=lifespan,
+        docs_url=None,  # /docs and /redoc are served by routes.ui with local assets (no CDN)
+        redoc_url=None,
     )
     app.state.settings = settings
     app.state.dask = None
@@ -178,4 +191,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(studies.router, dependencies=guarded)
     app.include_router(cases.router, dependencies=guarded)
     app.include_router(comparisons.router, dependencies=guarded)
+    app.include_router(calibrations.router, dependencies=guarded)
+    app.include_router(authoring.router, dependencies=guarded)
+    ui.add_ui(app)  # the web page's shells and assets (no data: every datum comes from the guarded API)
     return app

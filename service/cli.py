@@ -81,3 +81,7 @@ from isolab.service.client import fetch_command, status_command, submit_command 
 app.command("submit")(submit_command)
 app.command("status")(status_command)
 app.command("fetch")(fetch_command)
+
+from isolab.service.calibration_commands import calibrate_command  # noqa: E402
+
+app.command("calibrate")(calibrate_command)

@@ -280,6 +280,62 @@ class Client:
             body["simulation"] = dict(simulation)
         return self._request("POST", "/comparisons", json=body).json()
 
+    # --------------------------------------------------------------------------------- calibrations
+    def calibrate(
+        self,
+        scene: Mapping[str, Any] | str | Path,
+        measurement: Mapping[str, Any] | str | Path,
+        fit: builtins.list[str | Mapping[str, Any]],
+        offset: Mapping[str, Any] | None = None,
+        simulation: Mapping[str, Any] | None = None,
+        highpass: float | str | None = None,
+        lowpass: float | str | None = None,
+        plot: bool = False,
+    ) -> dict[str, Any]:
+        """Fit ``fit``'s parameters of ``scene`` (a dict, or a YAML/JSON scene file) to ``measurement``: a
+        CSV or netCDF file (read here: CSV is sent as text, netCDF as columns), or the request's form
+        (``{"csv": text}`` or ``{"time", "channels"}``). ``fit``: ``"isolators.f_vertical=1:6"`` strings or
+        ``{"path", "lower", "upper"}`` dicts. Answers fitted values +- 1 sigma (SI), the misfit per channel
+        before and after and the calibrated scene (``scene_yaml``); ``plot=True`` adds a base64 PNG."""
+        from isolab.studies.calibration import parse_fit, read_measurement
+
+        if not isinstance(scene, Mapping):
+            import yaml
+
+            path = Path(scene)
+            text = path.read_text(encoding="utf-8")
+            scene = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
+        if isinstance(measurement, Mapping):
+            meas: dict[str, Any] = dict(measurement)
+        elif Path(measurement).suffix.lower() in (".nc", ".nc4", ".cdf", ".netcdf"):
+            m = read_measurement(measurement)
+            meas = {
+                "time": m.time.tolist(),
+                "channels": [{"name": c.name, "unit": "", "values": c.values.tolist()} for c in m.channels],
+            }
+        else:
+            meas = {"csv": Path(measurement).read_text(encoding="utf-8")}
+        specs = []
+        for f in fit:
+            if isinstance(f, str):
+                s = parse_fit(f)
+                specs.append({"path": s.path, "lower": s.lower, "upper": s.upper, "start": s.start})
+            else:
+                specs.append(dict(f))
+        body: dict[str, Any] = {
+            "scene": dict(scene),  # type: ignore[arg-type]  # a mapping by now
+            "measurement": meas,
+            "fit": [{k: v for k, v in s.items() if v is not None} for s in specs],
+            "plot": plot,
+        }
+        for key, value in (("offset", offset), ("simulation", simulation)):
+            if value is not None:
+                body[key] = dict(value)
+        for key, corner in (("highpass", highpass), ("lowpass", lowpass)):
+            if corner is not None:
+                body[key] = corner
+        return self._request("POST", "/calibrations", json=body).json()
+
 
 # ------------------------------------------------------------------------------ command-line commands
 # ``isolab submit``, ``isolab status`` and ``isolab fetch``, registered in service/cli.py.

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
+import yaml
 from pydantic import BaseModel, ConfigDict, Field
 
 StudyStatusName = Literal["queued", "running", "done", "failed", "cancelled"]
@@ -186,6 +187,16 @@ class CaseTable(BaseModel):
     )
 
 
+class CaseMode(BaseModel):
+    """One natural mode of a case: frequency, damping and what moves (kinetic-energy shares)."""
+
+    mode: int
+    frequency: float | None = Field(description="undamped natural frequency, Hz")
+    damping_ratio: float | None
+    energy: dict[str, float | None] = Field(description="DOF (x, y, z, rx, ry, rz) -> kinetic-energy share")
+    name: str = Field(description="dominant motion: heave, pitch, roll, yaw, surge, sway (+ a coupled one)")
+
+
 class Timeseries(BaseModel):
     """Time histories of one case, recomputed from the study definition."""
 
@@ -204,6 +215,14 @@ class Timeseries(BaseModel):
     point_displacement: dict[str, dict[str, list[float | None]]] = Field(
         description="point of interest -> axis -> displacement"
     )
+    stages: dict[str, dict[str, list[float | None]]] = Field(
+        default_factory=dict,
+        description="stage -> position, velocity, acceleration along its axis, on the same time axis",
+    )
+    modes: list[CaseMode] = Field(default_factory=list, description="natural modes, ascending")
+    settling_time: float | None = Field(None, description="s after the last stage move")
+    settled: bool | None = None
+    last_move_end: float | None = Field(None, description="time the last stage move ends, s")
 
 
 # --------------------------------------------------------------------------------------- comparisons
@@ -271,3 +290,220 @@ class ValidationErrorBody(BaseModel):
 
 class MessageBody(BaseModel):
     detail: str
+
+
+# -------------------------------------------------------------------------- authoring (the web page)
+class ExampleList(BaseModel):
+    names: list[str] = Field(description="example studies shipped with isolab (GET /examples/{name})")
+
+
+class ExampleStudy(BaseModel):
+    """An example study as YAML text, its scene inlined (comments kept)."""
+
+    name: str
+    text: str = Field(description="YAML text, ready to edit and check (POST /studies/validate)")
+
+
+EXAMPLE_STUDY_TEXT: str = yaml.safe_dump(EXAMPLE_STUDY, sort_keys=False)
+"""The grid example study as YAML text (the body of ``POST /studies/validate``)."""
+
+
+class StudyText(BaseModel):
+    """A study definition as YAML (or JSON) text, its scene inline."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"text": EXAMPLE_STUDY_TEXT}]})
+
+    text: str = Field(max_length=1_000_000, description="YAML or JSON text of a study definition")
+
+
+class StudyCheck(BaseModel):
+    """A study checked as a submission would be, nothing stored: submit ``definition`` to POST /studies."""
+
+    definition: dict[str, Any] = Field(description="the text as data (JSON)")
+    name: str
+    n_cases: int
+    parameters: list[str] = Field(description="names of the varied parameters")
+    estimated_seconds: float = Field(description="rough run time on this service's workers, s")
+
+
+class LineErrorDetail(ErrorDetail):
+    line: int | None = Field(None, description="1-based line of the text the problem points at")
+
+
+class TextValidationErrorBody(BaseModel):
+    detail: list[LineErrorDetail]
+
+
+class ParameterDesign(BaseModel):
+    name: str = Field(description="column of the case table")
+    path: str
+    unit: str = Field(description="SI unit of the column")
+    categorical: bool
+    values: list[Any] | None = Field(None, description="values as written")
+    range: dict[str, Any] | None = Field(None, description="range as written (start, stop, num, scale)")
+    scale: str = Field(description="linear or log")
+    display_unit: str = Field(description="the unit the author wrote the values in")
+    display_scale: float = Field(description="SI value of one display unit")
+    index: int
+
+
+class StudyDesign(BaseModel):
+    """A stored study's design in the units its author wrote."""
+
+    name: str
+    description: str
+    design: dict[str, Any]
+    n_cases: int
+    parameters: list[ParameterDesign]
+
+
+class ErrorEstimateOutput(BaseModel):
+    value: float | None = Field(description="largest error over the sampled cases (null: none compared)")
+    units: str
+    meaning: str
+    worst_case: int | None
+
+
+class ErrorEstimate(BaseModel):
+    """The measured error of a done study and the model it ran with."""
+
+    fidelity: str | None
+    integrator: str | None
+    dt: float | None = Field(description="s")
+    method: str | None
+    cases: list[int] = Field(description="the sampled cases")
+    excluded: dict[str, str] = Field(description="case -> why it could not be compared")
+    outputs: dict[str, ErrorEstimateOutput]
+
+
+# -------------------------------------------------------------------------------------- calibrations
+EXAMPLE_CALIBRATION: dict[str, Any] = {
+    "scene": EXAMPLE_SCENE,
+    "measurement": {
+        "time": [round(0.05 * i, 2) for i in range(49)],
+        "time_unit": "s",
+        "channels": [
+            {
+                "name": "cg.y.displacement",
+                "unit": "mm",
+                "values": [
+                    *(0.0, 0.0, 0.0, -1.881, -5.316, -5.229, -0.652, 3.576, 4.145, 1.413, -1.797, -2.779),
+                    *(-1.022, 1.626, 2.795, 1.746, -0.212, -1.211, -0.547, 0.944, 1.899, 1.652, 0.654, -0.1),
+                    *(0.014, 0.786, 1.486, 1.568, 1.103, 0.611, 0.545, 0.917, 1.371, 3.425, 6.689, 6.323),
+                    *(1.645, -2.418, -2.71, 0.193, 3.374, 4.22, 2.385, -0.194, -1.198, -0.011, 1.98, 2.93),
+                    2.224,
+                ],
+            }
+        ],
+    },
+    "fit": [{"path": "isolators.f_horizontal", "lower": "1 Hz", "upper": "6 Hz"}],
+    "plot": False,
+}
+"""The scene of :data:`EXAMPLE_SCENE` measured in Y at 20 Hz by a laser tracker whose record starts 0.1 s
+before the stage: the mounts are 3.6 Hz sideways, not the air preset's 3 Hz."""
+
+
+class FitParameterIn(BaseModel):
+    """A parameter to fit: a study parameter path and its bounds (numbers in SI or text with units)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    path: str = Field(max_length=200, description="e.g. isolators.f_vertical, isolators.zeta, stages.y.mass")
+    lower: float | str
+    upper: float | str
+    start: float | str | None = Field(None, description="default: the scene's value, inside the bounds")
+
+
+class ChannelIn(BaseModel):
+    """One measured channel: ``LOCATION.AXIS.QUANTITY`` (cg or a point; x, y, z, rx, ry, rz;
+    displacement, velocity or acceleration), its unit and its samples."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = Field(max_length=200, description="e.g. cg.z.displacement, tool.y.acceleration")
+    unit: str = Field("", max_length=64, description="e.g. mm, um, m/s, g, mrad (default SI)")
+    values: list[float]
+
+
+class MeasurementIn(BaseModel):
+    """A measurement: CSV text (a header ``time [s], cg.z.displacement [mm], ...`` then rows), or columns."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    csv: str | None = Field(None, description="CSV text with a header naming each column")
+    time: list[float] | None = Field(None, description="sample times (columns form)")
+    time_unit: str = Field("s", max_length=32)
+    channels: list[ChannelIn] | None = Field(None, max_length=16)
+
+
+class OffsetIn(BaseModel):
+    """The time offset (when the motion starts on the measurement's clock): bounds and start, or a value
+    to hold fixed. Default bounds: +- a quarter of the measurement's span."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    lower: float | str | None = None
+    upper: float | str | None = None
+    start: float | str | None = None
+    value: float | str | None = Field(None, description="hold the offset at this value instead of fitting it")
+
+
+class CalibrationRequest(BaseModel):
+    """A scene, a measurement of its motion and the parameters to fit."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [EXAMPLE_CALIBRATION]})
+
+    scene: dict[str, Any] = Field(description="inline scene (as in a study's scene block)")
+    measurement: MeasurementIn
+    fit: list[FitParameterIn] = Field(min_length=1, max_length=8)
+    offset: OffsetIn | None = None
+    simulation: dict[str, Any] | None = Field(
+        None,
+        description="fidelity, integrator, dt, auto_step overriding the scene's (keep it cheap: lti/ltv)",
+    )
+    highpass: float | str | None = Field(
+        None, description="high-pass corner of acceleration channels, Hz (default 0.5 Hz; 0: off)"
+    )
+    lowpass: float | str | None = Field(
+        None, description="low-pass corner of acceleration channels, Hz (default min(fs/5, 0.03/dt); 0: off)"
+    )
+    plot: bool = Field(True, description="answer a PNG of measured against simulated traces in plot_png")
+
+
+class FittedParameter(BaseModel):
+    path: str
+    name: str
+    unit: str = Field(description="SI unit of lower, upper, start, value and sigma")
+    lower: float
+    upper: float
+    start: float
+    value: float | None = Field(description="fitted value; null when the measurement does not determine it")
+    sigma: float | None = Field(description="1-sigma uncertainty, from s^2 (J^T J)^-1")
+    determined: bool
+    reason: str | None = Field(None, description="why it is not determined")
+
+
+class Calibration(BaseModel):
+    """Fitted values with 1-sigma uncertainties, the misfit before and after per channel (SI), the
+    identifiability figures of the Jacobian and the calibrated scene."""
+
+    parameters: list[FittedParameter]
+    time_offset: FittedParameter
+    channels: list[dict[str, Any]] = Field(
+        description="per channel: rms_measured, rms_before, rms_after (SI)"
+    )
+    identifiability: dict[str, Any] = Field(
+        description="singular values and condition number of the column-normalised Jacobian, correlations"
+    )
+    residual_variance: float = Field(
+        description="s^2 of the weighted residuals (about 1: they are the noise)"
+    )
+    degrees_of_freedom: float
+    scene: dict[str, Any] = Field(description="the calibrated scene (SI)")
+    scene_yaml: str = Field(description="the calibrated scene as YAML, ready for a study")
+    simulation: dict[str, Any]
+    highpass: float
+    lowpass: float
+    evaluations: dict[str, Any]
+    message: str
+    plot_png: str | None = Field(None, description="base64 PNG of measured against simulated traces")

@@ -2,8 +2,10 @@
 
 A study stores peaks, not traces: :func:`case_history` reruns one case through the engine with its
 histories recorded (c.g. displacement, base rotation, dynamic isolator forces about the preload, point
-displacements), with the model the study's cases ran with. :func:`history_json` and
-:func:`history_dataset` give them as JSON-able data and as a CF-described xarray dataset.
+displacements), with the model the study's cases ran with, and with the case's stage motion profiles on
+the same time axis, its natural modes (each named by its dominant motion, :func:`mode_name`) and its
+settling. :func:`history_json` and :func:`history_dataset` give them as JSON-able data and as a
+CF-described xarray dataset.
 """
 
 from __future__ import annotations
@@ -20,10 +22,11 @@ import numpy as np
 import xarray as xr
 
 from isolab.engine import STATUS_NAMES, simulate
-from isolab.engine.results import AXES, ROTATIONS
+from isolab.engine.profiles import Pieces, evaluate
+from isolab.engine.results import AXES, DOF_NAMES, ROTATIONS
 from isolab.studies.accuracy import recorded_choice, resolved_study
 from isolab.studies.cases import CaseQueryError
-from isolab.studies.definitions import study_of
+from isolab.studies.definitions import definition_json, study_of
 from isolab.studies.runner import study_labels
 from isolab.studies.store import NETCDF_LOCK
 from isolab.studies.study import Study, study_from_json
@@ -32,6 +35,33 @@ MAX_RECORDED_SAMPLES = 2_000_000
 """Longest time history (samples) a case is recomputed with: about 200 bytes a sample in memory."""
 MAX_RETURNED_SAMPLES = 200_000
 """Most samples per series one answer holds (``every`` thins them)."""
+
+
+MOTION_NAMES = {
+    "x": "surge",
+    "y": "sway",
+    "z": "heave",
+    "rx": "pitch",
+    "ry": "roll",
+    "rz": "yaw",
+}
+"""The motion of the base along or about each degree of freedom (rotation about X is pitch, about Y roll)."""
+COUPLED_SHARE = 0.25
+"""A second degree of freedom with at least this kinetic-energy share is named too (``pitch + sway``)."""
+
+
+def mode_name(energy: np.ndarray) -> str:
+    """A mode named by its dominant motion from its kinetic-energy shares per degree of freedom (x, y, z,
+    rx, ry, rz): ``heave``, or ``pitch + sway`` when a second motion holds at least
+    :data:`COUPLED_SHARE` of the energy; ``""`` when the shares are not numbers."""
+    e = np.asarray(energy, dtype=np.float64).reshape(-1)
+    if e.size != len(DOF_NAMES) or not np.all(np.isfinite(e)) or e.sum() <= 0:
+        return ""
+    order = np.argsort(-e)
+    name = MOTION_NAMES[DOF_NAMES[order[0]]]
+    if e[order[1]] >= COUPLED_SHARE * e.sum():
+        name += " + " + MOTION_NAMES[DOF_NAMES[order[1]]]
+    return name
 
 
 class CaseNotFound(LookupError):
@@ -52,6 +82,16 @@ class CaseHistory:
     point_displacement: np.ndarray  # (T, p, 3) m
     isolator_names: list[str]
     point_names: list[str]
+    stage_names: list[str] | None = None
+    stage_position: np.ndarray | None = None  # (m, T) m, along each stage's axis
+    stage_velocity: np.ndarray | None = None  # (m, T) m/s
+    stage_acceleration: np.ndarray | None = None  # (m, T) m/s^2
+    natural_frequency: np.ndarray | None = None  # (6,) Hz, ascending
+    damping_ratio: np.ndarray | None = None  # (6,) 1
+    mode_energy: np.ndarray | None = None  # (6, 6) share of each DOF in each mode
+    settling_time: float = math.nan  # s after the last stage move
+    settled: bool = False
+    last_move_end: float = math.nan  # s
 
 
 def case_history(study: Any, case: int, every: int = 1) -> CaseHistory:
@@ -92,17 +132,30 @@ def case_history(study: Any, case: int, every: int = 1) -> CaseHistory:
     assert h is not None  # asked for with record=[0]
     n = int(h["n_samples"][0])
     iso, pts = study_labels(study)
+    time = np.asarray(h["time"][0, :n])
+    pieces = Pieces(batch.prof_t[0], batch.prof_s[0], batch.prof_v[0], batch.prof_a[0], batch.prof_j[0])
+    stage_s, stage_v, stage_a = evaluate(pieces, time) if time.size else (np.zeros((0, 0)),) * 3
     return CaseHistory(
         parameters=study.case_values(case),
         status=STATUS_NAMES[int(result.status[0])],
         message=str(result.message[0]),
-        time=np.asarray(h["time"][0, :n]),
+        time=time,
         displacement=np.asarray(h["displacement"][0, :n]),
         rotation=np.asarray(h["rotation"][0, :n]),
         isolator_force=np.asarray(h["isolator_force"][0, :n]),
         point_displacement=np.asarray(h["point_displacement"][0, :n]),
         isolator_names=iso,
         point_names=pts,
+        stage_names=[str(st.name) for st in study.scene.stages],
+        stage_position=stage_s,
+        stage_velocity=stage_v,
+        stage_acceleration=stage_a,
+        natural_frequency=np.asarray(result.natural_frequency[0]),
+        damping_ratio=np.asarray(result.damping_ratio[0]),
+        mode_energy=np.asarray(result.mode_energy[0]),
+        settling_time=float(result.settling_time[0]),
+        settled=bool(result.settled[0]),
+        last_move_end=float(batch.last_move_end()[0]),
     )
 
 
@@ -119,7 +172,7 @@ def case_study(row: dict[str, Any], case: int) -> Study:
     if study.simulation.request is None:
         return study
     choice = recorded_choice(study, row["fidelity"], row["integrator"], row["dt"])
-    return _resolved(json.dumps(row["definition"], sort_keys=True), choice)
+    return _resolved(definition_json(row), choice)
 
 
 @functools.lru_cache(maxsize=16)
@@ -147,6 +200,11 @@ def history_json(study_id: str, case: int, h: CaseHistory, every: int) -> dict[s
             "rotation": "rad",
             "isolator_force": "N",
             "point_displacement": "m",
+            "stage_position": "m",
+            "stage_velocity": "m/s",
+            "stage_acceleration": "m/s^2",
+            "natural_frequency": "Hz",
+            "settling_time": "s",
         },
         "time": _series(h.time[s]),
         "displacement": {a: _series(h.displacement[s, k]) for k, a in enumerate(axes)},
@@ -159,7 +217,45 @@ def history_json(study_id: str, case: int, h: CaseHistory, every: int) -> dict[s
             p: {a: _series(h.point_displacement[s, j, k]) for k, a in enumerate(axes)}
             for j, p in enumerate(h.point_names)
         },
+        "stages": {
+            name: {
+                "position": _series(h.stage_position[j, s]),
+                "velocity": _series(h.stage_velocity[j, s]),
+                "acceleration": _series(h.stage_acceleration[j, s]),
+            }
+            for j, name in enumerate(h.stage_names or [])
+            if h.stage_position is not None
+            and h.stage_velocity is not None
+            and h.stage_acceleration is not None
+        },
+        "modes": _modes(h),
+        "settling_time": _number(h.settling_time),
+        "settled": h.settled,
+        "last_move_end": _number(h.last_move_end),
     }
+
+
+def _number(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def _modes(h: CaseHistory) -> list[dict[str, Any]]:
+    """Each natural mode: frequency (Hz), damping ratio, energy shares per DOF and its name."""
+    if h.natural_frequency is None or h.mode_energy is None or h.damping_ratio is None:
+        return []
+    out = []
+    for k in range(h.natural_frequency.shape[0]):
+        energy = h.mode_energy[k]
+        out.append(
+            {
+                "mode": k + 1,
+                "frequency": _number(float(h.natural_frequency[k])),
+                "damping_ratio": _number(float(h.damping_ratio[k])),
+                "energy": dict(zip(DOF_NAMES, _series(energy), strict=True)),
+                "name": mode_name(energy),
+            }
+        )
+    return out
 
 
 def history_dataset(study_id: str, case: int, h: CaseHistory, every: int) -> xr.Dataset:

@@ -213,6 +213,7 @@ def test_a_wheel_installs_the_three_packages_under_one_namespace(tmp_path):
     assert "isolab" in tops and not tops & set(PACKAGES), tops
     members = zipfile.ZipFile(wheel).namelist()
     assert "isolab/studies/examples/article-scriber.yaml" in members
+    assert "isolab/service/ui/study.html" in members and "isolab/service/ui/assets/common.js" in members
     init_dirs = {
         str(p.parent.relative_to(ROOT)) for pkg in PACKAGES for p in (ROOT / pkg).rglob("__init__.py")
     }

@@ -15,7 +15,7 @@ import pytest
 from live_service import quick_scene, thread_server
 
 from isolab.service.app import create_app
-from isolab.service.schemas import EXAMPLE_COMPARISON
+from isolab.service.schemas import EXAMPLE_CALIBRATION, EXAMPLE_COMPARISON, EXAMPLE_STUDY_TEXT
 from isolab.service.settings import Settings
 
 pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
@@ -48,7 +48,14 @@ ROUTES: dict[tuple[str, str], dict[str, Any]] = {
         "params": {"y": "peak_displacement_y", "x": "isolator_type"},
     },
     ("POST", "/comparisons"): {"status": 200, "json": EXAMPLE_COMPARISON},
+    ("POST", "/calibrations"): {"status": 200, "json": EXAMPLE_CALIBRATION},
     ("DELETE", "/studies/{study_id}"): {"status": 204},
+    ("GET", "/examples"): {"status": 200},
+    ("GET", "/examples/{name}"): {"status": 200},
+    ("POST", "/studies/validate"): {"status": 200, "json": {"text": EXAMPLE_STUDY_TEXT}},
+    ("GET", "/studies/{study_id}/definition.yaml"): {"status": 200},
+    ("GET", "/studies/{study_id}/design"): {"status": 200},
+    ("GET", "/studies/{study_id}/error-estimate"): {"status": 200},
 }
 
 
@@ -86,7 +93,9 @@ def done(api: httpx.Client) -> str:
 
 
 def concrete(path: str, study_id: str) -> str:
-    return path.replace("{study_id}", study_id).replace("{case}", "0")
+    return (
+        path.replace("{study_id}", study_id).replace("{case}", "0").replace("{name}", "isolator-comparison")
+    )
 
 
 def call(
@@ -147,6 +156,24 @@ def test_the_api_description_is_public_and_holds_no_study(server: dict, done: st
         spec = bare.get("/openapi.json")
         assert spec.status_code == 200 and done not in spec.text
         assert bare.get("/docs").status_code == 200
+
+
+def test_the_web_page_shells_are_public_and_hold_no_study(server: dict, done: str) -> None:
+    """The page's HTML, scripts and the reference pages carry no data: every datum comes from the API,
+    with the token (tests/browser drive it)."""
+    with httpx.Client(base_url=server["url"], timeout=30.0) as bare:
+        for path in (
+            "/ui/",
+            "/ui/new",
+            "/ui/compare",
+            f"/ui/studies/{done}",
+            f"/ui/studies/{done}/cases/0",
+            "/ui/assets/common.js",
+            "/redoc",
+        ):
+            r = bare.get(path)
+            assert r.status_code == 200, path
+            assert done not in r.text and "escape" not in r.text, path
 
 
 # ------------------------------------------------------------------------------------ path traversal

@@ -298,6 +298,11 @@ def test_timeseries_recomputes_the_case(
         "rotation": "rad",
         "isolator_force": "N",
         "point_displacement": "m",
+        "stage_position": "m",
+        "stage_velocity": "m/s",
+        "stage_acceleration": "m/s^2",
+        "natural_frequency": "Hz",
+        "settling_time": "s",
     }
     t = np.array(body["time"])
     assert t[0] == 0.0 and t[-1] == pytest.approx(2.0) and np.allclose(np.diff(t), 0.002)
@@ -311,6 +316,14 @@ def test_timeseries_recomputes_the_case(
         np.abs(fz).max(axis=1), cell.peak_isolator_force.sel(axis="z").values, rtol=1e-9
     )
     assert list(body["point_displacement"]) == ["tool"]
+    # the stage profile on the same time axis, the modes and the settling of the same run
+    accel = np.array(body["stages"]["y"]["acceleration"])
+    assert accel.size == t.size and np.abs(accel).max() == pytest.approx(2 * G)
+    np.testing.assert_allclose(
+        [m["frequency"] for m in body["modes"]], cell.natural_frequency.values, rtol=1e-9
+    )
+    assert {m["name"] for m in body["modes"]} >= {"heave"}
+    assert body["settling_time"] == pytest.approx(float(cell.settling_time), rel=1e-9)
     # every 10th sample, as netCDF
     r = http.get(f"/studies/{grid['id']}/cases/3/timeseries", params={"format": "netcdf", "every": 10})
     assert r.status_code == 200 and r.headers["content-type"] == "application/x-netcdf"

@@ -1,0 +1,172 @@
+// /ui/new: start from an example or a stored study, edit the YAML, see the service's checks at their
+// lines with the case count and the estimated time, submit.
+"use strict";
+
+const CHECK_DELAY_MS = 500;
+let checked = null; // the last successful check: {definition, n_cases, ...}
+let checkTimer = null;
+let checkSeq = 0;
+let problemLines = new Map(); // line -> [messages]
+
+const text = () => $("#text");
+
+function escapeHtml(s) {
+  return s.replace(/&/g, "&amp;").replace(/</g, "&lt;").replace(/>/g, "&gt;");
+}
+
+function paint() {
+  const lines = text().value.split("\n");
+  $("#gutter").innerHTML = lines
+    .map((_, i) => {
+      const msgs = problemLines.get(i + 1);
+      return msgs ? `<span class="bad" title="${escapeHtml(msgs.join("\n"))}">⚠ ${i + 1}</span>` : String(i + 1);
+    })
+    .join("\n");
+  $("#backdrop").innerHTML =
+    lines
+      .map((l, i) => {
+        const msgs = problemLines.get(i + 1);
+        if (!msgs) return escapeHtml(l);
+        return `<span class="bad">${escapeHtml(l) || " "}</span><span class="note">   ◀ ${escapeHtml(msgs.join("; "))}</span>`;
+      })
+      .join("\n") + "\n";
+  syncScroll();
+}
+
+function syncScroll() {
+  $("#gutter").scrollTop = text().scrollTop;
+  $("#backdrop").scrollTop = text().scrollTop;
+  $("#backdrop").scrollLeft = text().scrollLeft;
+}
+
+function goToLine(line) {
+  const lines = text().value.split("\n");
+  const start = lines.slice(0, line - 1).reduce((n, l) => n + l.length + 1, 0);
+  text().focus();
+  text().setSelectionRange(start, start + (lines[line - 1] || "").length);
+  const lineHeight = parseFloat(getComputedStyle(text()).lineHeight) || 18;
+  text().scrollTop = Math.max(0, (line - 4) * lineHeight);
+  syncScroll();
+}
+
+function where(d) {
+  const loc = (d.loc || []).slice(2); // after ["body", "text"]
+  return loc.length ? loc.map((p) => (typeof p === "number" ? `[${p}]` : `.${p}`)).join("").replace(/^\./, "") : "";
+}
+
+function showProblems(details) {
+  problemLines = new Map();
+  for (const d of details) {
+    if (d.line) problemLines.set(d.line, [...(problemLines.get(d.line) || []), d.msg]);
+  }
+  fill($("#problems"), 
+    ...details.map((d) =>
+      el(
+        "li",
+        { "data-line": d.line || "", onclick: () => d.line && goToLine(d.line) },
+        el("span", { class: "line" }, d.line ? `line ${d.line}` : "study"),
+        where(d) ? el("code", {}, where(d) + ": ") : null,
+        d.msg
+      )
+    )
+  );
+  paint();
+}
+
+async function check() {
+  const seq = ++checkSeq;
+  const body = text().value;
+  checked = null;
+  $("#submit").disabled = true;
+  if (!body.trim()) {
+    $("#check").textContent = "Write or load a study.";
+    showProblems([]);
+    return;
+  }
+  $("#check").textContent = "Checking…";
+  try {
+    const answer = await postJson("/studies/validate", { text: body });
+    if (seq !== checkSeq) return;
+    checked = answer;
+    showProblems([]);
+    $("#check").className = "check ok";
+    $("#check").textContent = `✓ ${answer.name}: ${answer.n_cases} cases (${answer.parameters.join(" × ") || "no varied parameter"}), estimated time ${seconds(answer.estimated_seconds)}.`;
+    $("#submit").disabled = false;
+  } catch (err) {
+    if (seq !== checkSeq) return;
+    $("#check").className = "check error";
+    const details = err.body && Array.isArray(err.body.detail) ? err.body.detail : [{ msg: err.message, loc: [] }];
+    $("#check").textContent = `${details.length} problem${details.length === 1 ? "" : "s"}:`;
+    showProblems(details);
+  }
+}
+
+function scheduleCheck() {
+  clearTimeout(checkTimer);
+  paint();
+  checkTimer = setTimeout(check, CHECK_DELAY_MS);
+}
+
+async function loadSources() {
+  const select = $("#source");
+  try {
+    const examples = await apiJson("/examples");
+    select.appendChild(el("optgroup", { label: "Examples" }, examples.names.map((n) => el("option", { value: `example:${n}` }, n))));
+    const stored = await apiJson("/studies?limit=100");
+    if (stored.items.length) {
+      select.appendChild(
+        el("optgroup", { label: "Stored studies" }, stored.items.map((s) => el("option", { value: `study:${s.id}` }, `${s.name} (${s.status}, ${when(s.created)})`)))
+      );
+    }
+  } catch (err) {
+    showError("#load-error", err);
+  }
+}
+
+async function loadSource() {
+  const [kind, key] = $("#source").value.split(/:(.*)/s);
+  if (!key) return;
+  try {
+    if (kind === "example") {
+      text().value = (await apiJson(`/examples/${encodeURIComponent(key)}`)).text;
+    } else {
+      const r = await api(`/studies/${key}/definition.yaml`);
+      if (!r.ok) throw new ApiError(r.status, await r.json().catch(() => null));
+      text().value = await r.text();
+    }
+    fill($("#load-error"));
+    text().scrollTop = 0;
+    scheduleCheck();
+  } catch (err) {
+    showError("#load-error", err);
+  }
+}
+
+async function submit() {
+  if (!checked) return;
+  $("#submit").disabled = true;
+  fill($("#submit-error"));
+  try {
+    const accepted = await postJson("/studies", checked.definition);
+    location.href = `/ui/studies/${accepted.id}`;
+  } catch (err) {
+    $("#submit").disabled = false;
+    if (err.body && Array.isArray(err.body.detail)) check();
+    showError("#submit-error", err);
+  }
+}
+
+header("new");
+text().addEventListener("input", scheduleCheck);
+text().addEventListener("scroll", syncScroll);
+$("#load").addEventListener("click", loadSource);
+$("#source").addEventListener("change", loadSource);
+$("#submit").addEventListener("click", submit);
+const preset = new URLSearchParams(location.search).get("from");
+loadSources().then(() => {
+  if (preset) {
+    $("#source").value = preset;
+    loadSource();
+  }
+});
+paint();

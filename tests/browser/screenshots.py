@@ -1,0 +1,125 @@
+"""Screenshots of each page of the web UI for docs/ui.md, taken the way the browser tests drive it (Debian's
+Chromium under Playwright, a real ``isolab serve`` on loopback with a fresh store).
+
+    .venv/bin/python -m tests.browser.screenshots            # writes docs/ui-*.png
+    .venv/bin/python -m tests.browser.screenshots --out /tmp/shots
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import httpx
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from ui_driver import CHROMIUM, browser, service, submit_example, wait_done  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+VIEWPORT = {"width": 1300, "height": 900}
+
+
+def take(out: Path) -> list[Path]:
+    out.mkdir(parents=True, exist_ok=True)
+    shots: list[Path] = []
+
+    def shot(page, name: str, full: bool = True) -> None:
+        page.wait_for_timeout(400)  # let Plotly finish its transitions
+        path = out / f"ui-{name}.png"
+        page.screenshot(path=str(path), full_page=full)
+        shots.append(path)
+
+    with (
+        tempfile.TemporaryDirectory(prefix="isolab-shots-") as tmp,
+        service(Path(tmp)) as svc,
+        browser() as b,
+    ):
+        base = svc.url
+        page = b.new_page(viewport=VIEWPORT)
+        study_id = submit_example(page, base)
+        wait_done(page)
+        page.select_option("#colour", "isolator_type")
+        shot(page, "study")
+
+        page.goto(f"{base}/ui/studies/{study_id}/cases/7")
+        page.wait_for_selector("#traces svg.main-svg", timeout=60_000)
+        shot(page, "case")
+
+        page.goto(f"{base}/ui/new")
+        page.wait_for_selector("#source option[value='example:isolator-comparison']", state="attached")
+        page.select_option("#source", "example:isolator-comparison")
+        page.wait_for_selector("#check.ok")
+        text = (
+            page.input_value("#text").replace("num: 4", "num: 0").replace("mass: 1000 kg", "mass: -1000 kg")
+        )
+        page.fill("#text", text)
+        page.wait_for_selector("#check.error")
+        page.evaluate("document.querySelector('#text').scrollTop = 260")
+        page.dispatch_event("#text", "scroll")
+        shot(page, "new", full=False)
+
+        page.goto(f"{base}/ui/compare")
+        page.wait_for_selector("#source option", state="attached")
+        page.click("#run")
+        page.wait_for_selector("#comparison-table", timeout=60_000)
+        shot(page, "compare")
+
+        # a sampled study with a log-sampled parameter: the sweep plot's log axis
+        api = httpx.Client(base_url=base, timeout=60.0)
+        lhs = api.get("/examples/lhs-10000").json()["text"]
+        small = lhs.replace("samples: 10000", "samples: 300").replace("name: lhs-10000", "name: lhs-300")
+        sampled = submit_text(api, small)
+        deadline = time.monotonic() + 120
+        while api.get(f"/studies/{sampled}").json()["status"] != "done":
+            assert time.monotonic() < deadline, "the sampled study did not finish"
+            time.sleep(0.5)
+        page.goto(f"{base}/ui/studies/{sampled}")
+        wait_done(page)
+        zeta = page.eval_on_selector(
+            "#colour", "s => [...s.options].map(o => o.value).find(v => /zeta/.test(v))"
+        )
+        page.select_option("#colour", zeta)
+        page.locator("#sweep-card").scroll_into_view_if_needed()
+        page.locator("#sweep-card").screenshot(path=str(out / "ui-sweep-log.png"))
+        shots.append(out / "ui-sweep-log.png")
+
+        # the catalog while a large study runs (cancelled afterwards)
+        running = submit_text(api, lhs)
+        page.goto(f"{base}/ui/")
+        page.wait_for_selector(f"#study-table tr[data-id='{running}'] .status-running", timeout=60_000)
+        deadline = time.monotonic() + 60
+        while api.get(f"/studies/{running}").json()["progress"]["done"] == 0 and time.monotonic() < deadline:
+            time.sleep(0.5)
+        page.wait_for_timeout(2000)  # the page's next refresh
+        shot(page, "studies", full=False)
+        api.delete(f"/studies/{running}")
+    return shots
+
+
+def submit_text(api: httpx.Client, text: str) -> str:
+    """Check a study text and submit its definition, as the page does; the new study's id."""
+    checked = api.post("/studies/validate", json={"text": text})
+    checked.raise_for_status()
+    accepted = api.post("/studies", json=checked.json()["definition"])
+    accepted.raise_for_status()
+    return str(accepted.json()["id"])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--out", type=Path, default=ROOT / "docs", help="folder for the PNG files")
+    args = parser.parse_args()
+    if not CHROMIUM.exists():
+        sys.exit(f"no {CHROMIUM}: run `make browser` first")
+    for path in take(args.out):
+        print(path)
+
+
+if __name__ == "__main__":
+    main()

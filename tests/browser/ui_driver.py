@@ -1,0 +1,109 @@
+"""Driving the web page in a real headless Chromium: Debian's ``/usr/bin/chromium`` under Playwright for
+Python (``playwright install`` is never run: it downloads browsers, which this network does not allow).
+
+Shared by the browser tests and ``python -m tests.browser.screenshots``: start a real ``isolab serve``
+(:class:`ServiceProcess` of tests/reliability/live_service.py), open pages, walk the flows a person would.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "reliability"))
+
+from live_service import ServiceProcess  # noqa: E402
+
+CHROMIUM = Path("/usr/bin/chromium")
+"""Debian's chromium package (``make browser`` installs it)."""
+CHROMIUM_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+"""Without the background-networking flags Chromium keeps trying to reach Google's hosts, which this
+machine's closed network refuses."""
+EXAMPLE = "isolator-comparison"
+STUDY_TIMEOUT_S = 90.0
+
+
+@contextmanager
+def browser() -> Iterator:
+    """A headless Chromium (the system one), closed afterwards."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        b = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_FLAGS, headless=True)
+        try:
+            yield b
+        finally:
+            b.close()
+
+
+@contextmanager
+def service(tmp: Path, token: str | None = None, workers: int = 2) -> Iterator[ServiceProcess]:
+    """A real ``isolab serve`` on a free loopback port, with a study store under ``tmp``."""
+    env = {"ISOLAB_API_TOKEN": token} if token else {"ISOLAB_API_TOKEN": ""}
+    with ServiceProcess(tmp / "data", workers=workers, env=env) as svc:
+        yield svc
+
+
+class ConsoleErrors(list):
+    """Console errors and uncaught exceptions of a page, gathered as they happen."""
+
+    def __init__(self, page, ignore: tuple[str, ...] = ()):
+        super().__init__()
+        self.ignore = ignore
+        page.on("console", lambda m: m.type == "error" and self._add(f"console: {m.text}"))
+        page.on("pageerror", lambda e: self._add(f"uncaught: {e}"))
+
+    def _add(self, text: str) -> None:
+        if not any(s in text for s in self.ignore):
+            self.append(text)
+
+
+def plot_rendered(page, selector: str) -> bool:
+    """The Plotly figure in ``selector`` has drawn something: an SVG with traces (paths or points)."""
+    return page.eval_on_selector(
+        selector,
+        """node => {
+            const svg = node.querySelector('svg.main-svg');
+            if (!svg) return false;
+            const box = svg.getBoundingClientRect();
+            const marks = node.querySelectorAll(
+                '.scatterlayer .trace path, .scatterlayer .point, .barlayer .point');
+            return box.width > 0 && box.height > 0 && marks.length > 0;
+        }""",
+    )
+
+
+def submit_example(page, base: str, example: str = EXAMPLE) -> str:
+    """From /ui/new: load the example, wait for the service's check, submit; the new study's id."""
+    page.goto(f"{base}/ui/new")
+    page.wait_for_selector(f"#source option[value='example:{example}']", state="attached")
+    page.select_option("#source", f"example:{example}")
+    page.wait_for_selector("#check.ok", timeout=30_000)
+    page.click("#submit")
+    page.wait_for_url(f"{base}/ui/studies/*", timeout=30_000)
+    return page.url.rstrip("/").split("/")[-1]
+
+
+def wait_done(page, timeout_s: float = STUDY_TIMEOUT_S) -> None:
+    """On a study's page: wait until its badge says done and the sweep plot is drawn."""
+    page.wait_for_selector("#title .status-done", timeout=timeout_s * 1000)
+    page.wait_for_function(
+        "document.querySelector('#sweep svg.main-svg') !== null", timeout=30_000, polling=200
+    )
+
+
+def settle(seconds: float = 0.3) -> None:
+    time.sleep(seconds)
