@@ -7,6 +7,12 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 CODE := engine studies service tests benchmarks
 
+# numba caches each compiled kernel beside its source, but notices an edit only in the kernel's own file:
+# a kernel that inlines code from another engine module would run stale after that module changes. The
+# make targets keep the caches in a folder named for the engine's sources, so any engine edit starts fresh.
+ENGINE_HASH := $(shell cat engine/*.py engine/integrators/*.py 2>/dev/null | sha1sum | cut -c1-12)
+export NUMBA_CACHE_DIR ?= $(CURDIR)/$(VENV)/numba-cache/$(ENGINE_HASH)
+
 HOST ?= 127.0.0.1
 PORT ?= 8000
 WORKERS ?= 2

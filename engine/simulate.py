@@ -58,7 +58,7 @@ def simulate(
 
     Args:
         batch: the cases (see ``engine.scene``).
-        fidelity: "lti", "ltv" or "nonlinear" (see PHYSICS.md).
+        fidelity: "lti", "ltv" or "nonlinear" (see docs/physics.md).
         integrator: "euler" (semi-implicit), "rk4", "exact" (LTI only) or "reference" (adaptive).
         dt: output step, s; also the integration step of the fixed-step methods.
         auto_step: when ``dt`` is past the integrator's stability limit for a case, divide it into as
