@@ -277,17 +277,16 @@ def next_split(ev, c, passed, t_end, tol):
     return t_end
 
 
-@njit(cache=True)
-def step(P, c, ta, tb, t0, t1, fresh, passed, z, xn, idx, W, full, sub_b, sub_a, deg, osc_on):
+@njit(cache=True, inline="always")
+def step(P, c, ta, tb, t0, t1, fresh, passed, z, Fv, xn, idx, W, full, sub_b, sub_a, deg, osc_on):
     """Advance ``x`` (12,) exactly from ``ta`` to ``tb`` (s) inside the step ``[t0, t1]``.
 
     ``passed`` breakpoints of the case are behind ``ta``; ``fresh`` says a stage entered a new piece at
     ``ta``. ``z`` is ``[x (12), F0..F_deg (6 each)]``: the state and the forcing derivatives carried
-    between steps; ``xn`` (12,) is scratch for the new state. A sub-step that ends on a breakpoint takes
-    that breakpoint's map from ``sub_b``; the rest of a split step its map from ``sub_a``; an unsplit step
-    the full map. Always True.
+    between steps, ``Fv`` the view of its forcing part; ``xn`` (12,) is scratch for the new state. A
+    sub-step that ends on a breakpoint takes that breakpoint's map from ``sub_b``; the rest of a split
+    step its map from ``sub_a``; an unsplit step the full map. Always True.
     """
-    Fv = z[12:]
     if tb < t1:
         _forcing_poly(P, c, ta, idx, W, deg, Fv)
         _apply(sub_b[c, passed], z, osc_on, ta, P, c, xn)

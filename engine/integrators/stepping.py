@@ -76,7 +76,7 @@ def drive(method, P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, d
                 if method == EXACT:
                     tb = exact.next_split(ev, c, passed, t1, tol)
                     ok = exact.step(
-                        P, c, ta, tb, t0, t1, fresh, passed, z, xn, idx, W, full, sub_b, sub_a, deg, osc
+                        P, c, ta, tb, t0, t1, fresh, passed, z, Fv, xn, idx, W, full, sub_b, sub_a, deg, osc
                     )
                 else:
                     tb = piece_end if piece_end < t1 - tol else t1
