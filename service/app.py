@@ -27,12 +27,14 @@ import dask
 from anyio import to_thread
 from distributed import Client, LocalCluster
 from fastapi import Depends, FastAPI, HTTPException, Request
+from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from isolab.service.jobs import RUNNING_STUDIES, JobQueue
-from isolab.service.request_limits import RequestLimits, unreadable_body_is_422
+from isolab.service.openapi import describe_settings
+from isolab.service.request_limits import RequestLimits, unreadable_body_is_422, validation_errors_as_json
 from isolab.service.routes import (
     authoring,
     calibrations,
@@ -44,7 +46,9 @@ from isolab.service.routes import (
     ui,
 )
 from isolab.service.settings import Settings, load_settings
+from isolab.service.unavailable import add_store_handlers
 from isolab.service.worker_priority import LowerPriority
+from isolab.studies.store import StoreLock
 
 #: Port of the Dask dashboard of the in-process LocalCluster, when free.
 DASHBOARD_PORT = 8787
@@ -142,7 +146,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         settings.data_dir.mkdir(parents=True, exist_ok=True)
-        client, cluster = await to_thread.run_sync(start_dask, settings)
+        # one service per data directory: a second one refuses to start (StoreInUse) instead of running
+        # the same studies twice; the kernel drops the lock when this process ends, however it ends
+        store_lock = StoreLock(settings.data_dir).acquire()
+        try:
+            client, cluster = await to_thread.run_sync(start_dask, settings)
+        except BaseException:
+            store_lock.release()
+            raise
         app.state.dask = client
         app.state.dask_cluster = cluster
         jobs: JobQueue | None = None
@@ -163,6 +174,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             app.state.dask_cluster = None
             await to_thread.run_sync(stop_dask, client, cluster)
             sys.setswitchinterval(switch_interval)
+            store_lock.release()
 
     app = FastAPI(
         title="isolab",
@@ -178,7 +190,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.jobs = None
     app.state.heavy_work = heavy_work_limiter()
     app.add_middleware(RequestLimits, max_bytes=settings.max_body_bytes)
+    add_store_handlers(app)  # a full disk or a catalog SQLite refuses: 503 with the reason
     app.add_exception_handler(StarletteHTTPException, unreadable_body_is_422)  # type: ignore[arg-type]
+    app.add_exception_handler(RequestValidationError, validation_errors_as_json)  # type: ignore[arg-type]
     if settings.cors_origins:
         app.add_middleware(
             CORSMiddleware,
@@ -194,4 +208,5 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(calibrations.router, dependencies=guarded)
     app.include_router(authoring.router, dependencies=guarded)
     ui.add_ui(app)  # the web page's shells and assets (no data: every datum comes from the guarded API)
+    describe_settings(app, settings)  # /openapi.json: the token's 401 and security only when one is set
     return app

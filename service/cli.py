@@ -66,7 +66,18 @@ def serve(
     except SettingsError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(code=2) from None
-    uvicorn.run(create_app(settings), host=host, port=port, log_level="info")
+    from isolab.studies.store import StoreInUse, StoreLock
+
+    # held for the process's life (the app's lifespan shares it): one service per data directory
+    try:
+        lock = StoreLock(settings.data_dir).acquire()
+    except StoreInUse as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(code=1) from None
+    try:
+        uvicorn.run(create_app(settings), host=host, port=port, log_level="info")
+    finally:
+        lock.release()
 
 
 app.command("serve")(serve)

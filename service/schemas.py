@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
 StudyStatusName = Literal["queued", "running", "done", "failed", "cancelled"]
 IsolatorType = Literal["active", "air", "elastomer"]
@@ -111,6 +111,11 @@ class StudySummary(BaseModel):
     started: str | None = None
     finished: str | None = None
     error: str | None = Field(None, description="why the study failed")
+    failures: str | None = Field(
+        None,
+        description="how many cases failed (status not ok: unstable, tipping, failed) when any did, and "
+        "where to read why; null when none did",
+    )
     parameters: list[str] = Field(description="names of the varied parameters")
     isolator_types: list[str]
     fidelity: str | None = Field(
@@ -313,7 +318,9 @@ class StudyText(BaseModel):
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"text": EXAMPLE_STUDY_TEXT}]})
 
-    text: str = Field(max_length=1_000_000, description="YAML or JSON text of a study definition")
+    text: str = Field(
+        min_length=1, max_length=1_000_000, description="YAML or JSON text of a study definition"
+    )
 
 
 class StudyCheck(BaseModel):
@@ -406,7 +413,7 @@ before the stage: the mounts are 3.6 Hz sideways, not the air preset's 3 Hz."""
 class FitParameterIn(BaseModel):
     """A parameter to fit: a study parameter path and its bounds (numbers in SI or text with units)."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True)
 
     path: str = Field(max_length=200, description="e.g. isolators.f_vertical, isolators.zeta, stages.y.mass")
     lower: float | str
@@ -418,7 +425,7 @@ class ChannelIn(BaseModel):
     """One measured channel: ``LOCATION.AXIS.QUANTITY`` (cg or a point; x, y, z, rx, ry, rz;
     displacement, velocity or acceleration), its unit and its samples."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True)
 
     name: str = Field(max_length=200, description="e.g. cg.z.displacement, tool.y.acceleration")
     unit: str = Field("", max_length=64, description="e.g. mm, um, m/s, g, mrad (default SI)")
@@ -428,7 +435,7 @@ class ChannelIn(BaseModel):
 class MeasurementIn(BaseModel):
     """A measurement: CSV text (a header ``time [s], cg.z.displacement [mm], ...`` then rows), or columns."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True)
 
     csv: str | None = Field(None, description="CSV text with a header naming each column")
     time: list[float] | None = Field(None, description="sample times (columns form)")
@@ -440,7 +447,7 @@ class OffsetIn(BaseModel):
     """The time offset (when the motion starts on the measurement's clock): bounds and start, or a value
     to hold fixed. Default bounds: +- a quarter of the measurement's span."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True)
 
     lower: float | str | None = None
     upper: float | str | None = None
@@ -451,7 +458,9 @@ class OffsetIn(BaseModel):
 class CalibrationRequest(BaseModel):
     """A scene, a measurement of its motion and the parameters to fit."""
 
-    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [EXAMPLE_CALIBRATION]})
+    model_config = ConfigDict(
+        extra="forbid", strict=True, json_schema_extra={"examples": [EXAMPLE_CALIBRATION]}
+    )
 
     scene: dict[str, Any] = Field(description="inline scene (as in a study's scene block)")
     measurement: MeasurementIn
@@ -467,7 +476,9 @@ class CalibrationRequest(BaseModel):
     lowpass: float | str | None = Field(
         None, description="low-pass corner of acceleration channels, Hz (default min(fs/5, 0.03/dt); 0: off)"
     )
-    plot: bool = Field(True, description="answer a PNG of measured against simulated traces in plot_png")
+    plot: StrictBool = Field(
+        True, description="answer a PNG of measured against simulated traces in plot_png"
+    )
 
 
 class FittedParameter(BaseModel):

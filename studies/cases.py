@@ -11,8 +11,9 @@ as Python):
     value   := number [unit] | true | false | null | 'text' | "text" | bare-word
 
 Numbers are SI unless a unit follows (``peak_displacement_y<5 mm``). A missing value (a case that did not
-compute) matches only ``==null``. Text and yes/no columns take only ``==`` and ``!=``. Every mistake is a
-:class:`CaseQueryError` naming the query parameter.
+compute) matches only ``==null``. Text and yes/no columns take only ``==`` and ``!=``. A number must be
+finite: ``inf``, ``nan`` and literals beyond a 64-bit float (``1e999``, ``1e308 km``) are refused. Every
+mistake is a :class:`CaseQueryError` naming the query parameter.
 """
 
 from __future__ import annotations
@@ -227,6 +228,7 @@ _CLAUSE = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*(<=|>=|==|!=|<|>)\s*(.*?)\
 _NUMBER = re.compile(r"^[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?$")
 _QUANTITY = re.compile(r"^[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?\s*[A-Za-z%µ][A-Za-z0-9%µ/^* .]*$")
 _BARE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
+_NON_FINITE = re.compile(r"^[-+]?(?:inf|infinity|nan)(?![A-Za-z0-9_])", re.IGNORECASE)
 
 
 @dataclass(frozen=True)
@@ -266,8 +268,10 @@ def _filter_value(table: CaseColumns, column: str, op: str, raw: str) -> Any:
         if _BARE.match(raw):
             return raw
         raise CaseQueryError("filter", f"{where}: quote text values ('...')")
+    if _NON_FINITE.match(raw):
+        raise CaseQueryError("filter", f"{where}: not a finite number; compare with a finite value")
     if _NUMBER.match(raw):
-        return float(raw)
+        return _finite_value(float(raw), where)
     if _QUANTITY.match(raw):
         problem = quantity_problem(raw)
         if problem is not None:
@@ -278,10 +282,20 @@ def _filter_value(table: CaseColumns, column: str, op: str, raw: str) -> Any:
                 "filter", f"{where}: {column} has unit {table.units[column]!r}; give a number"
             )
         try:
-            return to_si(raw, dimension, f"filter: {column}")
+            value = to_si(raw, dimension, f"filter: {column}")
         except ValueError as err:
             raise CaseQueryError("filter", str(err)) from None
+        return _finite_value(value, where)
     raise CaseQueryError("filter", f"{where}: {column} holds numbers; give a number (SI, or with a unit)")
+
+
+def _finite_value(value: float, where: str) -> float:
+    """``value`` when finite; a literal beyond a 64-bit float (``1e999``) reads as infinity: refused."""
+    if not math.isfinite(value):
+        raise CaseQueryError(
+            "filter", f"{where}: not a finite number (beyond a 64-bit float); compare with a finite value"
+        )
+    return value
 
 
 def _split_clauses(text: str) -> list[str]:

@@ -75,6 +75,15 @@ class StudyNotFound(KeyError):
     """No study with this id in the catalog (or no dataset file for it)."""
 
 
+class CatalogUnavailable(RuntimeError):
+    """The catalog cannot be read or written just now (a full disk, an I/O error, a lock held too long);
+    the message says why. The service answers 503 with it: try again once the cause is gone."""
+
+
+# SQLite's words for a catalog that cannot be used now (as opposed to a mistake in a query)
+_UNAVAILABLE = ("disk", "full", "i/o", "locked", "unable to open", "readonly")
+
+
 def check_id(study_id: str) -> str:
     """``study_id`` if it is 32 lowercase hex digits, else ValueError (it never reaches a path)."""
     if not isinstance(study_id, str) or not STUDY_ID.fullmatch(study_id):
@@ -112,15 +121,34 @@ class Catalog:
             have = {r["name"] for r in con.execute("PRAGMA table_info(studies)")}
             if "dt" not in have:  # a catalog written before the step was recorded
                 con.execute("ALTER TABLE studies ADD COLUMN dt REAL")
+        # One connection stays open (idle) for the catalog's life: SQLite deletes the WAL index
+        # (``catalog.sqlite-shm``) when its last connection closes and must allocate it again at the
+        # next open, which fails on a full disk and then takes every read down with it. Held open, the
+        # index stays allocated and reads keep working while the disk is full.
+        self._keeper: sqlite3.Connection | None = sqlite3.connect(self.path, check_same_thread=False)
+        self._keeper.execute("SELECT COUNT(*) FROM studies").fetchall()
+
+    def close(self) -> None:
+        """Close the connection the catalog holds open (the per-call ones are closed already)."""
+        if self._keeper is not None:
+            self._keeper.close()
+            self._keeper = None
 
     @contextlib.contextmanager
     def _connect(self) -> Iterator[sqlite3.Connection]:
-        con = sqlite3.connect(self.path, timeout=30.0)
+        try:
+            con = sqlite3.connect(self.path, timeout=30.0)
+        except sqlite3.OperationalError as err:
+            raise _unavailable(self.path, err) from err
         con.row_factory = sqlite3.Row
         try:
             con.execute("PRAGMA busy_timeout=30000")
             with con:  # commits, or rolls back on error
                 yield con
+        except sqlite3.OperationalError as err:
+            if any(word in str(err).lower() for word in _UNAVAILABLE):
+                raise _unavailable(self.path, err) from err
+            raise
         finally:
             con.close()
 
@@ -284,6 +312,13 @@ class Catalog:
         check_id(study_id)
         with self._connect() as con:
             return con.execute("DELETE FROM studies WHERE id = ?", (study_id,)).rowcount > 0
+
+
+def _unavailable(path: Path, err: sqlite3.OperationalError) -> CatalogUnavailable:
+    text = str(err)
+    if "full" in text.lower():
+        text = f"no space left on device ({text})"
+    return CatalogUnavailable(f"the study catalog {path.name} cannot be used now: {text}")
 
 
 def _decode(row: sqlite3.Row) -> dict[str, Any]:

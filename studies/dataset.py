@@ -498,3 +498,22 @@ def error_estimate(ds: xr.Dataset) -> dict[str, float]:
         for name in ds.data_vars
         if str(name).startswith(ERROR_ESTIMATE_PREFIX)
     }
+
+
+def failures(path: Any) -> str:
+    """What went wrong in a study's dataset file: how many cases have each status other than ok, and the
+    message of the first of them (``"12 tipping; case 0: statically unstable: ..."``). Empty when every
+    case is ok."""
+    with xr.open_dataset(path) as ds:
+        status = np.asarray(ds["status"].values, dtype=np.int8).reshape(-1)
+        message = np.asarray(ds["message"].values).reshape(-1)
+    bad = np.flatnonzero(status != OK)
+    if bad.size == 0:
+        return ""
+    counts = ", ".join(
+        f"{int((status == code).sum())} {name}"
+        for code, name in enumerate(STATUS_NAMES)
+        if code != OK
+        if (status == code).any()
+    )
+    return f"{counts}; case {int(bad[0])}: {message[bad[0]]}"

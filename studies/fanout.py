@@ -49,6 +49,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from isolab.studies.dataset import failed_arrays, result_arrays
+from isolab.studies.store import is_no_space
 from isolab.studies.study import study_from_json
 from isolab.studies.timings import record_timing
 
@@ -251,6 +252,8 @@ def run_chunks(
 
     Raises:
         FanoutError: every submitted chunk failed.
+        OSError: a chunk's task failed for want of space in the store (ENOSPC, e.g.
+            :class:`studies.store.StoreFull`): the outstanding chunks are cancelled.
     """
     from dask.distributed import as_completed
 
@@ -322,6 +325,9 @@ def run_chunks(
                     _take_task_timing(arrays, timing)
                 else:
                     exc = fut.exception() if fut.status == "error" else None
+                    if is_no_space(exc):  # not the cases' fault: the study fails (and can run again)
+                        assert exc is not None
+                        raise exc
                     text = f"{type(exc).__name__}: {exc}" if exc is not None else f"task {fut.status}"
                     report.failed[k] = text
                     arrays = failed_arrays(len(chunks[k]), f"chunk {k} failed: {text}")

@@ -53,9 +53,9 @@ from isolab.studies.accuracy import (
     sample_arrays,
 )
 from isolab.studies.costs import estimate_seconds_per_case
-from isolab.studies.dataset import add_error_estimate, from_chunks, to_dataset
+from isolab.studies.dataset import add_error_estimate, failures, from_chunks, to_dataset
 from isolab.studies.fanout import TASK_RETRIES, choose_chunk_size, plan_chunks, run_chunks
-from isolab.studies.store import Store, copy_atomic, utc_now
+from isolab.studies.store import Store, StoreFull, copy_atomic, is_no_space, utc_now
 from isolab.studies.study import isolator_names, study_from_json
 
 log = logging.getLogger(__name__)
@@ -151,6 +151,7 @@ def run_study(
             dt=sim.dt,
         )
     row = store.get(study_id)  # exists, and the id is valid
+    store.restore_reserve()  # room to record a failure should the disk fill (see Store.release_reserve)
     store.update(study_id, status="running", started=row["started"] or utc_now(), finished=None, error=None)
     try:
         # an accuracy request is resolved before the fan-out: the chunks run the chosen model
@@ -248,10 +249,19 @@ def run_study(
         if n_failed is None:
             n_failed = assemble_dataset(store, study_id, run_json, attrs, estimate)
         store.clear_chunks(study_id)
+        if n_cases and int(n_failed) >= n_cases:  # not one case has a result: the study failed, saying why
+            reason = f"every case failed ({failures(store.path(study_id))})"
+            store.update(
+                study_id, status="failed", finished=utc_now(), n_done=n_cases, n_failed=n_cases, error=reason
+            )
+            return study_id
         store.update(study_id, status="done", finished=utc_now(), n_done=n_cases, n_failed=int(n_failed))
         return study_id
     except BaseException as err:
         text = f"{type(err).__name__}: {err}"
+        if is_no_space(err):  # "no space left on device: writing <id>.nc needs about N MB, ..."
+            text = str(err) if isinstance(err, StoreFull) else f"no space left on device: {text}"
+            store.release_reserve()  # room for the catalog to record it
         try:
             store.update(study_id, status="failed", finished=utc_now(), error=text)
         except Exception:  # the catalog itself failed: report the original error

@@ -841,6 +841,10 @@ class Scene(_Model):
 # study inputs (the Study model itself is in studies.study)
 
 Value = StrictFloat | StrictInt | StrictStr
+MAX_LIST_ENTRIES = 10_000_000
+"""Most entries of a parameter's ``values`` or a list design's ``cases``: the most cases a design holds
+(:data:`studies.designs.GRID_LIMIT`). A service refuses lists longer than its case limit
+(``ISOLAB_MAX_CASES``) before parsing (:func:`studies.definitions.long_lists`)."""
 
 
 class RangeSpec(_Model):
@@ -857,7 +861,7 @@ class ParameterSpec(_Model):
 
     name: Name | None = None
     path: str = Field(min_length=1, max_length=200)
-    values: list[Value] | None = Field(None, min_length=1)
+    values: list[Value] | None = Field(None, min_length=1, max_length=MAX_LIST_ENTRIES)
     range: RangeSpec | None = None
 
     @model_validator(mode="after")
@@ -873,7 +877,7 @@ class DesignSpec(_Model):
     type: Literal["grid", "lhs", "sobol", "random", "list"] = "grid"
     samples: int | None = Field(None, ge=1, le=10_000_000)
     seed: int = Field(0, ge=0)
-    cases: list[dict[str, Value]] | None = None
+    cases: list[dict[str, Value]] | None = Field(None, max_length=MAX_LIST_ENTRIES)
 
 
 def error_messages(err: ValidationError) -> list[str]:

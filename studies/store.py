@@ -7,6 +7,7 @@ Layout under ``root``::
     studies/<id>.nc              a finished study's dataset
     studies/<id>.chunks/<k>.npz  results of chunk k of a study still running (removed once the .nc exists)
     studies/<id>.chunks/plan.npz the case indices of every chunk, so a resumed run splits the same way
+    service.lock                 held (``flock``) by the one service that runs this store's studies
 
 A study id is a uuid4 hex string (32 lowercase hex digits); every id is checked before it becomes part of a
 path, so no path outside ``root`` can be named. Files are written atomically: to a hidden temporary file in
@@ -26,8 +27,12 @@ from __future__ import annotations
 
 import builtins
 import contextlib
+import errno
+import fcntl
+import logging
 import os
 import shutil
+import socket
 import tempfile
 import threading
 import time
@@ -43,6 +48,7 @@ from isolab.studies.catalog import (
     STATUSES,
     STUDY_ID,
     Catalog,
+    CatalogUnavailable,
     StudyNotFound,
     check_id,
     utc_now,
@@ -50,13 +56,22 @@ from isolab.studies.catalog import (
 from isolab.studies.dataset import netcdf_encoding
 from isolab.studies.timings import record_timing
 
+log = logging.getLogger(__name__)
+
 __all__ = [
+    "LOCK_FILE",
     "NETCDF_LOCK",
     "STATUSES",
+    "CatalogUnavailable",
     "Store",
+    "StoreFull",
+    "StoreInUse",
+    "StoreLock",
     "StudyNotFound",
     "atomic_path",
     "check_id",
+    "check_writable",
+    "is_no_space",
     "copy_atomic",
     "utc_now",
     "write_netcdf",
@@ -97,6 +112,82 @@ def atomic_path(target: Path) -> Iterator[Path]:
     _fsync_dir(target.parent)
 
 
+RESERVE_FILE = ".reserve"
+"""A file of :data:`RESERVE_BYTES` under a store's root, held back for a full disk: a write that fails for
+want of space deletes it, so that the catalog can still record why the study failed."""
+RESERVE_BYTES = 1024 * 1024
+_NO_SPACE = (errno.ENOSPC, errno.EDQUOT)
+_MB = 1e6
+
+
+class StoreFull(OSError):
+    """A store write failed for want of space (errno ENOSPC); the message says what needed how much.
+    Built as ``StoreFull(errno.ENOSPC, message, path)`` (so it crosses Dask's pickling whole)."""
+
+    def __str__(self) -> str:
+        return str(self.strerror)
+
+
+def is_no_space(err: BaseException | None) -> bool:
+    """``err`` (or an exception it was raised from) is a write that failed for want of space."""
+    seen = 0
+    while err is not None and seen < 10:
+        if isinstance(err, OSError) and err.errno in _NO_SPACE:
+            return True
+        err, seen = err.__cause__ or err.__context__, seen + 1
+    return False
+
+
+def _free_bytes(directory: Path) -> int:
+    try:
+        return int(shutil.disk_usage(directory).free)
+    except OSError:
+        return -1
+
+
+def _store_full(what: str, needed: int, directory: Path, err: BaseException) -> StoreFull:
+    free = _free_bytes(directory)
+    text = (
+        f"no space left on device: {what} needs about {max(needed / _MB, 0.1):.1f} MB, "
+        f"{max(free, 0) / _MB:.1f} MB free in {directory} ({type(err).__name__}: {err})"
+    )
+    return StoreFull(errno.ENOSPC, text, str(directory))
+
+
+def check_writable(root: str | Path) -> str | None:
+    """None when the store under ``root`` takes writes: a 64 kB file can be written and synced there, and
+    the reserve (:data:`RESERVE_FILE`) is in place or can be put back. Else why not."""
+    root = Path(root)
+    try:
+        with tempfile.NamedTemporaryFile(dir=root, prefix=".health-") as f:
+            f.write(b"\0" * 65536)
+            f.flush()
+            os.fsync(f.fileno())
+    except OSError as exc:
+        if exc.errno in _NO_SPACE:
+            return f"no space left on device: {_free_bytes(root) / _MB:.1f} MB free in {root}"
+        return f"{type(exc).__name__}: {exc}"
+    if not _put_reserve(root):
+        return (
+            f"no space left on device: the store's {RESERVE_BYTES / _MB:.0f} MB reserve cannot be put back, "
+            f"{_free_bytes(root) / _MB:.1f} MB free in {root}"
+        )
+    return None
+
+
+def _put_reserve(root: Path) -> bool:
+    """Create the reserve file when it is missing; False when there is no room for it."""
+    target = root / RESERVE_FILE
+    if target.is_file() and target.stat().st_size >= RESERVE_BYTES:
+        return True
+    try:
+        with atomic_path(target) as tmp, open(tmp, "wb") as f:
+            f.write(b"\0" * RESERVE_BYTES)
+    except OSError:
+        return False
+    return True
+
+
 NETCDF_LOCK = threading.RLock()
 """Held around every netCDF open, read and write of this process: the netCDF-C and HDF5 libraries are not
 thread-safe (two threads in them at once, even on different files, can crash the process), and the
@@ -107,7 +198,16 @@ def write_netcdf(ds: xr.Dataset, path: str | Path) -> Path:
     """Write ``ds`` to ``path`` atomically (see :func:`atomic_path`), with :func:`netcdf_encoding`."""
     path = Path(path)
     with atomic_path(path) as tmp, NETCDF_LOCK:
-        ds.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=netcdf_encoding(ds))
+        try:
+            ds.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=netcdf_encoding(ds))
+        except Exception as err:
+            # netCDF-C reports a full disk as anything (EACCES, "HDF error"): ask the file system. The
+            # size needed is the data uncompressed, an upper bound.
+            needed = int(ds.nbytes)
+            free = _free_bytes(path.parent)
+            if is_no_space(err) or 0 <= free < min(needed, RESERVE_BYTES):
+                raise _store_full(f"writing {path.name}", needed, path.parent, err) from err
+            raise
     return path
 
 
@@ -117,6 +217,85 @@ def copy_atomic(source: str | Path, target: str | Path) -> Path:
     with atomic_path(target) as tmp:
         shutil.copyfile(source, tmp)
     return target
+
+
+LOCK_FILE = "service.lock"
+"""File under a store's root that the service running its studies holds locked (see :class:`StoreLock`)."""
+
+
+class StoreInUse(RuntimeError):
+    """Another process (another isolab service) holds the store's lock."""
+
+
+class StoreLock:
+    """The lock of one store: one service at a time runs a store's studies.
+
+    :meth:`acquire` takes an exclusive ``flock`` on ``<root>/service.lock`` without waiting, and writes the
+    holder (pid, host, time) into the file for the message another service gets; :meth:`release` lets it
+    go. The kernel releases it when the process ends however it ends (``kill -9`` included), so a killed
+    service never blocks its restart. Within one process the lock is counted: a second :meth:`acquire` of
+    the same root (the ``serve`` command, then the app it starts) shares it.
+    """
+
+    _held: dict[Path, tuple[int, int]] = {}  # root -> (file descriptor, holders in this process)
+    _guard = threading.Lock()
+
+    def __init__(self, root: str | Path):
+        self.root = Path(root).resolve()
+        self.path = self.root / LOCK_FILE
+        self._acquired = False
+
+    def acquire(self) -> StoreLock:
+        """Take the lock (the root is created if missing). Raises StoreInUse naming the holder."""
+        if self._acquired:
+            return self
+        with StoreLock._guard:
+            fd, count = StoreLock._held.get(self.root, (-1, 0))
+            if count == 0:
+                self.root.mkdir(parents=True, exist_ok=True)
+                try:
+                    fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+                except OSError as exc:  # a read-only store: nothing can run on it; /health says so
+                    log.warning("cannot lock %s (%s): starting without the one-service guard", self.path, exc)
+                    return self
+                try:
+                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                except BlockingIOError:
+                    holder = os.pread(fd, 200, 0).decode(errors="replace").strip() or "unknown process"
+                    os.close(fd)
+                    raise StoreInUse(
+                        f"the data directory {self.root} is in use by another isolab service ({holder}); "
+                        "stop that service first, or give this one another data directory"
+                    ) from None
+                except BaseException:
+                    os.close(fd)
+                    raise
+                with contextlib.suppress(OSError):  # the note is for people; a full disk must not stop us
+                    note = f"pid {os.getpid()} on {socket.gethostname()}, since {utc_now()}\n".encode()
+                    os.ftruncate(fd, 0)
+                    os.pwrite(fd, note, 0)
+            StoreLock._held[self.root] = (fd, count + 1)
+            self._acquired = True
+        return self
+
+    def release(self) -> None:
+        """Let the lock go (the file stays; the last holder in this process closes it)."""
+        if not self._acquired:
+            return
+        with StoreLock._guard:
+            fd, count = StoreLock._held[self.root]
+            if count <= 1:
+                del StoreLock._held[self.root]
+                os.close(fd)  # closing the file releases the flock
+            else:
+                StoreLock._held[self.root] = (fd, count - 1)
+            self._acquired = False
+
+    def __enter__(self) -> StoreLock:
+        return self.acquire()
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
 
 
 class Store:
@@ -134,6 +313,22 @@ class Store:
             return
         self.studies_dir.mkdir(parents=True, exist_ok=True)
         self.catalog = Catalog(self.catalog_path)
+        _put_reserve(self.root)
+
+    def restore_reserve(self) -> bool:
+        """Put the reserve file back if it is missing (each study run starts so); False when there is no
+        room for it."""
+        return _put_reserve(self.root)
+
+    def release_reserve(self) -> bool:
+        """Delete the reserve file (after a write failed for want of space), so that the catalog has room
+        to record the failure; :func:`check_writable` (``/health``) puts it back once there is room.
+        False when it was gone already."""
+        try:
+            (self.root / RESERVE_FILE).unlink()
+        except FileNotFoundError:
+            return False
+        return True
 
     # ------------------------------------------------------------------------------------- catalog
     def _rows(self) -> Catalog:
@@ -279,5 +474,11 @@ def _save_npz(path: Path, arrays: Mapping[str, np.ndarray]) -> None:
         if a.dtype.kind == "O":
             raise ValueError(f"arrays[{name!r}]: object arrays cannot be saved; use a numeric or str dtype")
         checked[str(name)] = a
-    with atomic_path(path) as tmp, open(tmp, "wb") as f:
-        np.savez(f, **checked)  # type: ignore[arg-type]  # numpy's stub types the keywords as flags
+    try:
+        with atomic_path(path) as tmp, open(tmp, "wb") as f:
+            np.savez(f, **checked)  # type: ignore[arg-type]  # numpy's stub types the keywords as flags
+    except OSError as err:
+        if is_no_space(err):
+            needed = sum(a.nbytes for a in checked.values())
+            raise _store_full(f"writing {path.parent.name}/{path.name}", needed, path.parent, err) from err
+        raise

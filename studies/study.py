@@ -13,6 +13,7 @@ break (a mount that would carry no load) is caught when the batch is built.
 from __future__ import annotations
 
 import functools
+import itertools
 import json
 import re
 from collections.abc import Mapping
@@ -23,6 +24,8 @@ import numpy as np
 import yaml
 from pydantic import Field, PrivateAttr, ValidationError, model_validator
 
+from isolab.engine import modal, model
+from isolab.engine.results import DOF_NAMES
 from isolab.engine.scene import SceneBatch, concat
 from isolab.studies import designs
 from isolab.studies.designs import Design, Factor
@@ -37,6 +40,8 @@ _EXTREME_CHECK_LEVELS = 16
 DRY_RUN_LIMIT = 200_000
 """Studies of at most this many cases have every case built when they are validated."""
 DRY_RUN_CHUNK = 10_000
+REPRESENTATIVE_CASES = 64
+"""Most cases whose modes are computed when a study is checked (:meth:`Study._check_statics`)."""
 
 
 class Study(_Model):
@@ -206,6 +211,60 @@ class Study(_Model):
         for start in range(0, n, DRY_RUN_CHUNK):
             self.batch(np.arange(start, min(n, start + DRY_RUN_CHUNK)))
 
+    def representative_cases(self) -> np.ndarray:
+        """A few cases that span the study (at most :data:`REPRESENTATIVE_CASES`): for a grid, the corners
+        of its numeric parameters crossed with every level of its categorical ones; for a sampled or listed
+        design, the first case and the cases where each parameter takes its extremes (or each of its
+        levels)."""
+        d = self._design
+        if not d.names:
+            return np.zeros(1, dtype=np.int64)
+        if d.kind == "grid":
+            shape = d.shape
+            choices = []
+            for size, target in zip(shape, self._targets, strict=True):
+                choices.append(range(size) if target.categorical else sorted({0, size - 1}))
+            corners = list(itertools.islice(itertools.product(*choices), REPRESENTATIVE_CASES))
+            return np.unique(np.ravel_multi_index(np.array(corners).T, shape)).astype(np.int64)
+        picks = {0}
+        for name, target in zip(d.names, self._targets, strict=True):
+            values = d.values[name]
+            if target.categorical:
+                picks.update(int(np.flatnonzero(values == level)[0]) for level in np.unique(values))
+            else:
+                picks.update((int(np.argmin(values)), int(np.argmax(values))))
+        return np.array(sorted(picks)[:REPRESENTATIVE_CASES], dtype=np.int64)
+
+    def _check_statics(self) -> None:
+        """Refuse a study whose every representative case (:meth:`representative_cases`) is a mechanism
+        (a mode without stiffness: zero stiffness on the mounts along some direction, or all mounts on one
+        line) or tips over (the weights above the mounts rock it more than the mounts hold it): its every
+        case would fail. Modal analysis only, nothing is integrated."""
+        cases = self.representative_cases()
+        batch = self.batch(cases)
+        md = modal.modes(model.mass_matrix(batch), model.stiffness_matrix(batch), model.damping_matrix(batch))
+        mechanism = md.mechanism.any(axis=1)
+        if not (mechanism | md.tipping).all():
+            return
+        first = 0
+        if md.tipping[first]:
+            why = (
+                "tips over: the rocking stiffness of the weights above the mounts exceeds the mounts' own "
+                "(zero or too little stiffness, mounts too close together, or the c.g. too high)"
+            )
+        else:
+            mode = int(np.flatnonzero(md.mechanism[first])[0])
+            dof = DOF_NAMES[int(np.argmax(md.energy[first, mode]))]
+            why = (
+                f"is a mechanism: it moves freely along {dof} with no stiffness to restore it "
+                "(zero stiffness on every mount along some direction, or all mounts on one line)"
+            )
+        what = "the scene" if cases.size == 1 else f"each of the {cases.size} cases that span the study"
+        raise ValueError(
+            f"isolators: {what} {why}; every case would fail. Give the mounts stiffness in every direction "
+            "(k, f_vertical/f_horizontal or a preset) and place them around the c.g."
+        )
+
     def _check_values(self) -> None:
         """Each parameter's levels (or extremes) applied alone to the scene must give a valid scene."""
         d = self._design
@@ -263,6 +322,14 @@ def _factor(i: int, p: ParameterSpec, t: Target, design_type: str) -> Factor:
                 raise ValueError(f"{where}.values[{k}]: {v!r} is not one of {', '.join(t.levels)}")
         return Factor(name, t.path, t.unit, levels=np.array(p.values))
     if p.values is not None:
+        if all(type(v) is float or type(v) is int for v in p.values):  # SI numbers: read as one array
+            with np.errstate(all="ignore"):
+                try:
+                    plain = np.asarray(p.values, dtype=np.float64)
+                except OverflowError:
+                    plain = None
+            if plain is not None and np.isfinite(plain).all():
+                return Factor(name, t.path, t.unit, levels=plain)
         levels = [to_si(v, t.dimension, f"{where}.values[{k}]") for k, v in enumerate(p.values)]
         return Factor(name, t.path, t.unit, levels=np.array(levels))
     if p.range is not None:
@@ -368,6 +435,11 @@ def check_study(study: Study, data: Any = None) -> Study:
         raise
     except ValueError as err:
         raise _check_failed(err, (), data, "Study") from None
+    if study.scene is not None:
+        try:
+            study._check_statics()
+        except ValueError as err:
+            raise _check_failed(err, ("scene", "isolators"), data, "Study") from None
     return study
 
 

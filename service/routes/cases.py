@@ -215,9 +215,13 @@ async def get_case_plot(
 async def get_study_plot(
     request: Request,
     study_id: StudyId,
-    y: Annotated[str, Query(description="output column of the case table, e.g. peak_displacement_y")],
-    x: Annotated[str, Query(description="a varied parameter, e.g. stage_y_acceleration")],
-    x2: Annotated[str | None, Query(description="a second varied parameter: draws a heat map")] = None,
+    y: Annotated[
+        str, Query(min_length=1, description="output column of the case table, e.g. peak_displacement_y")
+    ],
+    x: Annotated[str, Query(min_length=1, description="a varied parameter, e.g. stage_y_acceleration")],
+    x2: Annotated[
+        str | None, Query(min_length=1, description="a second varied parameter: draws a heat map")
+    ] = None,
     reduce: Annotated[
         Literal["max", "min", "mean"] | None,
         Query(

@@ -2,16 +2,18 @@
 
 from __future__ import annotations
 
-import tempfile
+import hmac
 from pathlib import Path
 from typing import Any, Literal
 
 from distributed import Client
 from fastapi import APIRouter, Depends, Request, Response
+from fastapi.security.utils import get_authorization_scheme_param
 from pydantic import BaseModel, Field
 
 from isolab.service.routes import app_settings
 from isolab.service.settings import Settings
+from isolab.studies.store import check_writable
 
 #: Longest wait for the Dask scheduler to answer the health probe, in seconds.
 SCHEDULER_TIMEOUT_S = 5.0
@@ -42,22 +44,23 @@ class DaskHealth(BaseModel):
     error: str | None = None
 
 
-class HealthReport(BaseModel):
+class HealthStatus(BaseModel):
+    """What ``/health`` answers a request without the API token when one is set: the status only."""
+
     status: Literal["ok", "degraded"]
+
+
+class HealthReport(HealthStatus):
     service: ServiceInfo
     store: StoreHealth
     dask: DaskHealth
 
 
 def probe_store(path: Path) -> StoreHealth:
-    """Check that the store directory exists and accepts a new file."""
+    """Check that the store directory exists and takes writes (64 kB, and room for its reserve)."""
     resolved = path.resolve()
-    try:
-        with tempfile.NamedTemporaryFile(dir=resolved, prefix=".health-"):
-            pass
-    except OSError as exc:
-        return StoreHealth(path=str(resolved), writable=False, error=f"{type(exc).__name__}: {exc}")
-    return StoreHealth(path=str(resolved), writable=True)
+    error = check_writable(resolved)  # writes and syncs 64 kB; a full disk is not writable
+    return StoreHealth(path=str(resolved), writable=error is None, error=error)
 
 
 def probe_dask(client: Client | None, timeout_s: float = SCHEDULER_TIMEOUT_S) -> DaskHealth:
@@ -79,22 +82,38 @@ def probe_dask(client: Client | None, timeout_s: float = SCHEDULER_TIMEOUT_S) ->
     return DaskHealth(scheduler=identity.get("address"), workers=workers, n_workers=len(workers))
 
 
+def has_token(request: Request, token: str | None) -> bool:
+    """Whether the request carries the API token as a bearer token (always, when no token is set)."""
+    if token is None:
+        return True
+    scheme, given = get_authorization_scheme_param(request.headers.get("Authorization"))
+    return scheme.lower() == "bearer" and hmac.compare_digest(given.encode(), token.encode())
+
+
 @router.get(
     "/health",
-    response_model=HealthReport,
-    responses={503: {"model": HealthReport, "description": "no Dask worker or the store is not writable"}},
+    response_model=HealthReport | HealthStatus,
+    responses={
+        503: {
+            "model": HealthReport | HealthStatus,
+            "description": "no Dask worker or the store is not writable",
+        }
+    },
 )
 def health(
     request: Request,
     response: Response,
     settings: Settings = Depends(app_settings),
-) -> HealthReport:
-    """Report the service version, the store and the Dask cluster; 503 when the service cannot work."""
+) -> HealthReport | HealthStatus:
+    """Report the service version, the store and the Dask cluster; 503 when the service cannot work.
+    With an API token set, a request without it gets the status only (no paths, no addresses)."""
     store = probe_store(settings.data_dir)
     dask = probe_dask(getattr(request.app.state, "dask", None))
     healthy = store.writable and dask.n_workers > 0
     if not healthy:
         response.status_code = 503
+    if not has_token(request, settings.api_token):
+        return HealthStatus(status="ok" if healthy else "degraded")
     return HealthReport(
         status="ok" if healthy else "degraded",
         service=ServiceInfo(version=request.app.version),

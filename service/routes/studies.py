@@ -8,6 +8,7 @@ table, time histories and plots are :mod:`isolab.service.routes.cases`.
 from __future__ import annotations
 
 import re
+from datetime import UTC, datetime
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Depends, HTTPException, Query, Request, Response
@@ -50,6 +51,37 @@ router = APIRouter(prefix="/studies", tags=["studies"])
 MAX_OFFSET = 1_000_000_000
 """Largest ``offset`` of a listing (SQLite integers stop at 2**63)."""
 StudyId = Annotated[str, PathParam(description="study id (32 hex digits)")]
+TimeQuery = Query(
+    description="RFC 3339 date-time (ISO 8601; UTC if no zone), inclusive",
+    json_schema_extra={"format": "date-time"},
+)
+_RFC3339 = re.compile(
+    r"(\d{4}-\d{2}-\d{2})[Tt ](\d{2}:\d{2}):(\d{2})(\.\d+)?([Zz]|[+-]\d{2}:\d{2})?", re.ASCII
+)
+
+
+def query_time(text: str | None, field_name: str) -> datetime | str | None:
+    """A time filter of a listing as the catalog takes it: an RFC 3339 date-time (what the API description
+    says, ``t``/``z`` in either case, a leap second read as the second before, any number of fractional
+    digits) becomes a datetime; other text is left to the catalog (plain ISO 8601, or its ValueError)."""
+    if text is None:
+        return None
+    m = _RFC3339.fullmatch(text)
+    if m is None:
+        return text
+    day, minutes, seconds, fraction, zone = m.groups()
+    micro = (fraction or ".")[1:7].ljust(6, "0")
+    zone = "+00:00" if zone in (None, "Z", "z") else zone
+    year_zero = day.startswith("0000-")  # RFC 3339 has a year 0; Python's datetime starts at year 1
+    iso = f"{'0001' + day[4:] if year_zero else day}T{minutes}:{min(int(seconds), 59):02d}.{micro}{zone}"
+    try:
+        moment = datetime.fromisoformat(iso)
+    except ValueError:
+        raise ValueError(f"{field_name}: {text!r} is not an ISO 8601 time") from None
+    try:
+        return datetime.min.replace(tzinfo=UTC) if year_zero else moment.astimezone(UTC)
+    except OverflowError:  # within a day of year 1 or year 9999: as far as a datetime goes
+        return (datetime.min if moment.year == 1 else datetime.max).replace(tzinfo=UTC)
 
 
 def links(study_id: str) -> StudyLinks:
@@ -68,6 +100,7 @@ def summary(row: dict[str, Any]) -> dict[str, Any]:
         "started": row["started"],
         "finished": row["finished"],
         "error": row["error"],
+        "failures": failure_note(row),
         "parameters": row["parameters"] or [],
         "isolator_types": row["isolator_types"] or [],
         "fidelity": row["fidelity"],
@@ -77,12 +110,44 @@ def summary(row: dict[str, Any]) -> dict[str, Any]:
     }
 
 
+def failure_note(row: dict[str, Any]) -> str | None:
+    """``"3 of 12 cases failed ..."`` when cases have failed so far, else None."""
+    n_failed = int(row["n_failed"] or 0)
+    if not n_failed:
+        return None
+    return (
+        f"{n_failed} of {row['n_cases']} cases failed (status not ok); each one's status and message are "
+        f"in its row of /studies/{row['id']}/cases and in the dataset"
+    )
+
+
 @router.post(
     "",
     status_code=202,
     response_model=StudyAccepted,
-    responses={**INVALID, 413: {"model": MessageBody, "description": "request body too large"}},
+    responses={
+        **INVALID,
+        413: {"model": MessageBody, "description": "request body too large"},
+        503: {"model": MessageBody, "description": "the service is shutting down; submit again later"},
+    },
     summary="Submit a study",
+    # the definition is checked by studies.definitions (its errors name the field); the description
+    # says at least what every definition has
+    openapi_extra={
+        "requestBody": {
+            "content": {
+                "application/json": {
+                    "schema": {
+                        "required": ["name", "scene"],
+                        "properties": {
+                            "name": {"type": "string", "minLength": 1, "maxLength": 200},
+                            "scene": {"type": "object", "description": "inline scene"},
+                        },
+                    }
+                }
+            }
+        }
+    },
 )
 async def submit_study(
     request: Request,
@@ -143,25 +208,21 @@ def list_studies(
     name: Annotated[str | None, Query(description="exact study name")] = None,
     status: Annotated[StudyStatusName | None, Query(description="study status")] = None,
     isolator_type: Annotated[str | None, Query(description="studies involving this isolator type")] = None,
-    created_after: Annotated[
-        str | None, Query(description="ISO 8601 time (UTC if no zone), inclusive")
-    ] = None,
-    created_before: Annotated[
-        str | None, Query(description="ISO 8601 time (UTC if no zone), inclusive")
-    ] = None,
+    created_after: Annotated[str | None, TimeQuery] = None,
+    created_before: Annotated[str | None, TimeQuery] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
     offset: Annotated[int, Query(ge=0, le=MAX_OFFSET)] = 0,
     store: Store = Depends(study_store),
 ) -> StudyList:
     """Studies in the catalog, newest first, filtered (all filters must hold)."""
-    filters = dict(
-        name=name,
-        status=status,
-        isolator_type=isolator_type,
-        created_after=created_after,
-        created_before=created_before,
-    )
     try:
+        filters = dict(
+            name=name,
+            status=status,
+            isolator_type=isolator_type,
+            created_after=query_time(created_after, "created_after"),
+            created_before=query_time(created_before, "created_before"),
+        )
         rows = store.list(**filters, limit=limit, offset=offset)
         total = store.count(**filters)
     except ValueError as err:

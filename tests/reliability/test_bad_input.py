@@ -12,6 +12,7 @@ import select
 import socket
 import time
 from collections.abc import Callable
+from http.client import HTTPConnection
 from pathlib import Path
 from typing import Any
 
@@ -604,3 +605,71 @@ def test_time_histories_too_long_are_refused_before_they_are_computed(http: http
             assert http.delete(f"/studies/{s}").status_code == 204
             assert http.delete(f"/studies/{s}").status_code in (204, 404)
     assert {i["id"] for i in http.get("/studies").json()["items"]}.isdisjoint({sid, sid2})
+
+
+# -------------------------------------------------------------- NaN and Infinity in any body (issue 13)
+# (path, body, loc): Python's json reads NaN, Infinity and a literal beyond a 64-bit float as non-finite
+# floats; FastAPI's 422 echoed them and could not encode its own answer (a 500, the connection dropped).
+NON_FINITE_BODIES: list[tuple[str, str, list]] = [
+    ("/comparisons", '{"scene": NaN}', ["body", "scene"]),
+    ("/comparisons", "NaN", ["body"]),
+    ("/comparisons", '{"description": Infinity}', ["body", "description"]),
+    (
+        "/comparisons",
+        '{"scene": {}, "isolator_types": ["air"], "simulation": {"dt": -Infinity}}',
+        ["body", "simulation", "dt"],
+    ),
+    ("/studies", "NaN", ["body"]),
+    ("/studies", "[NaN]", ["body", 0]),
+    ("/studies", '{"name": "x", "scene": Infinity}', ["body", "scene"]),
+    (
+        "/studies",
+        '{"name": "x", "scene": {"machine": {"mass": 1e999}}}',
+        ["body", "scene", "machine", "mass"],
+    ),
+    ("/studies", '{"name": "x", "description": -1e400, "scene": {}}', ["body", "description"]),
+    ("/calibrations", "Infinity", ["body"]),
+    (
+        "/calibrations",
+        '{"scene": {}, "measurement": {"time": [0, NaN]}, "fit": []}',
+        ["body", "measurement", "time", 1],
+    ),
+    ("/studies/validate", '{"text": NaN}', ["body", "text"]),
+    ("/studies/validate", "[Infinity]", ["body", 0]),
+]
+
+
+def test_every_route_that_takes_a_body_is_in_the_non_finite_table(tmp_path: Path) -> None:
+    spec = create_app(Settings(data_dir=tmp_path)).openapi()
+    with_body = {
+        (method.upper(), path)
+        for path, ops in spec["paths"].items()
+        for method, op in ops.items()
+        if "requestBody" in op
+    }
+    assert with_body == {("POST", p) for p, _, _ in NON_FINITE_BODIES}
+
+
+def test_nan_and_infinity_anywhere_in_a_body_are_422_naming_the_field(server: dict) -> None:
+    """Every body holding NaN, Infinity or 1e999, on every route that takes one: 422 naming where it is,
+    and the keep-alive connection stays open for the next request."""
+    host, port = server["url"].removeprefix("http://").split(":")
+    conn = HTTPConnection(host, int(port), timeout=30)
+    try:
+        conn.request("GET", "/health")
+        conn.getresponse().read()
+        sock = conn.sock
+        for path, body, loc in NON_FINITE_BODIES:
+            conn.request("POST", path, body=body.encode(), headers={"Content-Type": "application/json"})
+            response = conn.getresponse()
+            answer = response.read()
+            assert response.status == 422, (path, body, response.status, answer[:300])
+            detail = json.loads(answer)["detail"]
+            assert detail[0]["loc"] == loc, (path, body, detail)
+            assert "finite" in detail[0]["msg"], detail
+            assert response.getheader("connection", "").lower() != "close", (path, body)
+            conn.request("GET", "/health")
+            assert conn.getresponse().read()
+            assert conn.sock is sock, f"the connection was dropped after {path} {body}"
+    finally:
+        conn.close()

@@ -172,17 +172,29 @@ ENGINE_REFUSES = {
             "points": {"tool": ["99.3 m", 0.6, 0.6]},
         },
     },
-    "combinations no mount can carry (above the dry-run size)": {
-        "name": "combinations",
-        "scene": quick_scene(),
-        "parameters": [
-            # each range alone is a valid scene; together the weight lies outside the mounts
-            {"path": "stages.y.mass", "range": {"start": "4000 kg", "stop": "5000 kg"}},
-            {"path": "isolators.layout.span_y", "range": {"start": "0.4 m", "stop": "0.5 m"}},
-        ],
-        "design": {"type": "lhs", "samples": 200_001},
-    },
 }
+
+COMBINATIONS_NO_MOUNT_CAN_CARRY = {
+    "name": "combinations",
+    "scene": quick_scene(),
+    "parameters": [
+        # each range alone is a valid scene; together the weight lies outside the mounts
+        {"path": "stages.y.mass", "range": {"start": "4000 kg", "stop": "5000 kg"}},
+        {"path": "isolators.layout.span_y", "range": {"start": "0.4 m", "stop": "0.5 m"}},
+    ],
+    "design": {"type": "lhs", "samples": 200_001},
+}
+
+
+def test_combinations_no_mount_can_carry_are_refused_at_submission(app_client) -> None:
+    # above the dry-run size, yet the cases that span the ranges (their corners) are built at submission:
+    # a study whose every spanning case puts a mount under tension is a 422 naming the isolators, at once
+    _, http, _ = app_client
+    r = http.post("/studies", json=COMBINATIONS_NO_MOUNT_CAN_CARRY)
+    assert r.status_code == 422, r.text
+    (detail,) = r.json()["detail"]
+    assert detail["loc"][:3] == ["body", "scene", "isolators"]
+    assert "would carry a static load" in detail["msg"]
 
 
 @pytest.mark.parametrize("definition", list(ENGINE_REFUSES.values()), ids=list(ENGINE_REFUSES))

@@ -349,3 +349,43 @@ def test_scene_file_names_are_never_opened(server: dict, api: httpx.Client) -> N
         r = api.post("/studies", json=body)
         assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "scene_file"]
         assert SECRET not in r.text
+
+
+def test_non_finite_filter_values_are_refused(api: httpx.Client, done: str) -> None:
+    """``1e999`` read as infinity matched every case: inf, nan and literals beyond a 64-bit float, with or
+    without a unit, are a 422 naming the filter (issue 13)."""
+    for text in (
+        "peak_displacement_y<1e999",
+        "peak_displacement_y>-1e999",
+        "peak_displacement_y<=1e999 mm",
+        "peak_displacement_y<1e308 km",
+        "peak_displacement_y<inf",
+        "peak_displacement_y<-inf m",
+        "peak_displacement_y!=nan",
+        "peak_displacement_y<Infinity",
+        "peak_displacement_y>=NaN mm",
+    ):
+        r = api.get(f"/studies/{done}/cases", params={"filter": text})
+        assert r.status_code == 422, (text, r.text[:300])
+        detail = r.json()["detail"][0]
+        assert detail["loc"] == ["query", "filter"] and "finite" in detail["msg"], (text, detail)
+    r = api.get(f"/studies/{done}/cases", params={"filter": "peak_displacement_y<1e300"})
+    assert r.status_code == 200 and r.json()["n_matched"] == r.json()["n_cases"]
+
+
+# ------------------------------------------------------------------------------------------ /health
+def test_health_without_the_token_gives_the_status_only(server: dict) -> None:
+    """/health stays open for load balancers, but without the token it tells only the status: no store
+    path, no scheduler or worker addresses (issue 13)."""
+    root = str(server["root"].resolve())
+    with httpx.Client(base_url=server["url"], timeout=30.0) as bare:
+        for headers in ({}, {"Authorization": "Bearer wrong-token"}, {"Authorization": f"Basic {TOKEN}"}):
+            r = bare.get("/health", headers=headers)
+            assert r.status_code == 200, r.text
+            assert r.json() == {"status": "ok"}, (headers, r.text)
+            assert root not in r.text and "tcp://" not in r.text
+        full = bare.get("/health", headers={"Authorization": f"Bearer {TOKEN}"})
+    assert full.status_code == 200
+    report = full.json()
+    assert report["status"] == "ok" and report["store"]["path"] == str(server["data"].resolve())
+    assert report["dask"]["n_workers"] >= 1

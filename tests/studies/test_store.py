@@ -373,7 +373,9 @@ def test_bad_ids_never_reach_a_path(store: Store, bad) -> None:
     ):
         with pytest.raises(ValueError, match="study_id"):
             call(bad)
-    assert all(p.name == "studies" or p.name.startswith("catalog.sqlite") for p in store.root.iterdir())
+    assert all(
+        p.name in ("studies", ".reserve") or p.name.startswith("catalog.sqlite") for p in store.root.iterdir()
+    )
     assert list(store.studies_dir.iterdir()) == []
 
 
