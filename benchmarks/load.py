@@ -44,7 +44,8 @@ import httpx
 from isolab.service.schemas import EXAMPLE_SCENE
 
 TARGET_P99_S = 0.100
-CLIENT_NICENESS = 5
+CLIENT_NICENESS = 0
+"""Nice value of the clients' process (``--client-niceness``): 0, the clients compete with the server."""
 PROBE_PERIOD_S = 0.020
 
 SCENE: dict[str, Any] = {
@@ -287,6 +288,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=2, help="Dask workers of the server")
     parser.add_argument("--budget", type=float, default=120.0, help="hard limit of the whole run, s")
     parser.add_argument("--json", type=Path, default=None, help="also write the figures to this file")
+    parser.add_argument(
+        "--client-niceness",
+        type=int,
+        default=CLIENT_NICENESS,
+        help="nice value of the clients' process (default 0: at the server's priority)",
+    )
     args = parser.parse_args(argv)
     # stopped from outside (`timeout`, Ctrl-C): still stop the server and its workers
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
@@ -318,9 +325,10 @@ def main(argv: list[str] | None = None) -> int:
             target=probe, args=(url, big, time.time() + (drain_end - time.monotonic()), results)
         )
         prober.start()
-        # the clients stand in for machines on the network: on this machine they yield the CPU to the
-        # server (the server, its workers and the probe were started before, at their own priority)
-        os.nice(CLIENT_NICENESS)
+        # the clients stand in for machines on the network; on this machine they share its cores with the
+        # server, at the same priority unless --client-niceness says otherwise
+        if args.client_niceness:
+            os.nice(args.client_niceness)
         t0 = time.monotonic()
         tally = asyncio.run(run_clients(url, args.clients, window_end, drain_end, args.poll))
         elapsed = time.monotonic() - t0
