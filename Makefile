@@ -5,6 +5,7 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+TEST_STAMP := $(VENV)/.installed-test
 CODE := engine studies service tests benchmarks
 
 # numba caches each compiled kernel beside its source, but notices an edit only in the kernel's own file:
@@ -22,8 +23,13 @@ DATA ?= ./data
 
 install: $(STAMP)
 
+# the service and the benchmarks need isolab alone; the tests, lint and type checks also its test extra
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -e .
+	touch $@
+
+$(TEST_STAMP): $(STAMP)
 	$(PY) -m pip install -e '.[test]'
 	touch $@
 
@@ -31,11 +37,11 @@ serve: $(STAMP)
 	$(VENV)/bin/isolab serve --host $(HOST) --port $(PORT) --workers $(WORKERS) --data $(DATA)
 
 # The whole suite (about 5 minutes on 2 cores).
-test: $(STAMP)
+test: $(TEST_STAMP)
 	$(PY) -m pytest -q
 
 # Everything not marked slow (services in subprocesses, fault injection, the wheel build): under a minute.
-test-fast: $(STAMP)
+test-fast: $(TEST_STAMP)
 	$(PY) -m pytest -q -m "not slow"
 
 # The performance figures (docs/performance.md): the engine on one core against a numpy loop and solve_ivp,
@@ -48,19 +54,19 @@ bench: $(STAMP)
 load: $(STAMP)
 	timeout 150 $(PY) -m benchmarks.load --budget 120
 
-lint: $(STAMP)
+lint: $(TEST_STAMP)
 	$(VENV)/bin/ruff check $(CODE)
 	$(VENV)/bin/ruff format --check $(CODE)
 	$(MAKE) --no-print-directory typecheck
 
-format: $(STAMP)
+format: $(TEST_STAMP)
 	$(VENV)/bin/ruff check --fix $(CODE)
 	$(VENV)/bin/ruff format $(CODE)
 
 # mypy on isolab.studies and isolab.service. The folders install under the isolab namespace through
 # setuptools' package-dir mapping, which mypy cannot follow, so it reads them through a view of links
 # laid out as installed (.typecheck/isolab/{engine,studies,service}).
-typecheck: $(STAMP)
+typecheck: $(TEST_STAMP)
 	mkdir -p .typecheck/isolab
 	for p in engine studies service; do ln -sfn ../../$$p .typecheck/isolab/$$p; done
 	cd .typecheck && ../$(VENV)/bin/mypy --config-file ../pyproject.toml -p isolab.studies -p isolab.service
