@@ -201,16 +201,12 @@ def advance_pieces(P, c, t, idx, tol):
 
     A piece that starts within ``tol`` s after ``t`` counts as started, so steps that land on a
     breakpoint use the piece that begins there. An index of -1 means "before the first piece": the stage
-    rests at its start position until its profile begins. Returns True when some stage entered a new
-    piece (the forcing polynomial changed).
+    rests at its start position until its profile begins.
     """
     K = P.pt.shape[2]
-    moved = False
     for i in range(P.pt.shape[1]):
         while idx[i] + 1 < K and P.pt[c, i, idx[i] + 1] <= t + tol:
             idx[i] += 1
-            moved = True
-    return moved
 
 
 @njit(cache=True)

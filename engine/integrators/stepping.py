@@ -26,8 +26,6 @@ from isolab.engine.results import FAILED, OK, UNSTABLE
 
 EULER, RK4, EXACT = 0, 1, 2
 """Codes of the stepped methods inside the driver."""
-SCRATCH_ROWS = 5
-"""State-sized rows of RK4's scratch: the stage state and the four slopes."""
 
 
 @njit(cache=True, nogil=True)
@@ -47,7 +45,7 @@ def drive(method, P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, d
     z = np.zeros(nx + 6 * (deg + 1))  # the state, then exact's forcing derivatives carried between steps
     x = z[:nx]
     Fv = z[nx:]
-    S = np.zeros((SCRATCH_ROWS, nx))  # RK4's stage state and slopes
+    S = np.zeros((rk4.SCRATCH_ROWS, nx))  # RK4's stage state and slopes
     xn = np.zeros(nx)  # exact: the new state
     idx = np.zeros(P.sm.shape[1], dtype=np.int64)
     for c in range(C):
@@ -67,12 +65,11 @@ def drive(method, P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, d
             t0 = k * h
             t1 = (k + 1) * h
             ta = t0
-            fresh = k == 0
-            if piece_end <= ta + tol:  # a stage enters a new piece: move to it
-                advance_pieces(P, c, ta, idx, tol)
-                piece_end = next_breakpoint(P, c, idx, np.inf, tol)
-                fresh = True
             while True:
+                fresh = piece_end <= ta + tol  # a stage enters a new piece (always at the case's start)
+                if fresh:
+                    advance_pieces(P, c, ta, idx, tol)
+                    piece_end = next_breakpoint(P, c, idx, np.inf, tol)
                 if method == EXACT:
                     tb = exact.next_split(ev, c, passed, t1, tol)
                     ok = exact.step(
@@ -88,11 +85,6 @@ def drive(method, P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, d
                     break
                 passed += 1
                 ta = tb
-                fresh = False
-                if piece_end <= ta + tol:
-                    advance_pieces(P, c, ta, idx, tol)
-                    piece_end = next_breakpoint(P, c, idx, np.inf, tol)
-                    fresh = True
             if not ok:
                 status[c] = FAILED
                 break
