@@ -14,23 +14,17 @@ from pathlib import Path
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from benchmarks import pairs
+from benchmarks.pairs import EXAMPLE
 from isolab.engine import concat, simulate
 from isolab.engine import model as engine_model
 from isolab.engine.integrators import exact
 from isolab.studies.study import load_scene, scene_batch
 
-EXAMPLE = Path(__file__).resolve().parent.parent / "studies" / "examples" / "article-scriber.yaml"
 DURATION = 5.0
 DT = 1e-3
-PAIRS = [
-    ("lti", "exact"),
-    ("lti", "rk4"),
-    ("lti", "euler"),
-    ("ltv", "rk4"),
-    ("ltv", "euler"),
-    ("nonlinear", "rk4"),
-    ("nonlinear", "euler"),
-]
+PAIRS = [pair for pair in pairs.PAIRS if pair[1] != "reference"]
+"""The fixed-step pairs of ``benchmarks.pairs`` (the reference is timed against, not as a kernel)."""
 
 
 def article_batch():

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import statistics
-import threading
 import time
 from typing import Any
 
@@ -17,6 +16,7 @@ import httpx
 import pytest
 from live_service import quick_scene, thread_server
 
+from benchmarks.refusals import post_and_probe
 from isolab.service.app import create_app
 from isolab.service.settings import Settings
 from isolab.studies import schema
@@ -113,28 +113,7 @@ def check_fast_422(url: str, content: bytes) -> None:
     assert len(content) < 10 * 1024 * 1024
     with httpx.Client(base_url=url, timeout=60.0) as http:
         assert http.get("/health").status_code in (200, 503)
-        latencies: list[float] = []
-        stop = threading.Event()
-
-        def probe() -> None:
-            with httpx.Client(base_url=url, timeout=60.0) as h:
-                while not stop.is_set():
-                    start = time.perf_counter()
-                    h.get("/health")
-                    latencies.append(time.perf_counter() - start)
-                    time.sleep(0.02)
-
-        prober = threading.Thread(target=probe)
-        prober.start()
-        try:
-            time.sleep(0.2)
-            start = time.perf_counter()
-            r = http.post("/studies", content=content, headers={"content-type": "application/json"})
-            took = time.perf_counter() - start
-            time.sleep(0.2)
-        finally:
-            stop.set()
-            prober.join()
+        r, took, latencies = post_and_probe(url, content)
         assert r.status_code == 422, r.text
         assert r.json()["detail"][0]["loc"] == ["body", "parameters"]
         assert "ISOLAB_MAX_CASES" in r.json()["detail"][0]["msg"]
