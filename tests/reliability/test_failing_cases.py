@@ -12,7 +12,7 @@ from typing import Any
 
 import httpx
 import pytest
-from live_service import quick_scene, thread_server
+from live_service import quick_scene, thread_server, wait_finished
 
 from isolab.service.app import create_app
 from isolab.service.settings import Settings
@@ -75,14 +75,7 @@ def http(tmp_path_factory: pytest.TempPathFactory):
 def run(http: httpx.Client, body: dict, timeout: float = 120.0) -> dict:
     r = http.post("/studies", json=body)
     assert r.status_code == 202, r.text
-    study_id = r.json()["id"]
-    deadline = time.monotonic() + timeout
-    while True:
-        info = http.get(f"/studies/{study_id}").json()
-        if info["status"] in ("done", "failed", "cancelled"):
-            return info
-        assert time.monotonic() < deadline, f"still {info['status']}"
-        time.sleep(0.2)
+    return wait_finished(http, r.json()["id"], timeout)
 
 
 @pytest.mark.slow
