@@ -13,8 +13,16 @@ RUN useradd --create-home --uid 1000 isolab \
     && chown isolab:isolab /data
 
 WORKDIR /app
+# The dependencies first, read from pyproject.toml alone: their layer is rebuilt only when pyproject.toml
+# changes, so an edit of the source reinstalls isolab alone (seconds) instead of numba, dask and the rest.
+# bokeh serves the Dask scheduler's dashboard (port 8787); distributed needs >= 3.1 for it.
+COPY pyproject.toml /app/
+RUN python -c "import tomllib; print('\n'.join(tomllib.load(open('pyproject.toml', 'rb'))['project']['dependencies']))" \
+        > /tmp/requirements.txt \
+    && pip install -r /tmp/requirements.txt 'bokeh>=3.1,<4' \
+    && rm /tmp/requirements.txt
 COPY . /app
-RUN pip install . && rm -rf /app/build
+RUN pip install --no-deps . && rm -rf /app/build
 
 USER isolab
 WORKDIR /home/isolab

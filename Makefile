@@ -19,7 +19,7 @@ PORT ?= 8000
 WORKERS ?= 2
 DATA ?= ./data
 
-.PHONY: install serve test test-fast bench load lint typecheck format browser
+.PHONY: install serve test test-fast bench load lint typecheck format browser docs
 
 install: $(STAMP)
 
@@ -33,8 +33,20 @@ $(TEST_STAMP): $(STAMP)
 	$(PY) -m pip install -e '.[test]'
 	touch $@
 
+# The address clients reach the service at (a wildcard host on loopback): `make serve` prints it as the
+# ISOLAB_URL the CLI (`isolab submit/status/fetch/sensitivity`) and the Python client read.
+URL_HOST = $(if $(filter 0.0.0.0 ::,$(HOST)),127.0.0.1,$(if $(findstring :,$(HOST)),[$(HOST)],$(HOST)))
+
 serve: $(STAMP)
+	@echo "isolab: the CLI and the Python client reach this service with (in another shell):"
+	@echo "  export ISOLAB_URL=http://$(URL_HOST):$(PORT)"
 	$(VENV)/bin/isolab serve --host $(HOST) --port $(PORT) --workers $(WORKERS) --data $(DATA)
+
+# docs/study-files.md, the reference of study and scene files, made from the models (a test fails while it
+# is not what they give: run this after changing a model of studies/schema.py or studies/study.py).
+docs: $(STAMP)
+	$(PY) -m isolab.studies.file_reference > docs/study-files.md.part
+	mv docs/study-files.md.part docs/study-files.md
 
 # The whole suite (about 5 minutes on 2 cores).
 test: $(TEST_STAMP)

@@ -11,10 +11,11 @@ from collections import namedtuple
 import numpy as np
 from numba.experimental import structref
 
-from isolab.engine.dynamics import KernelWork, Params, WorkType
+from isolab.engine.dynamics import KernelWork, Params, WorkType, feedforward_transients, kernel_struct
 from isolab.engine.scene import SceneBatch
 
-Work = namedtuple("Work", ["rho", "vr", "ar", "jr", "xf", "vf", "acc", "f", "M", "R", "F", "x1", "k1", "k2"])
+_WORK_FIELDS = "rho vr ar jr xf vf acc f M R F x1 k1 k2 Fa ffx ffy ffs"
+Work = namedtuple("Work", _WORK_FIELDS.split())
 structref.define_proxy(KernelWork, WorkType, list(Work._fields))
 
 
@@ -109,17 +110,30 @@ def damping_matrix(b: SceneBatch) -> np.ndarray:
     return _isolator_matrix(d, b.iso_c)
 
 
-def final_positions(b: SceneBatch) -> np.ndarray:
-    """Stage positions relative to the c.g. once every move is over (C, m, 3), m."""
+def placed_positions(b: SceneBatch, s: np.ndarray) -> np.ndarray:
+    """Stage positions relative to the c.g. (C, m, 3), m, with each stage at ``s`` (C, m), m, along its
+    axis (a stage that rides on another adds its parent's travel)."""
     _, rho_h, _ = relative_geometry(b)
-    s_end = b.prof_s[..., -1]
     rho = rho_h.copy()
     for i in range(b.n_stages):
-        rho[:, i] += s_end[:, i, None] * b.stage_axis[:, i]
+        rho[:, i] += s[:, i, None] * b.stage_axis[:, i]
         p = int(b.stage_parent[i])
         if p >= 0:
             rho[:, i] += rho[:, p] - rho_h[:, p]
     return rho
+
+
+def final_positions(b: SceneBatch) -> np.ndarray:
+    """Stage positions relative to the c.g. once every move is over (C, m, 3), m."""
+    return placed_positions(b, b.prof_s[..., -1])
+
+
+def positions_at(b: SceneBatch, t: np.ndarray) -> np.ndarray:
+    """Stage travel (C, m), m, at the per-case times ``t`` (C,), s, where every stage is at rest: the
+    start position of the piece that holds ``t`` (of the first piece before the profile starts)."""
+    k = (b.prof_t <= np.asarray(t, dtype=float)[:, None, None]).sum(axis=-1) - 1  # (C, m)
+    k = np.clip(k, 0, None)
+    return np.take_along_axis(np.asarray(b.prof_s, dtype=float), k[..., None], axis=-1)[..., 0]
 
 
 def travel_positions(b: SceneBatch, max_corners: int = 8) -> list[np.ndarray]:
@@ -164,28 +178,101 @@ def travel_positions(b: SceneBatch, max_corners: int = 8) -> list[np.ndarray]:
     return out
 
 
-def static_offset(b: SceneBatch, fidelity: str) -> np.ndarray:
-    """Static c.g. displacement and rotation (C, 6), m and rad, with the stages parked at their final
-    positions: ``K q = (change of the weights' moment)``; the LTI level keeps its stiffness at home."""
-    _, rho_h, _ = relative_geometry(b)
-    rho_f = final_positions(b)
+def static_offset(b: SceneBatch, fidelity: str, rho: np.ndarray | None = None) -> np.ndarray:
+    """Static c.g. displacement and rotation (C, 6), m and rad, with the stages parked at ``rho``
+    (C, m, 3), m relative to the c.g. (default: their final positions): ``K q = (change of the weights'
+    moment)``; the LTI level keeps its stiffness at home, the others take it with the stages there. Mounts
+    that feed the weight shift forward (``iso_ff_weight``) carry their share of it at rest."""
+    d, rho_h, _ = relative_geometry(b)
+    rho_f = final_positions(b) if rho is None else rho
     K = stiffness_matrix(b, None if fidelity == "lti" else rho_f)
     ds = rho_f - rho_h
     f = np.zeros((b.n_cases, 6))
     f[:, 3] = -b.g * np.einsum("cm,cm->c", b.stage_mass, ds[..., 1])
     f[:, 4] = b.g * np.einsum("cm,cm->c", b.stage_mass, ds[..., 0])
+    weight = np.asarray(b.iso_ff_weight, dtype=float) * np.asarray(b.iso_ff_gain, dtype=float)  # (C, n)
+    if np.any(weight != 0.0) and b.n_stages:
+        # at rest the low-pass has settled on the reversed weight moment, -f: each mount's clipped share
+        lim = np.asarray(b.iso_ff_limit, dtype=float)[..., None]
+        share = np.einsum("cnkq,cq->cnk", feedforward_distribution(b), -f) * weight[..., None]
+        share = np.clip(share, -lim, lim)
+        f[:, :3] += share.sum(axis=1)
+        f[:, 3:] += np.cross(d, share).sum(axis=1)
     q = np.einsum("cij,cj->ci", np.linalg.pinv(K, hermitian=True), f)
     return q
 
 
+def rest_offsets(b: SceneBatch, fidelity: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rest intervals after each stage move (``SceneBatch.rest_intervals``) and the static
+    displacement the base settles to in each.
+
+    Returns ``bounds`` (C, K, 2), s, and ``count`` (C,) as ``rest_intervals`` gives them, and ``target``
+    (C, K, 6), m and rad: :func:`static_offset` with the stages parked where they rest in the interval
+    (zero past a case's count).
+    """
+    bounds, count = b.rest_intervals()
+    C, K, _ = bounds.shape
+    target = np.zeros((C, K, 6))
+    for k in range(K):
+        has = count > k
+        if not has.any():
+            continue
+        t0, t1 = bounds[:, k, 0], bounds[:, k, 1]
+        when = np.where(has, np.where(np.isfinite(t1), 0.5 * (t0 + t1), t0), 0.0)
+        rho = placed_positions(b, positions_at(b, when))
+        target[has, k] = static_offset(b, fidelity, rho)[has]
+    return bounds, count, target
+
+
+def feedforward_distribution(b: SceneBatch) -> np.ndarray:
+    """Each mount's share of a wrench (C, n, 3, 6): the least-norm actuator forces (machine axes, N) that
+    apply a wrench ``[F, M]`` (N, N m, moment about the c.g.) through the mounts that feed forward (gain
+    not 0): ``D = pinv(B)``, ``B = [[1, ...], [[d_j]x, ...]]`` over those mounts; zero rows for the others.
+    With fewer than three such mounts (or all on one line) some wrenches cannot be applied: the least-squares
+    share applies the nearest one."""
+    d, _, _ = relative_geometry(b)
+    C, n = b.n_cases, b.n_isolators
+    on = np.asarray(b.iso_ff_gain) != 0.0
+    B = np.zeros((C, 6, n, 3))
+    B[:, :3] = np.eye(3)[None, :, None, :]
+    B[:, 3:] = np.moveaxis(skew(d), 1, 2)  # (C, 3, n, 3): moment row i, mount j, force axis k
+    B *= on[:, None, :, None]
+    D = np.linalg.pinv(B.reshape(C, 6, 3 * n), rcond=1e-12)  # (C, 3n, 6)
+    return D.reshape(C, n, 3, 6)
+
+
 def params(b: SceneBatch) -> Params:
     """The kernels' parameter arrays for a batch (see ``engine.dynamics.Params``)."""
+    P = _params(b)
+    if P.ffon:
+        KP, KW = kernel_struct(P), kernel_struct(work(b))
+        for c in range(b.n_cases):
+            feedforward_transients(KP, c, KW)
+    return P
+
+
+def _feedforward_breakpoints(b: SceneBatch) -> np.ndarray:
+    """Per case the sorted distinct piece start times of every stage (C, B), s, padded with +inf: where
+    the stages' wrench changes polynomial (the feedforward filter's stretches)."""
+    t = np.asarray(b.prof_t, dtype=float).reshape(b.n_cases, -1)
+    rows = [np.unique(r) for r in t]
+    B = max((len(r) for r in rows), default=0)
+    out = np.full((b.n_cases, max(B, 1)), np.inf)
+    for c, r in enumerate(rows):
+        out[c, : len(r)] = r
+    return out
+
+
+def _params(b: SceneBatch) -> Params:
     d, rho_h, pts = relative_geometry(b)
     M = mass_matrix(b)
     K = stiffness_matrix(b)
     Cm = damping_matrix(b)
     minv = np.linalg.inv(M)
     f64 = np.ascontiguousarray
+    ffon = bool(b.has_feedforward and b.n_stages)
+    n = b.n_isolators
+    fftb = _feedforward_breakpoints(b) if ffon else np.full((b.n_cases, 1), np.inf)
     return Params(
         mass=f64(b.mass, dtype=float),
         mtot=f64(b.mass + b.stage_mass.sum(axis=1), dtype=float),
@@ -217,6 +304,15 @@ def params(b: SceneBatch) -> Params:
         minv=f64(minv),
         g=float(b.g),
         gstiff=bool(b.gravity_stiffness),
+        ffon=ffon,
+        ffg=f64(b.iso_ff_gain, dtype=float),
+        ffw=f64(2 * np.pi * np.asarray(b.iso_ff_bandwidth, dtype=float)),
+        fflim=f64(b.iso_ff_limit, dtype=float),
+        ffD=f64(feedforward_distribution(b)) if ffon else np.zeros((b.n_cases, n, 3, 6)),
+        fftb=fftb,
+        ffA=np.zeros((b.n_cases, n, fftb.shape[1], 6)),
+        ffwt=f64(b.iso_ff_weight, dtype=float),
+        pbase=bool(b.preload_with_base),
     )
 
 
@@ -238,4 +334,8 @@ def work(b: SceneBatch) -> Work:
         x1=np.zeros(13),
         k1=np.zeros((4, 13)),
         k2=np.zeros(13),
+        Fa=np.zeros((n, 3)),
+        ffx=np.zeros((8, 6)),
+        ffy=np.zeros(6),
+        ffs=np.zeros(24),
     )

@@ -1,10 +1,25 @@
 """Running peaks, minima, RMS and settling of one case, updated at every output time.
 
 No time history is kept unless a case is recorded: the integrators call ``observe`` after each step.
+
+Peaks (and the smallest and largest loads) are taken at their extremum between output times too: each
+peaked quantity follows the cubic Hermite interpolant of its values and time derivatives at the two output
+times (``last_*`` keep the previous ones), whose interior extremum has a closed form; the solve runs only
+where the cubic's Bernstein control points reach beyond the running peak.
+
+Settling of the points of interest after each stage move: the rest intervals of a case (every stage at
+rest, from a move's end ``t_k`` to the next move's start ``s_k`` or the run's end) and the static
+displacement the base settles to in each come precomputed (``rest``, ``rest_n``, ``rest_target``); as time
+only increases, ``observe`` keeps a cursor ``rest_k`` on the interval it is in, records per point the last
+output time outside ``point_tol`` of that interval's static position (``p_viol``), and on leaving the
+interval folds ``p_viol - t_k`` (the interval's length if the point was still outside at its last output
+time, ``rest_tprev``; 0 if never outside) into the running worst ``p_settle``. :func:`finish_settling`
+closes the interval a run ends in.
 """
 
 from __future__ import annotations
 
+import math
 from collections import namedtuple
 
 import numpy as np
@@ -15,8 +30,10 @@ from isolab.engine.dynamics import (
     NONLINEAR,
     KernelPeaks,
     PeaksType,
+    _cross,
     floor_motion,
     isolator_forces,
+    mount_offset,
     quat_to_matrix,
     quat_to_rotvec,
 )
@@ -42,9 +59,29 @@ Peaks = namedtuple(
         "h_poi",
         "h_force",
         "h_t",
+        "defl",
+        "max_load",
+        "rest",
+        "rest_n",
+        "rest_target",
+        "point_tol",
+        "rest_k",
+        "rest_tprev",
+        "p_viol",
+        "p_settle",
+        "last_t",
+        "h_interp",
+        "last_u",
+        "last_th",
+        "last_poi",
+        "last_defl",
+        "last_floor",
+        "last_force",
     ],
 )
 structref.define_proxy(KernelPeaks, PeaksType, list(Peaks._fields))
+
+_THIRD = 1.0 / 3.0
 
 DIVERGED_DISPLACEMENT = 1.0
 """A c.g. or point displacement beyond this (m) can only come from a diverging integration."""
@@ -61,11 +98,21 @@ def allocate(
     tol: np.ndarray,
     record: list[int] | None,
     n_steps: int,
+    rest: np.ndarray | None = None,
+    rest_n: np.ndarray | None = None,
+    rest_target: np.ndarray | None = None,
+    point_tol: np.ndarray | None = None,
+    h_interp: np.ndarray | None = None,
 ) -> Peaks:
     """Accumulators for ``n_cases`` cases; histories of ``n_steps + 1`` samples for the ``record`` cases.
 
     ``target`` (C, 6) is the final static displacement and rotation the case settles to, m and rad;
     ``t_last`` (C,) the end of the last stage move, s; ``tol`` (C,) the settling tolerance, m.
+    ``rest`` (C, K, 2) the rest intervals after each stage move (start, end; s), ``rest_n`` (C,) their
+    number per case and ``rest_target`` (C, K, 6) the static displacement and rotation in each (m, rad),
+    as ``engine.model.rest_offsets`` gives them (default: none); ``point_tol`` (C, p) the settling
+    tolerance of each point of interest, m (default: ``tol``); ``h_interp`` (C,) the longest interval
+    between output times over which a peak is interpolated, s (default: every interval).
     """
     slot = np.full(n_cases, -1, dtype=np.int64)
     record = list(record or [])
@@ -92,7 +139,56 @@ def allocate(
         h_poi=np.zeros((R, T, n_points, 3)),
         h_force=np.zeros((R, T, n_isolators, 3)),
         h_t=np.zeros((R, T)),
+        defl=np.zeros((n_cases, n_isolators, 3)),
+        max_load=np.full((n_cases, n_isolators), -np.inf),
+        rest=np.ascontiguousarray(np.full((n_cases, 1, 2), np.nan) if rest is None else rest, dtype=float),
+        rest_n=np.ascontiguousarray(np.zeros(n_cases) if rest_n is None else rest_n, dtype=np.int64),
+        rest_target=np.ascontiguousarray(
+            np.zeros((n_cases, 1, 6)) if rest_target is None else rest_target, dtype=float
+        ),
+        point_tol=np.ascontiguousarray(
+            np.repeat(np.asarray(tol, dtype=float).reshape(-1, 1), n_points, axis=1)
+            if point_tol is None
+            else point_tol,
+            dtype=float,
+        ),
+        rest_k=np.zeros(n_cases, dtype=np.int64),
+        rest_tprev=np.full(n_cases, -np.inf),
+        p_viol=np.full((n_cases, n_points), -np.inf),
+        p_settle=np.zeros((n_cases, n_points)),
+        last_t=np.zeros(n_cases),
+        h_interp=np.full(n_cases, np.inf)
+        if h_interp is None
+        else np.ascontiguousarray(h_interp, dtype=float),
+        last_u=np.zeros((n_cases, 3, 2)),
+        last_th=np.zeros((n_cases, 3, 2)),
+        last_poi=np.zeros((n_cases, n_points, 3, 2)),
+        last_defl=np.zeros((n_cases, n_isolators, 3, 2)),
+        last_floor=np.zeros((n_cases, 3, 2)),
+        last_force=np.zeros((n_cases, n_isolators, 3)),
     )
+
+
+def finish_settling(O: Peaks, t_end: np.ndarray) -> np.ndarray:
+    """Per case and point, the settling time after each stage move, worst over the moves (C, p), s.
+
+    Folds the rest interval each run ended in (run end ``t_end`` (C,), s; the run's end closes it) into
+    what ``observe`` gathered over the intervals it left. Intervals the run never reached count 0.
+    """
+    out = np.array(O.p_settle, dtype=float)
+    k = np.asarray(O.rest_k)
+    cases = np.flatnonzero(k < O.rest_n)
+    if cases.size == 0:
+        return out
+    kk = k[cases]
+    t0 = O.rest[cases, kk, 0]
+    t1 = np.minimum(O.rest[cases, kk, 1], np.asarray(t_end, dtype=float)[cases])
+    viol = O.p_viol[cases]  # (c, p)
+    outside = viol == O.rest_tprev[cases, None]
+    value = np.where(outside, (t1 - t0)[:, None], viol - t0[:, None])
+    value = np.where(np.isfinite(viol), np.maximum(value, 0.0), 0.0)
+    out[cases] = np.maximum(out[cases], value)
+    return out
 
 
 @njit(cache=True)
@@ -117,14 +213,57 @@ def observe(P, c, level, t, x, W, O, step):
         return False
     slot = O.slot[c]
     settle = t >= O.t_last[c] - 1e-12
+    # the rest interval after a stage move that t falls in (time only increases: a cursor moves on)
+    k = O.rest_k[c]
+    nk = O.rest_n[c]
+    while k < nk and t > O.rest[c, k, 1] + 1e-12:
+        t0 = O.rest[c, k, 0]
+        for p in range(O.p_viol.shape[1]):
+            v = O.p_viol[c, p]
+            if v > -np.inf:
+                if v == O.rest_tprev[c]:
+                    v = O.rest[c, k, 1]  # still outside at the interval's last output: its length
+                if v - t0 > O.p_settle[c, p]:
+                    O.p_settle[c, p] = v - t0
+                O.p_viol[c, p] = -np.inf
+        k += 1
+        O.rest_k[c] = k
+    rest = k < nk and t >= O.rest[c, k, 0] - 1e-12
+    if rest:
+        O.rest_tprev[c] = t
+    # between the previous output time and this one, each peaked quantity follows the cubic Hermite
+    # interpolant of its values and time derivatives at both ends: its interior extremum is a peak too
+    h = t - O.last_t[c]
+    # (only over intervals the cubic can follow: at most 1/omega of the fastest mode, ``O.h_interp``; over
+    # longer ones it would overshoot, and the output samples alone are the honest peak)
+    between = step > 0 and h > 0.0 and h <= O.h_interp[c]
+    inv_h = 1.0 / h if between else 0.0
+    off = 7 if level == NONLINEAR else 6
+    if level == NONLINEAR:
+        # angular velocity in the floor frame: the rate of the rotation vector, linearised
+        wb0, wb1, wb2 = x[off + 3], x[off + 4], x[off + 5]
+        wf0 = W.R[0, 0] * wb0 + W.R[0, 1] * wb1 + W.R[0, 2] * wb2
+        wf1 = W.R[1, 0] * wb0 + W.R[1, 1] * wb1 + W.R[1, 2] * wb2
+        wf2 = W.R[2, 0] * wb0 + W.R[2, 1] * wb1 + W.R[2, 2] * wb2
+    else:
+        wf0, wf1, wf2 = x[off + 3], x[off + 4], x[off + 5]
     err = 0.0
     for i in range(3):
-        a = abs(x[i])
+        a = max(abs(x[i]), O.u[c, i])
+        if between:
+            a = max(a, _between(O.last_u[c, i, 0], O.last_u[c, i, 1], x[i], x[off + i], h, a))
         if a > O.u[c, i]:
             O.u[c, i] = a
-        a = abs(W.acc[i])
+        O.last_u[c, i, 0] = x[i]
+        O.last_u[c, i, 1] = x[off + i]
+        wi = wf0 if i == 0 else (wf1 if i == 1 else wf2)
+        a = max(abs(W.acc[i]), O.th[c, i])
+        if between:
+            a = max(a, _between(O.last_th[c, i, 0], O.last_th[c, i, 1], W.acc[i], wi, h, a))
         if a > O.th[c, i]:
             O.th[c, i] = a
+        O.last_th[c, i, 0] = W.acc[i]
+        O.last_th[c, i, 1] = wi
         O.sumsq[c, i] += x[i] * x[i]
         if settle:
             e = abs(x[i] - O.target[c, i])
@@ -136,24 +275,16 @@ def observe(P, c, level, t, x, W, O, step):
         for i in range(3):
             O.h_u[slot, step, i] = x[i]
             O.h_th[slot, step, i] = W.acc[i]
-    # points of interest: u + (R - I) d  (linear: u + theta x d)
+    v0, v1, v2 = x[off], x[off + 1], x[off + 2]
+    # points of interest: u + (R - I) d  (linear: u + theta x d); rate v + w x (R d)  (linear: v + w x d)
     for p in range(P.pts.shape[1]):
         d0, d1, d2 = P.pts[c, p, 0], P.pts[c, p, 1], P.pts[c, p, 2]
-        if level == NONLINEAR:
-            r0 = W.R[0, 0] * d0 + W.R[0, 1] * d1 + W.R[0, 2] * d2 - d0
-            r1 = W.R[1, 0] * d0 + W.R[1, 1] * d1 + W.R[1, 2] * d2 - d1
-            r2 = W.R[2, 0] * d0 + W.R[2, 1] * d1 + W.R[2, 2] * d2 - d2
-        else:
-            r0 = W.acc[1] * d2 - W.acc[2] * d1
-            r1 = W.acc[2] * d0 - W.acc[0] * d2
-            r2 = W.acc[0] * d1 - W.acc[1] * d0
+        r0, r1, r2 = mount_offset(level, x, W.R, d0, d1, d2)
+        q0, q1, q2 = _arm_rate(level, wf0, wf1, wf2, r0, r1, r2, d0, d1, d2)
         pv0, pv1, pv2 = u0 + r0, u1 + r1, u2 + r2
-        if abs(pv0) > O.poi[c, p, 0]:
-            O.poi[c, p, 0] = abs(pv0)
-        if abs(pv1) > O.poi[c, p, 1]:
-            O.poi[c, p, 1] = abs(pv1)
-        if abs(pv2) > O.poi[c, p, 2]:
-            O.poi[c, p, 2] = abs(pv2)
+        _peak_point(O.poi, O.last_poi, c, p, 0, pv0, v0 + q0, h, between)
+        _peak_point(O.poi, O.last_poi, c, p, 1, pv1, v1 + q1, h, between)
+        _peak_point(O.poi, O.last_poi, c, p, 2, pv2, v2 + q2, h, between)
         if settle:
             # target point displacement from the linearised static offset
             e0 = O.target[c, 4] * d2 - O.target[c, 5] * d1 + O.target[c, 0]
@@ -162,6 +293,13 @@ def observe(P, c, level, t, x, W, O, step):
             e = max(abs(pv0 - e0), abs(pv1 - e1), abs(pv2 - e2))
             if e > err:
                 err = e
+        if rest:
+            # the static position of the point in this rest interval
+            e0 = O.rest_target[c, k, 4] * d2 - O.rest_target[c, k, 5] * d1 + O.rest_target[c, k, 0]
+            e1 = O.rest_target[c, k, 5] * d0 - O.rest_target[c, k, 3] * d2 + O.rest_target[c, k, 1]
+            e2 = O.rest_target[c, k, 3] * d1 - O.rest_target[c, k, 4] * d0 + O.rest_target[c, k, 2]
+            if max(abs(pv0 - e0), abs(pv1 - e1), abs(pv2 - e2)) > O.point_tol[c, p]:
+                O.p_viol[c, p] = t
         if slot >= 0:
             O.h_poi[slot, step, p, 0] = pv0
             O.h_poi[slot, step, p, 1] = pv1
@@ -171,13 +309,173 @@ def observe(P, c, level, t, x, W, O, step):
     floor_motion(P, c, t, W.xf, W.vf)
     isolator_forces(P, c, level, x, W.R, W.xf, W.vf, W.F)
     for j in range(P.d.shape[1]):
+        d0, d1, d2 = P.d[c, j, 0], P.d[c, j, 1], P.d[c, j, 2]
+        # deflection of the mount from its static state: the base's mount point minus the floor under it
+        r0, r1, r2 = mount_offset(level, x, W.R, d0, d1, d2)
+        q0, q1, q2 = _arm_rate(level, wf0, wf1, wf2, r0, r1, r2, d0, d1, d2)
+        sky = P.sky[c, j]
+        load = P.f0[c, j] + W.F[j, 2]
+        lo = load
+        hi = load
         for i in range(3):
-            a = abs(W.F[j, i])
+            if i == 0:
+                dl, dd = u0 + r0, v0 + q0
+            elif i == 1:
+                dl, dd = u1 + r1, v1 + q1
+            else:
+                dl, dd = u2 + r2, v2 + q2
+            dl -= W.xf[i]
+            dd -= W.vf[i]
+            F1 = W.F[j, i]
+            a = max(abs(F1), O.force[c, j, i])
+            b = max(abs(dl), O.defl[c, j, i])
+            if between:
+                # the deflection's and the floor's cubics; the force law -k delta - c (delta' + sky x_f')
+                # on them, shifted linearly to meet the computed forces at both ends
+                p0, m0 = O.last_defl[c, j, i, 0], O.last_defl[c, j, i, 1]
+                c0, c1, c2, c3 = _hermite(p0, m0, dl, dd, h)
+                b = max(b, _beyond(c0, c1, c2, c3, b))  # the deflection's hull: p0, b1, b2, dl
+                f1 = f2 = f3 = 0.0
+                if sky != 0.0:
+                    _, f1, f2, f3 = _hermite(
+                        O.last_floor[c, i, 0], O.last_floor[c, i, 1], W.xf[i], W.vf[i], h
+                    )
+                kk, cc = P.k[c, j, i], P.cd[c, j, i] * inv_h
+                g0 = -kk * c0 - cc * (c1 + sky * f1)
+                g1 = -kk * c1 - cc * (2.0 * (c2 + sky * f2))
+                g2 = -kk * c2 - cc * (3.0 * (c3 + sky * f3))
+                g3 = -kk * c3
+                e0 = O.last_force[c, j, i] - g0
+                e1 = F1 - (g0 + g1 + g2 + g3)
+                g0 += e0
+                g1 += e1 - e0
+                a = max(a, _beyond(g0, g1, g2, g3, a))
+                if i == 2:
+                    # the Bernstein control points bound the cubic: solve only if a new extreme may lie inside
+                    b1 = g0 + g1 * _THIRD
+                    b2 = b1 + (g1 + g2) * _THIRD
+                    f0j = P.f0[c, j]
+                    if f0j + min(b1, b2) < min(lo, O.min_load[c, j]) or f0j + max(b1, b2) > max(
+                        hi, O.max_load[c, j]
+                    ):
+                        glo, ghi = _cubic_extremes(g0, g1, g2, g3)
+                        lo = min(lo, f0j + glo)
+                        hi = max(hi, f0j + ghi)
             if a > O.force[c, j, i]:
                 O.force[c, j, i] = a
+            if b > O.defl[c, j, i]:
+                O.defl[c, j, i] = b
             if slot >= 0:
-                O.h_force[slot, step, j, i] = W.F[j, i]
-        load = P.f0[c, j] + W.F[j, 2]
-        if load < O.min_load[c, j]:
-            O.min_load[c, j] = load
+                O.h_force[slot, step, j, i] = F1
+            O.last_defl[c, j, i, 0] = dl
+            O.last_defl[c, j, i, 1] = dd
+            O.last_force[c, j, i] = F1
+        if lo < O.min_load[c, j]:
+            O.min_load[c, j] = lo
+        if hi > O.max_load[c, j]:
+            O.max_load[c, j] = hi
+    for i in range(3):
+        O.last_floor[c, i, 0] = W.xf[i]
+        O.last_floor[c, i, 1] = W.vf[i]
+    O.last_t[c] = t
     return True
+
+
+@njit(cache=True, inline="always")
+def _hermite(p0, m0, p1, m1, h):
+    """Coefficients ``(c0, c1, c2, c3)`` of the cubic Hermite interpolant ``c0 + c1 s + c2 s^2 + c3 s^3``,
+    ``s = (t - t0) / h`` in [0, 1], of a quantity with values ``p0``, ``p1`` and rates ``m0``, ``m1`` (per
+    s) at the ends of an interval of ``h`` s."""
+    c1 = h * m0
+    c2 = 3.0 * (p1 - p0) - h * (2.0 * m0 + m1)
+    c3 = 2.0 * (p0 - p1) + h * (m0 + m1)
+    return p0, c1, c2, c3
+
+
+@njit(cache=True, inline="always")
+def _cubic_extremes(c0, c1, c2, c3):
+    """Smallest and largest value of ``c0 + c1 s + c2 s^2 + c3 s^3`` at its stationary points strictly
+    inside 0 < s < 1, in closed form; ``(inf, -inf)`` when it has none there."""
+    lo = np.inf
+    hi = -np.inf
+    a = 3.0 * c3
+    b = 2.0 * c2
+    s1 = -1.0
+    s2 = -1.0
+    if abs(a) <= 1e-12 * (abs(b) + abs(c1)):
+        if b != 0.0:
+            s1 = -c1 / b
+    else:
+        disc = b * b - 4.0 * a * c1
+        if disc >= 0.0:
+            q = -0.5 * (b + math.copysign(math.sqrt(disc), b))
+            s1 = q / a
+            if q != 0.0:
+                s2 = c1 / q
+    if 0.0 < s1 < 1.0:
+        y = c0 + s1 * (c1 + s1 * (c2 + s1 * c3))
+        lo = min(lo, y)
+        hi = max(hi, y)
+    if 0.0 < s2 < 1.0:
+        y = c0 + s2 * (c1 + s2 * (c2 + s2 * c3))
+        lo = min(lo, y)
+        hi = max(hi, y)
+    return lo, hi
+
+
+@njit(cache=True, inline="always")
+def _interior_abs(c0, c1, c2, c3):
+    """Largest |value| of the cubic at its stationary points inside (0, 1); 0 when it has none."""
+    lo, hi = _cubic_extremes(c0, c1, c2, c3)
+    if hi < lo:
+        return 0.0
+    return max(abs(lo), abs(hi))
+
+
+@njit(cache=True, inline="always")
+def _beyond(c0, c1, c2, c3, peak):
+    """Largest |value| of the cubic at its stationary points inside (0, 1) when it may exceed ``peak``
+    there, else 0. Its Bernstein control points ``c0``, ``c0 + c1/3``, ``c0 + (2 c1 + c2)/3``, ``c0 + c1 + c2
+    + c3`` bound it (convex hull), so the closed-form solve runs only when an inner one exceeds ``peak``
+    (which holds the end values): rarely, once a running peak has been reached."""
+    b1 = c0 + c1 * _THIRD
+    b2 = b1 + (c1 + c2) * _THIRD
+    if abs(b1) <= peak and abs(b2) <= peak:
+        return 0.0
+    return _interior_abs(c0, c1, c2, c3)
+
+
+@njit(cache=True, inline="always")
+def _between(p0, m0, p1, m1, h, peak):
+    """Largest |value| inside an output interval of ``h`` s of a quantity with values ``p0``, ``p1`` and
+    rates ``m0``, ``m1`` at its ends (cubic Hermite interpolant) when it may exceed ``peak`` (which holds the
+    end values); 0 when it cannot or its extremes are at the ends."""
+    # the inner Bernstein control points first: the cubic stays inside the hull of p0, b1, b2, p1
+    b1 = p0 + h * m0 * _THIRD
+    b2 = p1 - h * m1 * _THIRD
+    if abs(b1) <= peak and abs(b2) <= peak:
+        return 0.0
+    c0, c1, c2, c3 = _hermite(p0, m0, p1, m1, h)
+    return _interior_abs(c0, c1, c2, c3)
+
+
+@njit(cache=True, inline="always")
+def _peak_point(peak, last, c, p, i, value, rate, h, between):
+    """Fold a point's displacement ``value`` (m) and its rate (m/s) into its running peak, with the
+    extremum between the previous output time and this one."""
+    a = max(abs(value), peak[c, p, i])
+    if between:
+        a = max(a, _between(last[c, p, i, 0], last[c, p, i, 1], value, rate, h, a))
+    if a > peak[c, p, i]:
+        peak[c, p, i] = a
+    last[c, p, i, 0] = value
+    last[c, p, i, 1] = rate
+
+
+@njit(cache=True, inline="always")
+def _arm_rate(level, w0, w1, w2, r0, r1, r2, d0, d1, d2):
+    """Velocity (m/s) of a material point at ``d`` (m, from the c.g.) relative to the c.g., the base
+    turning at ``w`` (rad/s, floor frame): ``w x (R d)`` (nonlinear; ``R d = d + r``), ``w x d`` (linear)."""
+    if level == NONLINEAR:
+        return _cross(w0, w1, w2, d0 + r0, d1 + r1, d2 + r2)
+    return _cross(w0, w1, w2, d0, d1, d2)

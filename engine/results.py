@@ -43,14 +43,15 @@ class SimulationResult:
 
     A case whose ``status`` is not OK has NaN in ``peak_displacement``, ``peak_rotation``,
     ``peak_point_displacement``, ``peak_isolator_force``, ``min_isolator_load``, ``rms_displacement``,
-    ``final_displacement``, ``settling_time`` and ``transmissibility``, and ``settled`` False. What does
+    ``final_displacement``, ``settling_time``, ``point_settling_time``, ``peak_isolator_deflection``,
+    ``max_isolator_load`` and ``transmissibility``, and ``settled`` False. What does
     not depend on integrating its motion stays filled: ``dt`` (the step it was or would have been run
     with), ``static_isolator_load`` and the modal analysis (``natural_frequency``, ``damping_ratio``,
     ``mode_energy``, ``mechanism``), so an unstable or tipping case still shows its modes and preloads.
 
     Attributes (shapes; units):
         status: (C,) int8, one of OK, UNSTABLE, TIPPING, FAILED.
-        message: list of C strings, empty where OK.
+        message: list of C strings, empty where OK (an OK case the stability guard sub-stepped says so).
         dt: (C,) step actually used, s.
         peak_displacement: (C, 3) peak |c.g. displacement| per axis, m.
         peak_rotation: (C, 3) peak |rotation| about X, Y, Z, rad.
@@ -64,6 +65,21 @@ class SimulationResult:
         settling_time: (C,) time after the last stage move until the c.g. and every point stay within
             ``settle_tol`` of the final static position, s; a lower bound where ``settled`` is False.
         settled: (C,) bool.
+        point_settling_time: (C, p) settling time of each point of interest after each stage move,
+            worst over the moves, s. The rest intervals are the times every stage is at rest: from the
+            end ``t_k`` of a move until the next move of any stage starts or the run ends (``s_k``); a
+            run without stage motion has none and gives 0. In interval ``k`` the point's target is its
+            static displacement with the stages parked where they rest in that interval
+            (``engine.model.rest_offsets``, level-dependent as ``final_displacement``); its settling
+            time there is the last output time in ``[t_k, s_k]`` at which the largest per-axis
+            |displacement - target| exceeds ``point_settle_tol`` (scene input, default ``settle_tol``),
+            minus ``t_k``: 0 if never, the interval's length (a lower bound) if still outside at its
+            last output time. The value is the largest over the case's rest intervals.
+        peak_isolator_deflection: (C, n, 3) peak |deflection| of each isolator per floor axis from its
+            static (reference) state: the displacement of the base at the mount's point of action
+            (rotated point at the nonlinear level) minus the floor's there, m. What sizes a mount's
+            stroke.
+        max_isolator_load: (C, n) largest total vertical load (preload plus dynamic), N.
         natural_frequency: (C, 6) undamped natural frequencies, ascending, Hz (0 for a mechanism, and for
             a mode with negative stiffness: the modes a TIPPING case tips in).
         damping_ratio: (C, 6) modal damping ratio of each mode, 1.
@@ -71,6 +87,11 @@ class SimulationResult:
         mechanism: (C, 6) bool, True for a zero-stiffness (rigid-body) mode.
         transmissibility: (C, 3) |c.g. displacement / floor displacement| per axis at the floor
             frequency (sine floor motion only; 0 where there is none), 1.
+        floor_point_velocity: (C, p, 3) largest one-third-octave band RMS velocity (1 to 80 Hz) of each
+            point of interest per axis under the scene's floor spectrum, steady state at the ``lti`` level
+            (``engine.frequency``), m/s; 0 without a floor spectrum. Needs no time integration: filled
+            for unstable and failed cases too, NaN only for a tipping case or one with a mechanism.
+        floor_point_velocity_band: (C, p, 3) exact centre of that band, Hz (0 without a floor spectrum).
         history: time histories of recorded cases, or None (see ``simulate(record=...)``).
 
     The per-case outputs (every field but ``status``, ``message`` and ``history``) are listed, in this
@@ -90,12 +111,24 @@ class SimulationResult:
     final_displacement: np.ndarray = field(metadata=_output(len(DOF_NAMES)))
     settling_time: np.ndarray = field(metadata=_output())
     settled: np.ndarray = field(metadata=_output(flag=True))
+    point_settling_time: np.ndarray = field(metadata=_output(POINT))
+    peak_isolator_deflection: np.ndarray = field(metadata=_output(ISOLATOR, len(AXES)))
+    max_isolator_load: np.ndarray = field(metadata=_output(ISOLATOR))
     natural_frequency: np.ndarray = field(metadata=_output(N_MODES))
     damping_ratio: np.ndarray = field(metadata=_output(N_MODES))
     mode_energy: np.ndarray = field(metadata=_output(N_MODES, len(DOF_NAMES)))
     mechanism: np.ndarray = field(metadata=_output(N_MODES, flag=True))
     transmissibility: np.ndarray = field(metadata=_output(len(AXES)))
+    floor_point_velocity: np.ndarray | None = field(default=None, metadata=_output(POINT, len(AXES)))
+    floor_point_velocity_band: np.ndarray | None = field(default=None, metadata=_output(POINT, len(AXES)))
     history: dict[str, np.ndarray] | None = field(default=None)
+
+    def __post_init__(self) -> None:
+        # a result assembled without the floor-spectrum outputs has none: zeros (no floor spectrum)
+        for name in ("floor_point_velocity", "floor_point_velocity_band"):
+            if getattr(self, name) is None:
+                c, p = np.shape(self.peak_point_displacement)[:2]
+                setattr(self, name, np.zeros((c, p, len(AXES))))
 
     @property
     def n_cases(self) -> int:

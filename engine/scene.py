@@ -56,10 +56,24 @@ class SceneBatch:
         floor_t: (F,) sample times of a recorded floor displacement, s (F = 0: none).
         floor_disp: (C, 3, F) recorded floor displacement per axis, m, linearly interpolated,
             held at its last value after the last sample, zero before the first.
+        floor_band_velocity: (C, 3, 20) the floor's RMS velocity per axis in the one-third-octave bands
+            of 1 to 80 Hz (``engine.frequency.BAND_CENTRES``), m/s; all zero (the default) when the
+            scene gives no floor spectrum. Steady state only: the time integration does not see it.
         duration: (C,) simulated time, s.
         settle_tol: (C,) settling tolerance on c.g. and point displacement, m.
+        point_settle_tol: (C, p) settling tolerance of each point of interest after each stage move
+            (``point_settling_time``), m; defaults to ``settle_tol`` for every point.
         gravity_stiffness: include the rocking stiffness of preload and weights that tilt with the base.
         g: gravitational acceleration, m/s^2.
+        iso_ff_gain: (C, n) gain of each mount's feedforward of the stages' inertial wrench, 1 (0: none,
+            the default; docs/physics.md, "Active mounts with feedforward").
+        iso_ff_bandwidth: (C, n) corner frequency of each mount's first-order feedforward low-pass, Hz
+            (positive where the gain is not 0).
+        iso_ff_limit: (C, n) force limit of each mount's actuator, per axis, N (``inf``: none, the default).
+        iso_ff_weight: (C, n) True where the mount also feeds forward the change of the stages' weight
+            moment (a stage that has travelled), not only their inertial wrench (default False).
+        preload_with_base: the nonlinear level's preloads turn with the base (mounts that tilt with it)
+            instead of staying vertical in the floor frame (the default, False).
     """
 
     mass: np.ndarray
@@ -84,19 +98,45 @@ class SceneBatch:
     floor_phase: np.ndarray
     floor_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     floor_disp: np.ndarray | None = None
+    floor_band_velocity: np.ndarray | None = None
     duration: np.ndarray | None = None
     settle_tol: np.ndarray | None = None
+    point_settle_tol: np.ndarray | None = None
     gravity_stiffness: bool = True
     g: float = GRAVITY
+    iso_ff_gain: np.ndarray | None = None
+    iso_ff_bandwidth: np.ndarray | None = None
+    iso_ff_limit: np.ndarray | None = None
+    iso_ff_weight: np.ndarray | None = None
+    preload_with_base: bool = False
 
     def __post_init__(self) -> None:
         c = np.shape(self.mass)[0] if np.ndim(self.mass) else 1
+        n = np.shape(self.iso_pos)[1] if np.ndim(self.iso_pos) == 3 else 0
+        if self.iso_ff_gain is None:
+            self.iso_ff_gain = np.zeros((c, n))
+        if self.iso_ff_bandwidth is None:
+            self.iso_ff_bandwidth = np.zeros((c, n))
+        if self.iso_ff_limit is None:
+            self.iso_ff_limit = np.full((c, n), np.inf)
+        if self.iso_ff_weight is None:
+            self.iso_ff_weight = np.zeros((c, n), dtype=bool)
         if self.floor_disp is None:
             self.floor_disp = np.zeros((c, 3, len(self.floor_t)))
+        if self.floor_band_velocity is None:
+            self.floor_band_velocity = np.zeros((c, 3, 20))
         if self.duration is None:
             self.duration = np.full(c, 5.0)
         if self.settle_tol is None:
             self.settle_tol = np.full(c, 10e-6)
+        if self.point_settle_tol is None:
+            tol = np.asarray(self.settle_tol, dtype=float)
+            p = np.shape(self.points)[1] if np.ndim(self.points) == 3 else 0
+            self.point_settle_tol = np.repeat(tol.reshape(-1, 1), p, axis=1)
+
+    @property
+    def has_floor_spectrum(self) -> bool:
+        return bool(np.any(np.asarray(self.floor_band_velocity) != 0.0))
 
     @property
     def n_cases(self) -> int:
@@ -115,12 +155,17 @@ class SceneBatch:
         return int(self.points.shape[1])
 
     @property
+    def has_feedforward(self) -> bool:
+        """True when some mount feeds the stages' inertial wrench forward (a gain other than 0)."""
+        return bool(np.any(np.asarray(self.iso_ff_gain) != 0.0))
+
+    @property
     def has_floor_motion(self) -> bool:
         return bool(np.any(self.floor_amp != 0.0) or (len(self.floor_t) and np.any(self.floor_disp != 0.0)))
 
     def take(self, index: np.ndarray | slice | list[int]) -> SceneBatch:
         """The cases at ``index`` as a new batch (scene-level fields are shared)."""
-        shared = {"stage_parent", "floor_t", "gravity_stiffness", "g"}
+        shared = {"stage_parent", "floor_t", "gravity_stiffness", "g", "preload_with_base"}
         kw = {}
         for f in fields(self):
             v = getattr(self, f.name)
@@ -136,11 +181,46 @@ class SceneBatch:
         last = np.where(moving, ends, 0.0).max(axis=-1) if t.shape[-1] else np.zeros(t.shape[:2])
         return last.max(axis=-1) if last.shape[-1] else np.zeros(self.n_cases)
 
+    def rest_intervals(self) -> tuple[np.ndarray, np.ndarray]:
+        """The time intervals in which every stage is at rest after a move, per case.
+
+        Interval ``k`` runs from ``t_k``, the end of a move (no stage moves from there on), to ``s_k``, the
+        start of the next move of any stage, or ``+inf`` after the last move (the run's end closes it).
+        The rest before the first move is not one (nothing has moved yet); a case without stage motion,
+        or whose last piece moves for ever, has none after its last move. Gaps between moves shorter than
+        ``1e-12`` s (relative to the time) are not rests: those moves run into each other.
+
+        Returns:
+            ``bounds`` (C, K, 2): ``t_k`` and ``s_k``, s, padded with NaN past each case's count;
+            ``count`` (C,) int64: the number of rest intervals of each case (K = max(count, 1)).
+        """
+        C = self.n_cases
+        t = np.asarray(self.prof_t, dtype=float)
+        if t.ndim != 3 or t.shape[1] == 0 or t.shape[2] == 0:
+            return np.full((C, 1, 2), np.nan), np.zeros(C, dtype=np.int64)
+        moving = (self.prof_v != 0.0) | (self.prof_a != 0.0) | (self.prof_j != 0.0)
+        # a moving piece runs until the next piece starts; a moving last piece for ever
+        ends = np.concatenate([t[..., 1:], np.full(t.shape[:-1] + (1,), np.inf)], axis=-1)
+        start = np.where(moving, t, np.inf).reshape(C, -1)
+        end = np.where(moving, ends, -np.inf).reshape(C, -1)
+        order = np.argsort(start, axis=1, kind="stable")
+        start = np.take_along_axis(start, order, axis=1)
+        reach = np.maximum.accumulate(np.take_along_axis(end, order, axis=1), axis=1)  # motion up to here
+        after = np.concatenate([start[:, 1:], np.full((C, 1), np.inf)], axis=1)  # the next move's start
+        gap = 1e-12 * np.maximum(1.0, np.abs(np.where(np.isfinite(reach), reach, 0.0)))
+        rest = np.isfinite(start) & np.isfinite(reach) & (after > reach + gap)
+        count = rest.sum(axis=1).astype(np.int64)
+        bounds = np.full((C, max(int(count.max()), 1), 2), np.nan)
+        for c in np.flatnonzero(count):
+            bounds[c, : count[c], 0] = reach[c, rest[c]]
+            bounds[c, : count[c], 1] = after[c, rest[c]]
+        return bounds, count
+
 
 def concat(batches: list[SceneBatch]) -> SceneBatch:
     """Join batches of the same scene shape along the case dimension."""
     first = batches[0]
-    shared = {"stage_parent", "floor_t", "gravity_stiffness", "g"}
+    shared = {"stage_parent", "floor_t", "gravity_stiffness", "g", "preload_with_base"}
     kw = {}
     for f in fields(first):
         if f.name in shared:

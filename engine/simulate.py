@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from isolab.engine import modal, model, peaks, stability
+from isolab.engine import frequency, modal, model, peaks, stability
 from isolab.engine.dynamics import FIDELITIES
 from isolab.engine.integrators import INTEGRATORS
 from isolab.engine.results import FAILED, OK, TIPPING, UNSTABLE, SimulationResult
@@ -26,6 +26,20 @@ def check_choice(fidelity: str, integrator: str) -> None:
         raise SceneError(
             "integrator", f"{integrator!r} integrates only the {', '.join(levels)} level, not {fidelity!r}"
         )
+
+
+SUB_STEPPED = "sub-stepped"
+"""How the message of a case the stability guard sub-stepped begins (the case itself is ``ok``)."""
+
+
+def substep_message(dt: float, step: float, n_div: int, integrator: str, fastest_hz: float) -> str:
+    """What an ``ok`` case the stability guard cut into ``n_div`` sub-steps of ``step`` s (from ``dt`` s)
+    says: that it was, and that its accuracy may be poor (a stable step near the limit is not accurate)."""
+    return (
+        f"{SUB_STEPPED}: {dt * 1e3:.3g} ms cut to {step * 1e3:.3g} ms ({n_div} sub-steps) by the stability "
+        f"guard of the {integrator} integrator (fastest mode {fastest_hz:.4g} Hz at home); accuracy may be "
+        "poor, choose a smaller dt or the exact integrator"
+    )
 
 
 def _divergence_cause(integrator: str, step: float) -> str:
@@ -67,8 +81,8 @@ def simulate(
 
     Returns:
         A ``SimulationResult``; cases that went or would go numerically unstable, tip over or fail
-        carry that status and a message, and NaN instead of their peaks, loads, RMS, final displacement,
-        settling time and transmissibility (the static preloads and the modes stay filled: see
+        carry that status and a message, and NaN instead of their peaks, loads, deflections, RMS, final
+        displacement, settling times and transmissibility (the static preloads and the modes stay filled: see
         ``SimulationResult``).
     """
     check_choice(fidelity, integrator)
@@ -134,6 +148,8 @@ def simulate(
                 n_div[c] = 1
         n_div[status != OK] = 1
         steps = dt / n_div
+        for c in np.flatnonzero(n_div > 1):
+            message[c] = substep_message(dt, steps[c], int(n_div[c]), integrator, fastest[c])
     duration = np.asarray(batch.duration, dtype=float)
     n_steps = np.rint(duration / steps).astype(np.int64)
     n_steps = np.maximum(n_steps, 1)
@@ -144,6 +160,7 @@ def simulate(
     n_steps[too_many] = 1
 
     target = model.static_offset(batch, fidelity)
+    rest, rest_n, rest_target = model.rest_offsets(batch, fidelity)
     O = peaks.allocate(
         C,
         batch.n_points,
@@ -153,6 +170,12 @@ def simulate(
         batch.settle_tol,
         record,
         int(n_steps[list(record)].max()) if record else 0,
+        rest=rest,
+        rest_n=rest_n,
+        rest_target=rest_target,
+        point_tol=batch.point_settle_tol,
+        # a peak between output times is interpolated over intervals of at most 1/omega of the fastest mode
+        h_interp=1.0 / (2.0 * np.pi * np.maximum(np.asarray(md.frequency).max(axis=1), 1e-300)),
     )
     W = model.work(batch)
     run_status = status.copy()
@@ -165,7 +188,8 @@ def simulate(
             message[c] = f"diverged at t = {O.diverged[c]:.4g} s: " + _divergence_cause(integrator, steps[c])
         elif run_status[c] == FAILED:
             status[c] = FAILED
-            message[c] = message[c] or (
+            failed_why = message[c] if not message[c].startswith(SUB_STEPPED) else ""
+            message[c] = failed_why or (
                 "the mass matrix lost positive definiteness (the base turned "
                 "beyond the range the model holds)"
             )
@@ -175,6 +199,7 @@ def simulate(
     settled = O.last_viol < t_end - 0.5 * steps
     settling = np.where(np.isfinite(O.last_viol), np.maximum(O.last_viol - t_last, 0.0), 0.0)
     settling = np.where(settled, settling, np.maximum(t_end - t_last, 0.0))
+    point_settling = peaks.finish_settling(O, t_end)
 
     if batch.has_floor_motion and np.any(batch.floor_amp != 0):
         d, _, _ = model.relative_geometry(batch)
@@ -184,6 +209,14 @@ def simulate(
         )
     else:
         T = np.zeros((C, 3))
+
+    # steady-state response to the floor spectrum: no stepping, so every case but a tipping one has it
+    fpv = np.zeros((C, batch.n_points, 3))
+    fpb = np.zeros((C, batch.n_points, 3))
+    if batch.has_floor_spectrum:
+        bands = frequency.batch_point_band_velocity(batch, matrices=(M0, K0, C0), modes=md)
+        bands[status == TIPPING] = np.nan
+        fpv, fpb = frequency.worst_band(bands)
 
     bad = status != OK
     nan = np.nan
@@ -218,10 +251,15 @@ def simulate(
         final_displacement=per_case(target),
         settling_time=per_case(settling),
         settled=np.where(bad, False, settled),
+        point_settling_time=per_case(point_settling),
+        peak_isolator_deflection=per_case(O.defl),
+        max_isolator_load=per_case(O.max_load),
         natural_frequency=np.array(md.frequency),
         damping_ratio=np.array(md.damping_ratio),
         mode_energy=np.array(md.energy),
         mechanism=np.array(md.mechanism),
         transmissibility=per_case(T),
+        floor_point_velocity=fpv,
+        floor_point_velocity_band=fpb,
         history=history,
     )

@@ -26,6 +26,11 @@ def validate(b: SceneBatch) -> None:
     for f in fields(b):
         v = getattr(b, f.name)
         if isinstance(v, np.ndarray) and v.dtype.kind == "f":
+            if f.name == "iso_ff_limit":  # +inf: no actuator force limit
+                bad = np.isnan(v) | (v == -np.inf)
+                if bad.any():
+                    raise SceneError(f.name, "must be a number or +inf (no limit)" + _case(bad))
+                continue
             bad = ~np.isfinite(v)
             if bad.any():
                 raise SceneError(f.name, "must be finite (got NaN or infinity)" + _case(bad))
@@ -45,8 +50,10 @@ def validate(b: SceneBatch) -> None:
         "floor_amp": (C, 3),
         "floor_freq": (C, 3),
         "floor_phase": (C, 3),
+        "floor_band_velocity": (C, 3, 20),
         "duration": (C,),
         "settle_tol": (C,),
+        "point_settle_tol": (C, b.n_points),
     }
     for name, shape in shapes.items():
         if np.shape(getattr(b, name)) != shape:
@@ -70,6 +77,20 @@ def validate(b: SceneBatch) -> None:
         raise SceneError("iso_k", "stiffness must not be negative" + _case((b.iso_k < 0).any(axis=(1, 2))))
     if (b.iso_c < 0).any():
         raise SceneError("iso_c", "damping must not be negative" + _case((b.iso_c < 0).any(axis=(1, 2))))
+    for name in ("iso_ff_gain", "iso_ff_bandwidth", "iso_ff_limit", "iso_ff_weight"):
+        if np.shape(getattr(b, name)) != (C, n):
+            raise SceneError(name, f"shape {np.shape(getattr(b, name))}, expected {(C, n)}")
+    if (b.iso_ff_gain < 0).any():
+        raise SceneError("iso_ff_gain", "feedforward gain must not be negative" + _case(b.iso_ff_gain < 0))
+    slow = (b.iso_ff_gain != 0) & ~(b.iso_ff_bandwidth > 0)
+    if slow.any():
+        raise SceneError(
+            "iso_ff_bandwidth", "must be positive where a mount feeds forward" + _case(slow.any(axis=1))
+        )
+    if (b.iso_ff_limit <= 0).any():
+        raise SceneError(
+            "iso_ff_limit", "actuator force limit must be positive" + _case((b.iso_ff_limit <= 0).any(axis=1))
+        )
     for name in ("iso_pos", "stage_home", "points", "cg"):
         v = np.asarray(getattr(b, name))
         if v.size and (np.abs(v) > MAX_LENGTH).any():
@@ -98,8 +119,14 @@ def validate(b: SceneBatch) -> None:
         raise SceneError("duration", "must be positive")
     if (b.settle_tol <= 0).any():
         raise SceneError("settle_tol", "must be positive")
+    if (b.point_settle_tol <= 0).any():
+        raise SceneError(
+            "point_settle_tol", "must be positive" + _case((b.point_settle_tol <= 0).any(axis=1))
+        )
     if (b.floor_freq < 0).any():
         raise SceneError("floor_freq", "must not be negative")
+    if not (np.isfinite(b.floor_band_velocity) & (b.floor_band_velocity >= 0)).all():
+        raise SceneError("floor_band_velocity", "must be finite and not negative")
     if len(b.floor_t):
         if b.floor_disp.shape != (C, 3, len(b.floor_t)):
             raise SceneError("floor_disp", f"shape {b.floor_disp.shape}, expected {(C, 3, len(b.floor_t))}")

@@ -7,11 +7,11 @@ stops the queue (running studies stay queued for the next start) and closes the 
 ``isolab serve``, which hands the app to uvicorn.
 
 When ``ISOLAB_API_TOKEN`` is set, every route but ``/health`` (and the API description: ``/docs``,
-``/redoc``, ``/openapi.json``) wants ``Authorization: Bearer <token>``; request bodies larger than
-``ISOLAB_MAX_BODY_BYTES`` are refused with 413 before they are read, JSON nested too deep with 422
-(:class:`service.request_limits.RequestLimits`). CORS answers only the origins of ``ISOLAB_CORS_ORIGINS``.
-The web page (``/ui/``, :mod:`service.routes.ui`) is static: its shells and assets need no token, and all
-its data comes from the API above, with the token.
+``/redoc``, ``/openapi.json``; the file schemas ``/schemas/*.json``) wants ``Authorization: Bearer
+<token>``; request bodies larger than ``ISOLAB_MAX_BODY_BYTES`` are refused with 413 before they are
+read, JSON nested too deep with 422 (:class:`service.request_limits.RequestLimits`). CORS answers only the
+origins of ``ISOLAB_CORS_ORIGINS``. The web page (``/ui/``, :mod:`service.routes.ui`) is static: its
+shells and assets need no token, and all its data comes from the API above, with the token.
 """
 
 from __future__ import annotations
@@ -40,8 +40,10 @@ from isolab.service.routes import (
     calibrations,
     cases,
     comparisons,
+    file_schemas,
     health,
     heavy_work_limiter,
+    sensitivity,
     studies,
     ui,
 )
@@ -201,9 +203,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             allow_headers=["*"],
         )
     app.include_router(health.router)
+    app.include_router(file_schemas.router)  # describes files, holds no data: open, like /openapi.json
     guarded = [Depends(require_token)]
     app.include_router(studies.router, dependencies=guarded)
     app.include_router(cases.router, dependencies=guarded)
+    app.include_router(sensitivity.router, dependencies=guarded)
     app.include_router(comparisons.router, dependencies=guarded)
     app.include_router(calibrations.router, dependencies=guarded)
     app.include_router(authoring.router, dependencies=guarded)

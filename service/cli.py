@@ -96,3 +96,15 @@ app.command("fetch")(fetch_command)
 from isolab.service.calibration_commands import calibrate_command  # noqa: E402
 
 app.command("calibrate")(calibrate_command)
+
+from isolab.service.comparison_commands import compare_command  # noqa: E402
+
+app.command("compare")(compare_command)
+
+from isolab.service.sensitivity_commands import sensitivity_command  # noqa: E402
+
+app.command("sensitivity")(sensitivity_command)
+
+from isolab.service.floor_commands import floor_command  # noqa: E402
+
+app.command("floor")(floor_command)

@@ -28,9 +28,12 @@ import httpx
 import typer
 
 if TYPE_CHECKING:
+    import pandas as pd
     import xarray as xr
 
 DEFAULT_URL = "http://127.0.0.1:8000"
+"""Where ``isolab serve`` listens by default; ``ISOLAB_URL`` (or the commands' ``--url``) names another."""
+URL_ENV = "ISOLAB_URL"
 KEEPALIVE_S = 2.0
 """Seconds an idle connection is kept for reuse (uvicorn closes idle connections after 5 s)."""
 FINISHED = ("done", "failed", "cancelled")
@@ -94,14 +97,15 @@ class Client:
     """The isolab REST API.
 
     Args:
-        base_url: the service's address.
+        base_url: the service's address (default: ``ISOLAB_URL``, else ``http://127.0.0.1:8000``).
         token: bearer token, when the service has one (default: ``ISOLAB_API_TOKEN``).
         timeout: seconds to wait for one request (downloads: for each read).
     """
 
-    def __init__(self, base_url: str = DEFAULT_URL, token: str | None = None, timeout: float = 60.0):
+    def __init__(self, base_url: str | None = None, token: str | None = None, timeout: float = 60.0):
         token = token if token is not None else (os.environ.get("ISOLAB_API_TOKEN") or None)
         headers = {"Authorization": f"Bearer {token}"} if token else {}
+        base_url = base_url if base_url is not None else (os.environ.get(URL_ENV) or DEFAULT_URL)
         self.base_url = base_url.rstrip("/")
         self._http = httpx.Client(
             base_url=self.base_url,
@@ -122,11 +126,26 @@ class Client:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    def _unreached(self, method: str, url: str, err: httpx.HTTPError) -> ClientError:
+        """The error of a request that got no answer: one line; where no service listens, what to check."""
+        if isinstance(err, httpx.ConnectError | httpx.ConnectTimeout):
+            reason = str(err).partition("] ")[2] or str(err) or type(err).__name__
+            return ClientError(
+                f"cannot reach the isolab service at {self.base_url} ({reason.lower()}): is `isolab serve` "
+                f"running at {self.base_url}? set {URL_ENV} or --url"
+            )
+        if isinstance(err, httpx.UnsupportedProtocol):
+            return ClientError(
+                f"{self.base_url!r} is not an http:// or https:// address: set {URL_ENV} or --url to the "
+                f"service's address, such as {DEFAULT_URL}"
+            )
+        return ClientError(f"{method} {self.base_url}{url}: {type(err).__name__}: {err}")
+
     def _request(self, method: str, url: str, **kwargs: Any) -> httpx.Response:
         try:
             response = self._http.request(method, url, **kwargs)
         except httpx.HTTPError as err:
-            raise ClientError(f"{method} {self.base_url}{url}: {type(err).__name__}: {err}") from err
+            raise self._unreached(method, url, err) from err
         if response.status_code >= 400:
             message, detail = _message(response)
             raise ClientError(
@@ -220,9 +239,10 @@ class Client:
                         for chunk in response.iter_bytes():
                             out.write(chunk)
                 except httpx.HTTPError as err:
-                    raise ClientError(
-                        f"GET /studies/{study_id}/dataset: {type(err).__name__}: {err}"
-                    ) from err
+                    raise self._unreached("GET", f"/studies/{study_id}/dataset", err) from err
+            from isolab.studies.store import new_file_mode
+
+            os.chmod(tmp_name, new_file_mode())  # as a file opened for writing would be, not mkstemp's 0600
             os.replace(tmp_name, path)
         except BaseException:
             Path(tmp_name).unlink(missing_ok=True)
@@ -258,15 +278,41 @@ class Client:
         """Cancel a queued or running study; remove a finished one."""
         self._request("DELETE", f"/studies/{study_id}")
 
+    # ---------------------------------------------------------------------------------- sensitivity
+    def sensitivity_answer(self, study_id: str, output: str) -> dict[str, Any]:
+        """The sensitivity of ``output`` of a done study as the service answers it (JSON)."""
+        return self._request("GET", f"/studies/{study_id}/sensitivity", params={"output": output}).json()
+
+    def sensitivity(self, study_id: str, output: str) -> pd.DataFrame:
+        """Sensitivity indices of ``output`` (e.g. ``peak_point_displacement.tool.z``) of a done study: one
+        row per parameter (index: its name), a column per index (``S1``, ``ST`` or ``delta``, ``S1``) and
+        one per confidence half-width (``S1_conf``...), plus ``long_name`` and ``unit`` of the parameter.
+        ``df.attrs`` holds the method, its description, the output, its unit and the case counts."""
+        return sensitivity_frame(self.sensitivity_answer(study_id, output))
+
+    def sensitivity_png(self, study_id: str, output: str) -> bytes:
+        """The bar chart of :meth:`sensitivity` as PNG bytes."""
+        return self._request("GET", f"/studies/{study_id}/sensitivity.png", params={"output": output}).content
+
     # ---------------------------------------------------------------------------------- comparisons
     def compare(
         self,
         scene: Mapping[str, Any] | str | Path,
         types: builtins.list[str] | None = None,
         simulation: Mapping[str, Any] | None = None,
-    ) -> dict[str, Any]:
+        cost_order: builtins.list[str] | None = None,
+        tune: bool = False,
+    ) -> Any:
         """Run one scene (a dict, or a YAML/JSON scene file) under several isolator types (default all
-        three); the side-by-side table with the best type per column."""
+        three); the side-by-side table as a pandas DataFrame: one row per isolator type, one column per
+        output (SI) and, when the scene has design criteria, ``meets_criteria`` and ``margin_<criterion>``
+        (fraction of the limit to spare, positive: met).
+
+        ``df.attrs`` holds ``recommendation`` (``isolator_type``: the cheapest type in ``cost_order``,
+        default elastomer < air < active, that meets every criterion; ``reason``), ``requirements`` (the
+        criteria: name, limit, unit), ``units`` (column -> SI unit), ``best`` (column -> best type) and
+        ``simulation``; with ``tune`` (each type first tuned to the criteria within its physical range),
+        also ``tuning`` (type -> values found)."""
         if not isinstance(scene, Mapping):
             import yaml
 
@@ -278,7 +324,13 @@ class Client:
             body["isolator_types"] = list(types)
         if simulation is not None:
             body["simulation"] = dict(simulation)
-        return self._request("POST", "/comparisons", json=body).json()
+        if cost_order is not None:
+            body["cost_order"] = list(cost_order)
+        if tune:
+            body["tune"] = True
+        from isolab.studies.comparisons import comparison_frame
+
+        return comparison_frame(self._request("POST", "/comparisons", json=body).json())
 
     # --------------------------------------------------------------------------------- calibrations
     def calibrate(
@@ -339,11 +391,32 @@ class Client:
 
 # ------------------------------------------------------------------------------ command-line commands
 # ``isolab submit``, ``isolab status`` and ``isolab fetch``, registered in service/cli.py.
-UrlOption = Annotated[str, typer.Option("--url", envvar="ISOLAB_URL", help="Address of the isolab service.")]
+UrlOption = Annotated[str, typer.Option("--url", envvar=URL_ENV, help="Address of the isolab service.")]
 TokenOption = Annotated[
     str | None,
     typer.Option("--token", envvar="ISOLAB_API_TOKEN", help="Bearer token of the service, if any."),
 ]
+
+
+def sensitivity_frame(answer: Mapping[str, Any]) -> pd.DataFrame:
+    """A sensitivity answer (JSON of ``/studies/{id}/sensitivity``) as a DataFrame (see
+    :meth:`Client.sensitivity`); missing indices are NaN."""
+    import pandas as pd
+
+    columns: dict[str, Any] = {}
+    for kind, values in answer["indices"].items():
+        columns[kind] = [float("nan") if v is None else v for v in values]
+        conf = answer["conf"].get(kind, [None] * len(values))
+        columns[f"{kind}_conf"] = [float("nan") if v is None else v for v in conf]
+    columns["long_name"] = list(answer["parameter_long_names"])
+    columns["unit"] = list(answer["parameter_units"])
+    df = pd.DataFrame(columns, index=pd.Index(list(answer["parameters"]), name="parameter"))
+    keys = ("method", "method_name", "design", "output", "long_name", "unit", "n_cases", "n_total")
+    df.attrs.update({k: answer[k] for k in keys})
+    df.attrs.update(
+        n_excluded=answer["n_excluded"], n_dropped=answer.get("n_dropped", 0), notes=list(answer["notes"])
+    )
+    return df
 
 
 def _fail(err: Exception) -> NoReturn:

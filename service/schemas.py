@@ -125,6 +125,14 @@ class StudySummary(BaseModel):
     )
     integrator: str | None = None
     dt: float | None = Field(None, description="integration step the cases run at, s")
+    generation: int | None = Field(
+        None, description="optimize designs: generations evaluated so far (null for other designs)"
+    )
+    generations: int | None = Field(
+        None,
+        description="optimize designs: generations the budget allows (budget // population; null for the "
+        "local searches until done), the generations run once done",
+    )
     links: StudyLinks
 
 
@@ -246,6 +254,37 @@ class ComparisonRequest(BaseModel):
     simulation: dict[str, Any] | None = Field(
         None, description="overrides of the scene's simulation block (fidelity, integrator, dt, duration...)"
     )
+    cost_order: list[IsolatorType] | None = Field(
+        None,
+        min_length=1,
+        max_length=3,
+        description="isolator types from the cheapest to the dearest, for the recommendation "
+        "(default elastomer, air, active)",
+    )
+    tune: StrictBool = Field(
+        False,
+        description="first tune each type's frequencies and damping, within what the type can reach, to "
+        "the scene's criteria (maximising the smallest margin); the answer's tuning gives the values",
+    )
+
+
+class Recommendation(BaseModel):
+    """The one isolator type to buy, and why."""
+
+    isolator_type: str | None = Field(
+        description="the cheapest type that meets every criterion (null: no criteria, or none meets them)"
+    )
+    reason: str
+    cost_order: list[str] = Field(description="the types from the cheapest to the dearest")
+
+
+class Requirement(BaseModel):
+    """One design criterion the types were judged by."""
+
+    name: str = Field(description="e.g. tool_displacement, isolators_no_liftoff")
+    limit: float = Field(description="the limit, in SI")
+    unit: str
+    description: str
 
 
 class Comparison(BaseModel):
@@ -256,7 +295,16 @@ class Comparison(BaseModel):
     units: dict[str, str]
     rows: dict[str, dict[str, Any]] = Field(description="isolator type -> column -> value")
     best: dict[str, str] = Field(description="column -> isolator type with the best value")
-    criteria: dict[str, str] = Field(description="column -> what 'best' means (lowest, highest, false)")
+    criteria: dict[str, str] = Field(description="column -> what 'best' means (lowest, highest, false, true)")
+    requirements: list[Requirement] = Field(
+        default_factory=list,
+        description="the scene's design criteria; each row has meets_criteria and margin_<name> "
+        "(fraction of the limit to spare, positive: met)",
+    )
+    recommendation: Recommendation
+    tuning: dict[str, dict[str, Any]] | None = Field(
+        None, description="with tune: per type, the values found (f_vertical, f_horizontal in Hz, zeta)"
+    )
     simulation: dict[str, Any] = Field(description="the simulation block every type ran with")
 
     model_config = ConfigDict(
@@ -273,11 +321,43 @@ class Comparison(BaseModel):
                     },
                     "best": {"peak_displacement_y": "elastomer", "natural_frequency_1": "active"},
                     "criteria": {"peak_displacement_y": "lowest", "natural_frequency_1": "lowest"},
+                    "requirements": [
+                        {
+                            "name": "tool_displacement",
+                            "limit": 5e-4,
+                            "unit": "m",
+                            "description": "peak displacement of tool",
+                        }
+                    ],
+                    "recommendation": {
+                        "isolator_type": "air",
+                        "reason": "air is the cheapest type (cost order elastomer < air < active) that meets "
+                        "every criterion; its smallest margin is +12% on tool_displacement",
+                        "cost_order": ["elastomer", "air", "active"],
+                    },
                     "simulation": {"fidelity": "lti", "integrator": "exact", "dt": 0.002},
                 }
             ]
         }
     )
+
+
+EXAMPLE_FLOOR_PLOT: dict[str, Any] = {
+    **EXAMPLE_COMPARISON,
+    "scene": {**EXAMPLE_SCENE, "floor": {"spectrum": {"x": "VC-D", "y": "VC-D", "z": "VC-D"}}},
+    "point": "tool",
+}
+"""The example comparison on a floor at the VC-D level (6.25 um/s RMS per one-third-octave band) along
+every axis, drawn at the tool point."""
+
+
+class FloorPlotRequest(ComparisonRequest):
+    """One scene under several isolator types, and the point of interest whose floor-induced velocity
+    spectrum to draw (the scene needs a ``floor.spectrum``)."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [EXAMPLE_FLOOR_PLOT]})
+
+    point: str = Field(min_length=1, max_length=64, description="the point of interest to draw, e.g. tool")
 
 
 # -------------------------------------------------------------------------------------------- errors

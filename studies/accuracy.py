@@ -10,7 +10,10 @@ estimated cost (:data:`studies.costs.STEP_COST`, stability sub-steps included) a
 largest error on the pilot cases stays inside the tolerance. A relative tolerance applies to every sizing
 output (:data:`SIZING_OUTPUTS`: peak c.g. and point displacement, peak rotation, peak isolator force,
 relative to the reference's largest of each; the smallest isolator load relative to the largest preload); an
-absolute one (metres) to the peak displacements. ``fast`` allows 5 %, ``balanced`` 0.5 %; ``reference`` runs
+absolute one (metres) to the peak displacements. A per-output tolerance (``tolerance: {settling_time: 5 ms,
+peak_point_displacement: 1 %}``) bounds instead the worst component of each named output
+(:func:`component_errors`). A candidate the stability guard would sub-step on a pilot case is never
+chosen. ``fast`` allows 5 %, ``balanced`` 0.5 %; ``reference`` runs
 the nonlinear level with the reference integrator at the requested step (default 1 ms). When no candidate
 meets the tolerance the reference itself is chosen. Choices are cached per study definition.
 
@@ -26,7 +29,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import SimpleNamespace
 from typing import Any
 
@@ -36,9 +39,18 @@ from isolab.engine import modal, model, simulate, stability
 from isolab.engine.integrators import INTEGRATORS
 from isolab.engine.results import OK, STATUS_NAMES
 from isolab.engine.scene import SceneBatch
+from isolab.engine.simulate import SUB_STEPPED
 from isolab.studies.costs import step_cost
 from isolab.studies.dataset import result_arrays
-from isolab.studies.schema import ACCURACY_LEVELS, DEFAULT_DT, Simulation, parse_tolerance
+from isolab.studies.schema import (
+    ACCURACY_LEVELS,
+    DEFAULT_DT,
+    TOLERANCE_OUTPUTS,
+    Simulation,
+    parse_output_tolerance,
+    parse_tolerance,
+    tolerance_text,
+)
 from isolab.studies.study import study_from_json
 
 CANDIDATE_STEPS = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3)
@@ -142,6 +154,53 @@ def sizing_error(errors: Mapping[str, np.ndarray], relative: bool) -> np.ndarray
     return np.asarray(errors["displacement_m"])
 
 
+COMPONENT_FLOOR = 1e-3
+"""Per-output relative tolerances: a component whose reference value is below this fraction of the largest
+reference value of its output is measured against that fraction (a peak that is almost zero has no
+meaningful relative error)."""
+SETTLING_FLOOR = 1e-3
+"""Per-output relative tolerance on the settling time: reference settling times below this (s) count as
+this."""
+
+
+def component_errors(
+    result: Any, reference: Any, tolerances: Mapping[str, tuple[float, bool]]
+) -> dict[str, np.ndarray]:
+    """Per case (C,), for each output named in ``tolerances`` (output -> (value, relative), as
+    :func:`studies.schema.parse_output_tolerance` gives them), the error of its worst component as a
+    fraction of its tolerance (1 = at the tolerance). NaN where either case is not OK.
+
+    A component is one axis of one point, isolator or the c.g. A relative error is ``|a - b| / |b|`` with
+    ``b`` the reference value of that component (at least :data:`COMPONENT_FLOOR` of the output's largest
+    component); the smallest and largest isolator loads are relative to that isolator's preload; the
+    settling time to the reference's (at least :data:`SETTLING_FLOOR` s). An absolute one is ``|a - b|``
+    in SI.
+    """
+    status = np.asarray(result.status)
+    C = status.shape[0]
+    ok = (status == OK) & (np.asarray(reference.status) == OK)
+    out: dict[str, np.ndarray] = {}
+    for name, (tol, relative) in tolerances.items():
+        a = np.asarray(getattr(result, name), dtype=float).reshape(C, -1)
+        b = np.asarray(getattr(reference, name), dtype=float).reshape(C, -1)
+        if a.shape[1] == 0:
+            out[name] = np.where(ok, 0.0, np.nan)
+            continue
+        with np.errstate(invalid="ignore", divide="ignore"):
+            err = np.abs(a - b)
+            if relative:
+                if name in ("min_isolator_load", "max_isolator_load"):
+                    scale = np.abs(np.asarray(reference.static_isolator_load, dtype=float)).reshape(C, -1)
+                elif name == "settling_time":
+                    scale = np.maximum(np.abs(b), SETTLING_FLOOR)
+                else:
+                    big = np.abs(b).max(axis=1, keepdims=True)
+                    scale = np.maximum(np.abs(b), np.maximum(COMPONENT_FLOOR * big, DISPLACEMENT_FLOOR))
+                err = err / np.maximum(scale, np.finfo(float).tiny)
+            out[name] = np.where(ok, err.max(axis=1) / tol, np.nan)
+    return out
+
+
 # ----------------------------------------------------------------------------------------------- choice
 @dataclass(frozen=True)
 class Choice:
@@ -169,6 +228,10 @@ class Choice:
     reason: str = ""
     pilot_cases: tuple[int, ...] = ()
     pilot: tuple[dict[str, Any], ...] = field(default_factory=tuple)
+    per_output: dict[str, str] | None = None
+    """A per-output tolerance (output -> its text, ``"1 %"``, ``"0.005 s"``) instead of ``tolerance``;
+    the ``error`` of the pilot rows is then the worst named output's error as a fraction of its
+    tolerance."""
 
     def attrs(self) -> dict[str, Any]:
         """Dataset attributes recording the choice (JSON-able)."""
@@ -179,7 +242,9 @@ class Choice:
             "dt": float(self.dt),
             "accuracy_reason": self.reason,
         }
-        if self.tolerance is not None:
+        if self.per_output:
+            out["accuracy_tolerance"] = ", ".join(f"{k} {v}" for k, v in self.per_output.items())
+        elif self.tolerance is not None:
             out["accuracy_tolerance"] = (
                 f"{self.tolerance * 100:.6g} %" if self.relative else f"{self.tolerance:.6g} m"
             )
@@ -192,11 +257,20 @@ class Choice:
 def request_tolerance(sim: Simulation) -> tuple[float | None, bool]:
     """The error a simulation block's request allows: (value, relative); (None, True) for ``reference``
     or an explicit choice."""
+    if isinstance(sim.tolerance, dict):
+        return None, True
     if sim.tolerance is not None:
         return parse_tolerance(sim.tolerance)
     if sim.accuracy is not None:
         return ACCURACY_LEVELS[sim.accuracy], True
     return None, True
+
+
+def request_output_tolerances(sim: Simulation) -> dict[str, tuple[float, bool]] | None:
+    """A per-output tolerance of a simulation block: output -> (value, relative); None when it has none."""
+    if not isinstance(sim.tolerance, dict):
+        return None
+    return {k: parse_output_tolerance(k, v, f"simulation.tolerance.{k}") for k, v in sim.tolerance.items()}
 
 
 def candidate_steps(dt_cap: float | None) -> tuple[float, ...]:
@@ -207,15 +281,17 @@ def candidate_steps(dt_cap: float | None) -> tuple[float, ...]:
     return steps or (float(dt_cap),)
 
 
-def _fmt_error(e: float | None, relative: bool) -> str:
+def _fmt_error(e: float | None, relative: bool | None) -> str:
     if e is None or not math.isfinite(e):
         return "not ok"
+    if relative is None:  # a per-output tolerance: the error as a fraction of it
+        return f"{e:.3g} of the tolerance"
     return f"{e * 100:.3g} %" if relative else f"{e * 1e6:.3g} um"
 
 
 def choose_for_batch(
     batch: SceneBatch,
-    tolerance: float,
+    tolerance: float | None,
     relative: bool = True,
     *,
     steps: Sequence[float] = CANDIDATE_STEPS,
@@ -223,16 +299,25 @@ def choose_for_batch(
     pairs: Sequence[tuple[str, str]] = CANDIDATE_PAIRS,
     case_numbers: Sequence[int] | None = None,
     margin: float = PILOT_MARGIN,
+    per_output: Mapping[str, tuple[float, bool]] | None = None,
 ) -> Choice:
     """The cheapest (fidelity, integrator, step) whose error on every case of ``batch`` (the pilot cases)
-    stays within ``margin`` times ``tolerance`` (relative, 1, or absolute on peak displacement, m).
+    stays within ``margin`` times ``tolerance`` (relative, 1, or absolute on peak displacement, m), or,
+    with ``per_output`` (output -> (value, relative)) instead, whose worst component of every named output
+    stays within ``margin`` times that output's tolerance (:func:`component_errors`).
 
     The truth is the nonlinear level with the reference integrator at the smallest of ``steps``.
     Candidates are tried in order of estimated cost (:func:`studies.costs.step_cost` times the steps each
-    case takes, stability sub-steps included; a candidate the guard would refuse under ``auto_step=False`` is
-    skipped). When none meets the tolerance the reference itself is returned.
+    case takes). A candidate the stability guard would refuse or sub-step on any pilot case (with the stages
+    at home, or, found when it runs, at the ends of their travel) is never chosen: a step cut to the
+    stability limit is stable, not accurate, and the study's other cases may need it cut further. When
+    none meets the tolerance the reference itself is returned.
     """
     steps = tuple(sorted(float(s) for s in steps))
+    fmt: bool | None = None if per_output else relative  # how errors read: of the tolerance, %, um
+    bound = 1.0 if per_output else float(tolerance)  # per output: errors are fractions of the tolerance
+    texts = {k: tolerance_text(v, r, TOLERANCE_OUTPUTS[k]) for k, (v, r) in (per_output or {}).items()}
+    shown = ", ".join(f"{k} {v}" for k, v in texts.items()) if per_output else _fmt_error(tolerance, relative)
     cases = tuple(int(c) for c in (case_numbers if case_numbers is not None else range(batch.n_cases)))
     fine = steps[0]
     truth = simulate(batch, *REFERENCE_PAIR, dt=fine, auto_step=auto_step)
@@ -252,6 +337,7 @@ def choose_for_batch(
             reason=f"no pilot case could be simulated at the reference level ({why}); the cheapest "
             f"candidate is used and the cases report their status",
             pilot_cases=cases,
+            per_output=texts or None,
         )
     if usable.size < batch.n_cases:
         batch = batch.take(usable)
@@ -265,8 +351,8 @@ def choose_for_batch(
     for rank, (fid, integ) in enumerate(pairs):
         for dt in steps:
             n_div = stability.subdivisions(A, dt, INTEGRATORS[integ].step_matrix)
-            if np.any(n_div == 0) or (not auto_step and np.any(n_div > 1)):
-                continue  # the guard would refuse a case
+            if np.any(n_div != 1):
+                continue  # the guard would refuse a case, or sub-step it (a stable step is not accurate)
             n_steps = np.rint(duration / (dt / n_div))
             cost = float(np.sum(n_steps) * step_cost(fid, integ))
             candidates.append((cost, rank, -dt, fid, integ, dt, float(dt / n_div.max())))
@@ -274,10 +360,16 @@ def choose_for_batch(
     rows: list[dict[str, Any]] = []
     for cost, _, _, fid, integ, dt, used in candidates:
         r = simulate(batch, fid, integ, dt=dt, auto_step=auto_step)
-        err = sizing_error(output_errors(r, truth), relative)
+        if per_output:
+            err = np.max(np.stack(list(component_errors(r, truth, per_output).values())), axis=0)
+        else:
+            err = sizing_error(output_errors(r, truth), relative)
         worst = float(np.max(err)) if np.all(np.isfinite(err)) else None
-        meets = worst is not None and worst <= margin * tolerance
-        bad = [STATUS_NAMES[int(s)] for s in r.status if s != OK]
+        # the guard also looks at the stages at the ends of their travel: a case it sub-stepped there
+        # rules the candidate out like one sub-stepped at home
+        sub_stepped = bool(np.any(np.asarray(r.dt) < dt * (1 - 1e-9)))
+        meets = worst is not None and worst <= margin * bound and not sub_stepped
+        bad = [STATUS_NAMES[int(s)] for s in r.status if s != OK] or (["sub-stepped"] if sub_stepped else [])
         rows.append(
             {
                 "fidelity": fid,
@@ -302,15 +394,17 @@ def choose_for_batch(
                 also = (
                     f"; the {missed} cheaper candidates missed it (closest: {best_missed['fidelity']}/"
                     f"{best_missed['integrator']} at {best_missed['dt'] * 1e3:g} ms, "
-                    f"{_fmt_error(best_missed['error'], relative)})"
+                    f"{_fmt_error(best_missed['error'], fmt)})"
                 )
             reason = (
                 f"{fid}/{integ} at {dt * 1e3:g} ms is the cheapest candidate whose largest error on "
-                f"pilot cases {list(cases)} ({_fmt_error(worst, relative)} against nonlinear/reference "
+                f"pilot cases {list(cases)} ({_fmt_error(worst, fmt)} against nonlinear/reference "
                 f"at {fine * 1e3:g} ms) stays within {margin:g} of the tolerance "
-                f"{_fmt_error(tolerance, relative)}" + also
+                f"{shown}" + also
             )
-            return Choice(None, fid, integ, dt, tolerance, relative, reason, cases, tuple(rows))
+            return Choice(
+                None, fid, integ, dt, tolerance, relative, reason, cases, tuple(rows), texts or None
+            )
     closest = min(
         (row for row in rows if row["error"] is not None), key=lambda row: row["error"], default=None
     )
@@ -319,15 +413,15 @@ def choose_for_batch(
         if closest is None
         else (
             f" (closest: {closest['fidelity']}/{closest['integrator']} at {closest['dt'] * 1e3:g} ms, "
-            f"{_fmt_error(closest['error'], relative)})"
+            f"{_fmt_error(closest['error'], fmt)})"
         )
     )
     reason = (
-        f"no candidate meets {margin:g} of {_fmt_error(tolerance, relative)} on pilot cases "
+        f"no candidate meets {margin:g} of {shown} on pilot cases "
         f"{list(cases)}{near}: the "
         f"reference itself (nonlinear/reference at {fine * 1e3:g} ms)"
     )
-    return Choice(None, *REFERENCE_PAIR, fine, tolerance, relative, reason, cases, tuple(rows))
+    return Choice(None, *REFERENCE_PAIR, fine, tolerance, relative, reason, cases, tuple(rows), texts or None)
 
 
 def _take_result(result: Any, index: np.ndarray) -> SimpleNamespace:
@@ -446,10 +540,9 @@ def _choose(study: Any) -> Choice:
         steps=candidate_steps(sim.dt),
         auto_step=sim.auto_step,
         case_numbers=cases,
+        per_output=request_output_tolerances(sim),
     )
-    return Choice(
-        request, c.fidelity, c.integrator, c.dt, c.tolerance, c.relative, c.reason, c.pilot_cases, c.pilot
-    )
+    return replace(c, request=request)
 
 
 def choose_from_json(definition_json: str) -> Choice:
@@ -547,7 +640,9 @@ class ErrorEstimate:
         worst_case: output -> the study case where it was found (None when none).
         cases: the sampled study cases.
         excluded: case -> why it could not be compared (the case or its reference rerun is not OK).
-        method: how the reference was run.
+        method: how the reference was run (and which sampled cases the stability guard sub-stepped).
+        sub_stepped: case -> the message of a sampled case the stability guard sub-stepped; such a case
+            is ``ok`` and compared like any other, so its (often larger) error is in ``values``.
     """
 
     values: dict[str, float]
@@ -555,6 +650,7 @@ class ErrorEstimate:
     cases: tuple[int, ...]
     excluded: dict[int, str]
     method: str
+    sub_stepped: dict[int, str] = field(default_factory=dict)
 
 
 def estimate_errors(
@@ -576,6 +672,17 @@ def estimate_errors(
             excluded[c] = f"the case is {STATUS_NAMES[int(ours.status[k])]}"
         elif ref.status[k] != OK:
             excluded[c] = f"its reference rerun is {STATUS_NAMES[int(ref.status[k])]}"
+    messages = [str(m) for m in np.asarray(study_arrays.get("message", [""] * len(cases))).reshape(-1)]
+    sub_stepped = {
+        c: m
+        for c, m, s in zip(cases, messages, ours.status, strict=True)
+        if s == OK and m.startswith(SUB_STEPPED)
+    }
+    if sub_stepped:
+        method = (
+            f"{method}; sampled cases {sorted(sub_stepped)} were sub-stepped by the stability guard and are "
+            "compared like the others"
+        ).lstrip("; ")
     values, worst = {}, {}
     for name in outputs:
         e = np.asarray(errors[name])
@@ -584,7 +691,7 @@ def estimate_errors(
         else:
             k = int(np.nanargmax(e))
             values[name], worst[name] = float(e[k]), cases[k]
-    return ErrorEstimate(values, worst, cases, excluded, method)
+    return ErrorEstimate(values, worst, cases, excluded, method, sub_stepped)
 
 
 def exact_estimate(cases: Sequence[int], outputs: Sequence[str] = ESTIMATED_OUTPUTS) -> ErrorEstimate:

@@ -202,7 +202,7 @@ def check_text(text: str, max_cases: int | None, workers: int, prefix: Loc | Non
             if line is not None:
                 d["line"] = line
         raise
-    n = int(study.n_cases)
+    n = int(study.planned_cases)  # an optimize design: its budget
     seconds = n * estimate_seconds_per_case(study) / max(1, workers)
     return {
         "definition": data,
@@ -267,7 +267,7 @@ def design_summary(row: dict[str, Any]) -> dict[str, Any]:
         "name": study.name,
         "description": study.description,
         "design": {"type": how.type, "samples": how.samples, "seed": how.seed},
-        "n_cases": int(study.n_cases),
+        "n_cases": int(study.planned_cases),
         "parameters": params,
     }
 

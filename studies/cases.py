@@ -52,6 +52,11 @@ class CaseColumns:
         parameters: the varied parameters (columns too).
         default: the columns shown when none are asked for.
         design_kind: "grid" or "sampled".
+        display_units: numeric parameter -> the unit the study was written in (``"g"``, ``"%"``; its SI
+            unit when written as plain numbers), from the coordinate's ``display_units``.
+        scales: numeric parameter -> "linear" or "log", from the coordinate's ``scale``.
+        long_names: column -> what it holds (the dataset variable's ``long_name`` and the column's label),
+            for the columns that come from a dataset variable.
     """
 
     names: list[str] = field(default_factory=list)
@@ -61,6 +66,9 @@ class CaseColumns:
     parameters: list[str] = field(default_factory=list)
     default: list[str] = field(default_factory=list)
     design_kind: str = "grid"
+    display_units: dict[str, str] = field(default_factory=dict)
+    scales: dict[str, str] = field(default_factory=dict)
+    long_names: dict[str, str] = field(default_factory=dict)
 
     @property
     def n_cases(self) -> int:
@@ -118,6 +126,9 @@ def case_table(ds: xr.Dataset) -> CaseColumns:
             "text" if text else "number",
             True,
         )
+        if not text:
+            t.display_units[p] = str(ds[p].attrs.get("display_units", "")) or unit_of(p)
+            t.scales[p] = str(ds[p].attrs.get("scale", "linear"))
 
     axes = [str(a) for a in ds["axis"].values]
     rotations = [str(r) for r in ds["rotation"].values]
@@ -139,6 +150,14 @@ def case_table(ds: xr.Dataset) -> CaseColumns:
         t.add(f"peak_isolator_force_{a}", _nan_reduce(np.nanmax, force[:, :, k]), "N", "number", True)
     min_load = flat("min_isolator_load").astype(np.float64)
     t.add("min_isolator_load_min", _nan_reduce(np.nanmin, min_load), "N", "number", True)
+    mounts = "max_isolator_load" in ds and "peak_isolator_deflection" in ds  # not in older datasets
+    if mounts:
+        max_load = flat("max_isolator_load").astype(np.float64)
+        t.add("max_isolator_load_max", _nan_reduce(np.nanmax, max_load), "N", "number", True)
+        deflection = flat("peak_isolator_deflection").astype(np.float64).reshape(n, len(isolators), len(axes))
+        for k, a in enumerate(axes):
+            worst = _nan_reduce(np.nanmax, deflection[:, :, k])
+            t.add(f"peak_isolator_deflection_{a}", worst, "m", "number", True)
     liftoff = flat("liftoff").astype(np.float64)
     t.add("liftoff_any", _nan_reduce(np.nanmax, liftoff), "1", "bool", True)
     for name in ("settling_time", "settled"):
@@ -154,6 +173,14 @@ def case_table(ds: xr.Dataset) -> CaseColumns:
     for j, p in enumerate(points):
         for k, a in enumerate(axes):
             t.add(f"peak_point_displacement_{p}_{a}", ppd[:, j, k], "m", "number", True)
+    if "point_settling_time" in ds:  # not in older datasets
+        per("point_settling_time", points, True)
+    floor_velocity = "floor_point_velocity" in ds  # not in older datasets
+    if floor_velocity:
+        fpv = flat("floor_point_velocity").astype(np.float64).reshape(n, len(points), len(axes))
+        fpb = flat("floor_point_velocity_band").astype(np.float64).reshape(n, len(points), len(axes))
+        for j, p in enumerate(points):
+            t.add(f"floor_point_velocity_{p}", _nan_reduce(np.nanmax, fpv[:, j, :]), "m/s", "number", True)
     status_names = str(ds["status"].attrs.get("flag_meanings", "ok unstable tipping failed")).split()
     codes = flat("status")[:, 0].astype(np.int64)
     t.add(
@@ -165,21 +192,59 @@ def case_table(ds: xr.Dataset) -> CaseColumns:
         "text",
         True,
     )
+    if "meets_criteria" in ds:  # a study with design criteria (studies.criteria)
+        t.add("meets_criteria", flat("meets_criteria").astype(np.float64)[:, 0], "1", "bool", True)
+        margin = flat("criterion_margin").astype(np.float64)
+        for k, name in enumerate(str(c) for c in ds["criterion"].values):
+            t.add(f"margin_{name}", margin[:, k], "1", "number", True)
     # the rest: asked for by name
     per("damping_ratio", modes, False)
     for j, iso in enumerate(isolators):
         for k, a in enumerate(axes):
             t.add(f"peak_isolator_force_{iso}_{a}", force[:, j, k], "N", "number", False)
+    if mounts:
+        for j, iso in enumerate(isolators):
+            for k, a in enumerate(axes):
+                t.add(f"peak_isolator_deflection_{iso}_{a}", deflection[:, j, k], "m", "number", False)
     per("min_isolator_load", isolators, False)
+    if mounts:
+        per("max_isolator_load", isolators, False)
     per("static_isolator_load", isolators, False)
     per("liftoff", isolators, False, kind="bool")
     per("rms_displacement", axes, False)
     per("final_displacement", axes, False)
     per("final_rotation", rotations, False)
     per("transmissibility", axes, False)
+    if floor_velocity:
+        for j, p in enumerate(points):
+            for k, a in enumerate(axes):
+                t.add(f"floor_point_velocity_{p}_{a}", fpv[:, j, k], "m/s", "number", False)
+                t.add(f"floor_point_velocity_band_{p}_{a}", fpb[:, j, k], "Hz", "number", False)
     t.add("dt", flat("dt").astype(np.float64)[:, 0], "s", "number", False)
     t.add("message", flat("message")[:, 0].astype(str), "", "text", False)
+    # an optimisation's cases (studies.optimisation): shown by default
+    for name, kind in (("generation", "number"), ("feasible", "bool"), ("pareto", "bool"), ("best", "bool")):
+        if name in ds.data_vars:
+            t.add(name, flat(name).astype(np.float64)[:, 0], "1", kind, True)
+    if "constraint_violation" in ds.data_vars:
+        violation = flat("constraint_violation")[:, 0].astype(np.float64)
+        t.add("constraint_violation", violation, "1", "number", False)
+    _add_long_names(t, ds)
     return t
+
+
+def _add_long_names(t: CaseColumns, ds: xr.Dataset) -> None:
+    """Fill ``t.long_names`` of the output columns named after a dataset variable: its ``long_name``, then
+    the column's label (``peak_displacement_y`` -> "peak absolute displacement of the machine c.g., y")."""
+    variables = sorted((str(v) for v in ds.data_vars), key=len, reverse=True)
+    for c in t.names:
+        if c in t.parameters or c in t.long_names:
+            continue
+        v = next((v for v in variables if c == v or c.startswith(v + "_")), None)
+        if v is None or not ds[v].attrs.get("long_name"):
+            continue
+        label = c[len(v) + 1 :].replace("_", " ")
+        t.long_names[c] = str(ds[v].attrs["long_name"]) + (f", {label}" if label else "")
 
 
 def _nan_reduce(func: Any, a: np.ndarray) -> np.ndarray:
@@ -462,13 +527,20 @@ def _csv_cell(v: Any) -> str:
     return str(v)
 
 
+def csv_header(name: str, unit: str) -> str:
+    """A CSV column heading with its unit: ``peak_displacement_y [m]``; a text column, or a number without
+    a unit (``"1"``: case numbers, yes/no, ratios), is its name alone."""
+    return f"{name} [{unit}]" if unit not in ("", "1") else name
+
+
 def cases_csv(table: CaseColumns, columns: list[str], rows: np.ndarray) -> str:
-    """The cases at positions ``rows`` as CSV text: a header of column names, then one line per case
-    (empty for a missing value, ``true``/``false`` for yes/no, numbers in SI)."""
+    """The cases at positions ``rows`` as CSV text: a header of column names with their SI unit
+    (:func:`csv_header`: ``peak_displacement_y [m]``), then one line per case (empty for a missing value,
+    ``true``/``false`` for yes/no, numbers in SI)."""
     values = {c: json_values(table.data[c][rows], table.kinds[c]) for c in columns}
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow(columns)
+    writer.writerow([csv_header(c, table.units[c]) for c in columns])
     for i in range(rows.size):
         writer.writerow([_csv_cell(values[c][i]) for c in columns])
     return buf.getvalue()

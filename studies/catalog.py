@@ -1,10 +1,11 @@
 """The catalog of studies: one SQLite table (``studies``) with a row per study, to find them.
 
 A row holds what a listing needs (name, status, times, case counts, varied parameters, isolator types,
-the model the cases ran with) and the study's stored definition; the results themselves are files (see
-:mod:`isolab.studies.store`). The catalog opens a fresh connection per call, so one :class:`Catalog` can
-be shared between threads; listing and filtering run in SQL. The database is in WAL mode, and opening it
-adds the columns an older catalog lacks (migrations).
+the model the cases ran with, an optimisation's finished and planned generations) and the study's stored
+definition; the results themselves are files (see :mod:`isolab.studies.store`). The catalog opens a
+fresh connection per call, so one :class:`Catalog` can be shared between threads; listing and filtering
+run in SQL. The database is in WAL mode, and opening it adds the columns an older catalog lacks
+(migrations).
 """
 
 from __future__ import annotations
@@ -43,6 +44,8 @@ _COLUMNS = (
     "dt",
     "error",
     "definition",
+    "generation",
+    "generations",
 )
 _UPDATABLE = frozenset(_COLUMNS) - {"id", "created"}
 
@@ -63,7 +66,9 @@ CREATE TABLE IF NOT EXISTS studies (
     integrator TEXT,
     dt REAL,
     error TEXT,
-    definition TEXT NOT NULL
+    definition TEXT NOT NULL,
+    generation INTEGER,
+    generations INTEGER
 );
 CREATE INDEX IF NOT EXISTS studies_created ON studies (created);
 CREATE INDEX IF NOT EXISTS studies_name ON studies (name);
@@ -121,6 +126,9 @@ class Catalog:
             have = {r["name"] for r in con.execute("PRAGMA table_info(studies)")}
             if "dt" not in have:  # a catalog written before the step was recorded
                 con.execute("ALTER TABLE studies ADD COLUMN dt REAL")
+            for column in ("generation", "generations"):  # optimisations' progress (null for other designs)
+                if column not in have:
+                    con.execute(f"ALTER TABLE studies ADD COLUMN {column} INTEGER")
         # One connection stays open (idle) for the catalog's life: SQLite deletes the WAL index
         # (``catalog.sqlite-shm``) when its last connection closes and must allocate it again at the
         # next open, which fails on a full disk and then takes every read down with it. Held open, the

@@ -15,6 +15,7 @@ import numpy as np
 from isolab.engine import simulate
 from isolab.studies.accuracy import resolved_study
 from isolab.studies.cases import CaseColumns, case_table, json_values
+from isolab.studies.criteria import add_criteria
 from isolab.studies.dataset import to_dataset
 from isolab.studies.definitions import DefinitionError, check_definition, detail
 from isolab.studies.runner import study_labels
@@ -27,9 +28,15 @@ CRITERIA: tuple[tuple[str, str], ...] = (
     ("peak_point_displacement_", "lowest"),
     ("peak_isolator_force_", "lowest"),
     ("min_isolator_load_min", "highest"),
+    ("max_isolator_load_max", "lowest"),
+    ("peak_isolator_deflection_", "lowest"),
+    ("point_settling_time_", "lowest"),
+    ("floor_point_velocity_", "lowest"),
     ("liftoff_any", "false"),
     ("settling_time", "lowest"),
     ("natural_frequency_", "lowest"),
+    ("meets_criteria", "true"),
+    ("margin_", "highest"),
 )
 """Lowest peaks and settling time; the highest smallest isolator load (farthest from lift-off); no
 lift-off; the lowest natural frequencies (the softest suspension isolates best from the floor)."""
@@ -81,11 +88,12 @@ def run_comparison(study: Study) -> CaseColumns:
         auto_step=sim.auto_step,
     )
     iso, pts = study_labels(study)
-    return case_table(to_dataset(result, study.design(), isolator_names=iso, point_names=pts))
+    ds = to_dataset(result, study.design(), isolator_names=iso, point_names=pts)
+    return case_table(add_criteria(ds, study.criteria))
 
 
 def criterion(column: str) -> str | None:
-    """The rule (\"lowest\", \"highest\" or \"false\") a column is judged by, or None."""
+    """The rule (\"lowest\", \"highest\", \"false\" or \"true\") a column is judged by, or None."""
     for prefix, rule in CRITERIA:
         if column == prefix or (prefix.endswith("_") and column.startswith(prefix)):
             return rule
@@ -104,8 +112,8 @@ def best_of(values: dict[str, Any], rule: str, unit: str = "") -> str | None:
     }
     if not known:
         return None
-    if rule == "false":
-        winners = [t for t, v in known.items() if v is False]
+    if rule in ("false", "true"):
+        winners = [t for t, v in known.items() if v is (rule == "true")]
         return winners[0] if 0 < len(winners) < len(values) else None
     pick = min if rule == "lowest" else max
     target = float(pick(known.values()))
@@ -116,7 +124,72 @@ def best_of(values: dict[str, Any], rule: str, unit: str = "") -> str | None:
     return winners[0]
 
 
-def comparison_table(table: CaseColumns, study: Study) -> dict[str, Any]:
+COST_ORDER: tuple[str, ...] = ("elastomer", "air", "active")
+"""Isolator types from the cheapest to the dearest: a passive elastomer pad costs least, an air spring
+needs air supply and levelling valves, an active system adds sensors, actuators and a controller."""
+
+
+def recommend(
+    rows: dict[str, dict[str, Any]], criteria: list[str], cost_order: list[str] | tuple[str, ...] = COST_ORDER
+) -> dict[str, Any]:
+    """The one isolator type to buy: the cheapest (first in ``cost_order``) that meets every criterion.
+
+    ``rows``: isolator type -> column -> value (a comparison's rows: ``meets_criteria`` and
+    ``margin_<criterion>`` for each name in ``criteria``). Answers ``isolator_type`` (None when there are
+    no criteria or no type meets them all), the ``reason`` in words, and the ``cost_order`` used.
+    """
+    order = [t for t in cost_order if t in rows] + [t for t in rows if t not in cost_order]
+    answer: dict[str, Any] = {"isolator_type": None, "cost_order": order}
+    if not criteria:
+        answer["reason"] = (
+            "no criteria given: add a criteria block (limits at the points of interest and on the mounts) "
+            "to the scene to get a recommendation"
+        )
+        return answer
+
+    def worst(t: str) -> tuple[float, str]:
+        margins = {c: rows[t].get(f"margin_{c}") for c in criteria}
+        known = {c: float(m) for c, m in margins.items() if m is not None and math.isfinite(float(m))}
+        if len(known) < len(criteria):
+            return -math.inf, next(c for c in criteria if c not in known)
+        c = min(known, key=lambda k: known[k])
+        return known[c], c
+
+    def failing(t: str) -> str:
+        bad = [
+            f"{c} ({float(rows[t][f'margin_{c}']):+.0%})"
+            for c in criteria
+            if rows[t].get(f"margin_{c}") is not None and float(rows[t][f"margin_{c}"]) < 0
+        ]
+        if not bad:
+            return f"its case did not end ok ({rows[t].get('status')}: {rows[t].get('message', '')})"
+        return "fails " + ", ".join(bad)
+
+    cost = " < ".join(order)
+    meeting = [t for t in order if rows[t].get("meets_criteria") is True]
+    if meeting:
+        pick = meeting[0]
+        m, c = worst(pick)
+        cheaper = [f"{t} {failing(t)}" for t in order[: order.index(pick)]]
+        answer["isolator_type"] = pick
+        answer["reason"] = (
+            f"{pick} is the cheapest type (cost order {cost}) that meets every criterion; its smallest "
+            f"margin is {m:+.0%} on {c}" + (f". Cheaper: {'; '.join(cheaper)}" if cheaper else "")
+        )
+        return answer
+    ranked = sorted(order, key=lambda t: worst(t)[0], reverse=True)
+    closest = ranked[0]
+    answer["reason"] = (
+        f"no type meets every criterion: {'; '.join(f'{t} {failing(t)}' for t in order)}. "
+        f"Closest: {closest} (smallest margin {worst(closest)[0]:+.0%} on {worst(closest)[1]}); relax the "
+        "criteria, or tune or place the mounts differently"
+    )
+    return answer
+
+
+def comparison_table(
+    table: CaseColumns, study: Study, cost_order: list[str] | tuple[str, ...] = COST_ORDER
+) -> dict[str, Any]:
     """The side-by-side answer: one row per isolator type (outputs in SI), the units, the rule of each
     criterion and the best type on each (``best``), and the simulation block the cases ran with."""
     types = [str(t) for t in table.data["isolator_type"]]
@@ -134,6 +207,7 @@ def comparison_table(table: CaseColumns, study: Study) -> dict[str, Any]:
         winner = best_of({t: rows[t][c] for t in types}, rule, table.units[c])
         if winner is not None:
             best[c] = winner
+    judged = study.criteria.names() if study.criteria is not None else []
     return {
         "isolator_types": types,
         "columns": columns,
@@ -141,19 +215,88 @@ def comparison_table(table: CaseColumns, study: Study) -> dict[str, Any]:
         "rows": rows,
         "best": best,
         "criteria": criteria,
+        "requirements": _requirements(study),
+        "recommendation": recommend(rows, judged, cost_order),
         "simulation": study.simulation.model_dump(mode="json"),
     }
 
 
-def compare(scene: Any, isolator_types: list[str], simulation: Any = None) -> dict[str, Any]:
-    """Validate, run and tabulate a comparison in one call (see :func:`comparison_table`).
+def _requirements(study: Study) -> list[dict[str, Any]]:
+    """The design criteria the types were judged by: name, limit (SI), unit and meaning."""
+    if study.criteria is None:
+        return []
+    from isolab.studies.criteria import judged_criteria
+
+    return [
+        {"name": c.name, "limit": c.limit, "unit": c.unit, "description": c.description}
+        for c in judged_criteria(study.criteria)
+    ]
+
+
+def compare(
+    scene: Any,
+    isolator_types: list[str],
+    simulation: Any = None,
+    cost_order: list[str] | tuple[str, ...] | None = None,
+    tune: bool = False,
+) -> dict[str, Any]:
+    """Validate, run and tabulate a comparison in one call (see :func:`comparison_table`), with the
+    recommended type (:func:`recommend`; ``cost_order`` default :data:`COST_ORDER`). With ``tune``, each
+    type is first tuned to the scene's criteria within its physical range (:func:`studies.tuning.tune`);
+    the answer's ``tuning`` gives the values found.
 
     Raises:
         DefinitionError: bad input, naming the field.
     """
     study = resolved_study(comparison_study(scene, isolator_types, simulation))
+    tuned: list[Any] = []
+    if tune:
+        from isolab.studies.tuning import tune as tune_type
+        from isolab.studies.tuning import tuned_scene
+
+        if study.criteria is None or not study.criteria.names():
+            raise DefinitionError(
+                [
+                    detail(
+                        ["body", "tune"], "tuning serves the design criteria: give the scene a criteria block"
+                    )
+                ]
+            )
+        data = study.scene.model_dump(mode="json", exclude_none=True)
+        try:
+            tuned = [
+                tune_type(data, t, study.simulation.model_dump(mode="json"))
+                for t in map(str, study.design().levels["isolator_type"])
+            ]
+        except ValueError as err:
+            raise DefinitionError([detail(["body", "scene"], str(err))]) from None
+        study = resolved_study(comparison_study(tuned_scene(data, tuned), isolator_types, simulation))
     try:
         table = run_comparison(study)
     except ValueError as err:
         raise DefinitionError([detail(["body", "scene"], str(err))]) from None
-    return comparison_table(table, study)
+    answer = comparison_table(table, study, COST_ORDER if cost_order is None else cost_order)
+    if tuned:
+        answer["tuning"] = {t.isolator_type: t.to_dict() for t in tuned}
+    return answer
+
+
+def comparison_frame(answer: dict[str, Any]) -> Any:
+    """A comparison's answer (:func:`comparison_table`, or the JSON of ``POST /comparisons``) as a pandas
+    DataFrame: one row per isolator type (index ``isolator_type``), one column per output, then
+    ``meets_criteria`` and the margins; ``attrs`` carries ``recommendation``, ``requirements``, ``units``,
+    ``best`` and ``simulation``."""
+    import pandas as pd
+
+    types = list(answer["isolator_types"])
+    columns = list(answer["columns"])
+    first = [c for c in columns if c != "meets_criteria" and not c.startswith("margin_")]
+    last = [c for c in columns if c == "meets_criteria"] + [c for c in columns if c.startswith("margin_")]
+    df = pd.DataFrame(
+        [[answer["rows"][t].get(c) for c in first + last] for t in types],
+        index=pd.Index(types, name="isolator_type"),
+        columns=first + last,
+    )
+    for key in ("recommendation", "requirements", "units", "best", "simulation"):
+        df.attrs[key] = answer.get(key)
+    return df

@@ -8,7 +8,9 @@ outputs add the dimensions ``axis`` (x, y, z), ``rotation`` (rx, ry, rz: about X
 ``isolator``, ``point``, ``mode`` (1..6) and ``dof``.
 
 Every variable and coordinate carries CF ``units`` and ``long_name`` (``"1"`` for dimensionless quantities
-and labels). A case whose ``status`` is not OK has missing values (NaN; ``_FillValue`` on disk) in every
+and labels); a numeric parameter's coordinate also carries ``display_units`` (the unit the study was written
+in, ``"g"`` or ``"%"``, while ``units`` stays SI) and ``scale`` (``linear`` or ``log``), which figures follow.
+A case whose ``status`` is not OK has missing values (NaN; ``_FillValue`` on disk) in every
 numeric output, never numbers; ``status`` (CF ``flag_values``/``flag_meanings``) and ``message`` say why.
 Yes/no outputs (``liftoff``, ``settled``, ``mechanism``) are float32 in memory (1.0 yes, 0.0 no, NaN
 missing) and int8 with ``_FillValue`` -1 on disk, so they too can be missing.
@@ -63,6 +65,19 @@ _VARIABLES: dict[str, tuple[tuple[str, ...], str, str, str]] = {
     "final_rotation": (("rotation",), "rad", "static base rotation with the stages parked at the end", "f"),
     "settling_time": ((), "s", "settling time after the last stage move (lower bound if not settled)", "f"),
     "settled": ((), "1", "motion settled within the tolerance before the end of the simulation", "b"),
+    "point_settling_time": (
+        ("point",),
+        "s",
+        "settling time of a point of interest after each stage move, worst over the moves",
+        "f",
+    ),
+    "peak_isolator_deflection": (
+        ("isolator", "axis"),
+        "m",
+        "peak absolute isolator deflection from its static state",
+        "f",
+    ),
+    "max_isolator_load": (("isolator",), "N", "largest total vertical isolator load", "f"),
     "natural_frequency": (("mode",), "Hz", "undamped natural frequency (0 for a mechanism)", "f"),
     "damping_ratio": (("mode",), "1", "modal damping ratio", "f"),
     "mode_energy": (("mode", "dof"), "1", "kinetic-energy share of a degree of freedom in a mode", "f"),
@@ -71,6 +86,19 @@ _VARIABLES: dict[str, tuple[tuple[str, ...], str, str, str]] = {
         ("axis",),
         "1",
         "floor-to-c.g. displacement transmissibility at the floor frequency",
+        "f",
+    ),
+    "floor_point_velocity": (
+        ("point", "axis"),
+        "m/s",
+        "largest one-third-octave band RMS velocity (1 to 80 Hz) of a point of interest under the floor "
+        "spectrum (0 without one)",
+        "f",
+    ),
+    "floor_point_velocity_band": (
+        ("point", "axis"),
+        "Hz",
+        "centre frequency of the one-third-octave band of floor_point_velocity (0 without a floor spectrum)",
         "f",
     ),
     "dt": ((), "s", "integration time step used", "f"),
@@ -339,7 +367,16 @@ def _case_layout(design: Design):
         unit = design.units.get(name, "") or "1"
         path = design.paths.get(name, "")
         long_name = f"study parameter {name}" + (f" (sets {path})" if path else "")
-        return {"units": "1" if values.dtype.kind in "USO" else unit, "long_name": long_name}
+        if values.dtype.kind in "USO":
+            return {"units": "1", "long_name": long_name}
+        # what figures show it in: the unit it was written in (CF units stay SI) and its range's scale
+        shown = design.display_units.get(name) or unit
+        return {
+            "units": unit,
+            "long_name": long_name,
+            "display_units": shown,
+            "scale": design.scales.get(name, "linear"),
+        }
 
     if design.kind == "grid":
         dims = tuple(design.names)

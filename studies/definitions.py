@@ -3,9 +3,9 @@
 The steps every submission goes through, whatever carries it (REST, the CLI, a web page):
 
 1. :func:`case_count_bound` counts the cases from the raw definition (grid: the product of each
-   parameter's count; list: its length; lhs/sobol/random: ``samples``) and :func:`long_lists` measures
-   its lists, so a study above a case limit is refused from lengths and integers alone, before anything
-   is read or built (a 600,000-value list in milliseconds);
+   parameter's count; list: its length; lhs/sobol/random: ``samples``; saltelli: ``samples`` times
+   D + 2) and :func:`long_lists` measures its lists, so a study above a case limit is refused from
+   lengths and integers alone, before anything is read or built (a 600,000-value list in milliseconds);
 2. :func:`screen_definition` names every hostile value of the raw definition: quantity text whose
    arithmetic would not end (the units parser computes integer powers exactly, so ``"9**9**9 kg"`` would
    take hours) and numbers no 64-bit float holds (``"10**999 kg"``);
@@ -24,6 +24,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
+from isolab.studies.designs import saltelli_cases
 from isolab.studies.study import SAMPLED_TYPES, Study, study_from_json, validate_study
 from isolab.studies.units import quantity_problem
 
@@ -118,7 +119,8 @@ def case_count_bound(body: Any, prefix: Loc | None = None) -> tuple[int, Loc] | 
     definition, read without building its design; None when the definition does not say (validation will
     tell what is missing).
 
-    Sampled designs have ``design.samples`` cases, a list design ``len(design.cases)``, a grid the
+    Sampled designs have ``design.samples`` cases (saltelli: ``samples`` times D + 2, or 2D + 2 with
+    ``second_order``, D the number of parameters), a list design ``len(design.cases)``, a grid the
     product of each parameter's ``values`` count or ``range.num``."""
     pre: Loc = ["body"] if prefix is None else list(prefix)
     if not isinstance(body, dict):
@@ -128,10 +130,17 @@ def case_count_bound(body: Any, prefix: Loc | None = None) -> tuple[int, Loc] | 
     kind = design.get("type", "grid")
     if kind in SAMPLED_TYPES:
         n = _count(design.get("samples"))
+        if n is not None and kind == "saltelli":  # N base samples run N (D + 2) or N (2D + 2) cases
+            parameters = body.get("parameters")
+            d = len(parameters) if isinstance(parameters, list) else 0
+            n = saltelli_cases(n, max(d, 1), design.get("second_order") is True)
         return None if n is None else (n, [*pre, "design", "samples"])
     if kind == "list":
         cases = design.get("cases")
         return (len(cases), [*pre, "design", "cases"]) if isinstance(cases, list) else None
+    if kind == "optimize":  # an optimiser runs at most its budget
+        n = _count(design.get("budget"))
+        return None if n is None else (n, [*pre, "design", "budget"])
     parameters = body.get("parameters")
     if parameters is None:
         return 1, [*pre, "parameters"]
@@ -195,6 +204,8 @@ def case_limit_loc(study: Study, prefix: Loc) -> Loc:
     spec = study.design_spec
     if spec.type in SAMPLED_TYPES:
         return [*prefix, "design", "samples"]
+    if spec.type == "optimize":
+        return [*prefix, "design", "budget"]
     return [*prefix, "design", "cases"] if spec.type == "list" else [*prefix, "parameters"]
 
 
@@ -222,7 +233,12 @@ def validation_details(err: ValidationError, prefix: Loc) -> list[dict[str, Any]
     out = []
     for e in err.errors(include_url=False):
         msg = str(e["msg"]).removeprefix("Value error, ")
-        loc = [x for x in e["loc"]] or _loc_from_message(msg)
+        loc = [x for x in e["loc"]]
+        named = _loc_from_message(msg)
+        if not loc:
+            loc = named
+        elif named and e["type"] == "value_error":  # a model's check naming a field below it
+            loc = loc[:-1] + named if named[0] == loc[-1] else loc + named
         out.append(detail([*prefix, *loc], msg, str(e["type"])))
     return out
 
@@ -263,8 +279,10 @@ def check_definition(body: dict[str, Any], max_cases: int | None = None, prefix:
         raise DefinitionError(
             [detail(pre, f"the definition cannot be computed: {type(err).__name__}: {err}")]
         ) from None
-    if max_cases is not None and study.n_cases > max_cases:
-        raise DefinitionError([too_many_cases(int(study.n_cases), case_limit_loc(study, pre), max_cases)])
+    if max_cases is not None and study.planned_cases > max_cases:
+        raise DefinitionError(
+            [too_many_cases(int(study.planned_cases), case_limit_loc(study, pre), max_cases)]
+        )
     return study
 
 

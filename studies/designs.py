@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.stats import qmc
@@ -23,6 +23,9 @@ class Design:
         levels: for a grid, per parameter, the array of its distinct levels in order; empty otherwise.
         paths: per parameter, the path into the scene it sets.
         units: per parameter, its SI unit ("" for categorical / dimensionless).
+        display_units: per numeric parameter, the unit it was written in (``"g"``, ``"%"``, ``"kN/m"``;
+            its SI unit when written as plain numbers): what figures show it in.
+        scales: per numeric parameter, "linear" or "log" (the scale its range was drawn on).
     """
 
     kind: str
@@ -31,6 +34,8 @@ class Design:
     levels: dict[str, np.ndarray]
     paths: dict[str, str]
     units: dict[str, str]
+    display_units: dict[str, str] = field(default_factory=dict)
+    scales: dict[str, str] = field(default_factory=dict)
 
     @property
     def n_cases(self) -> int:
@@ -65,6 +70,7 @@ class Factor:
         low, high: range ends (SI), ``high`` may be below ``low``.
         scale: "linear" or "log" (log needs both ends of one sign and non-zero).
         num: number of grid levels spanning the range (ends included).
+        display_unit: the unit the values were written in (``"g"``, ``"%"``; "" for SI), for figures.
     """
 
     name: str
@@ -75,6 +81,7 @@ class Factor:
     high: float | None = None
     scale: str = "linear"
     num: int | None = None
+    display_unit: str = ""
 
     def __post_init__(self) -> None:
         if self.levels is not None:
@@ -136,6 +143,15 @@ def _meta(factors: list[Factor]) -> tuple[list[str], dict[str, str], dict[str, s
     return names, {f.name: f.path for f in factors}, {f.name: f.unit for f in factors}
 
 
+def _shown(design: Design, factors: list[Factor]) -> Design:
+    """``design`` with the display unit and scale of each numeric factor filled in."""
+    for f in factors:
+        if not f.categorical:
+            design.display_units[f.name] = f.display_unit or f.unit
+            design.scales[f.name] = f.scale
+    return design
+
+
 def grid(factors: list[Factor]) -> Design:
     """Full factorial design: every combination of levels; the last factor varies fastest."""
     names, paths, units = _meta(factors)
@@ -149,13 +165,13 @@ def grid(factors: list[Factor]) -> Design:
         raise ValueError(f"design: the grid {shape} has {n_cases} cases, more than {GRID_LIMIT}")
     index = np.indices(shape).reshape(len(shape), -1) if shape else np.zeros((0, 1), dtype=np.intp)
     values = {n: levels[n][index[i]] for i, n in enumerate(names)}
-    return Design("grid", names, values, levels, paths, units)
+    return _shown(Design("grid", names, values, levels, paths, units), factors)
 
 
 def _sampled(factors: list[Factor], u: np.ndarray) -> Design:
     names, paths, units = _meta(factors)
     values = {f.name: f.from_unit(u[:, i]) for i, f in enumerate(factors)}
-    return Design("sampled", names, values, {}, paths, units)
+    return _shown(Design("sampled", names, values, {}, paths, units), factors)
 
 
 def _check_n(n: int) -> int:
@@ -187,6 +203,54 @@ def sobol(factors: list[Factor], n: int, seed: int = 0) -> Design:
             warnings.filterwarnings("ignore", message=".*balance properties of Sobol.*", category=UserWarning)
             u = engine.random(n)
     return _sampled(factors, u)
+
+
+def saltelli_cases(n: int, d: int, second_order: bool = False) -> int:
+    """Cases of a Saltelli design of base sample ``n`` over ``d`` parameters: ``n (d + 2)``, or
+    ``n (2d + 2)`` with second-order indices."""
+    return int(n) * ((2 * int(d) + 2) if second_order else (int(d) + 2))
+
+
+def saltelli(factors: list[Factor], n: int, seed: int = 0, second_order: bool = False) -> Design:
+    """Saltelli's scheme on a scrambled Sobol' sequence (``SALib.sample.sobol``), for Sobol' indices.
+
+    ``n`` is the base sample N (best a power of 2); the design has :func:`saltelli_cases` cases, laid out
+    as N consecutive blocks of ``d + 2`` (``2d + 2`` with ``second_order``): the row of matrix A, the d
+    rows of A with column i taken from B, (second order: the d rows of B with column i from A), then the
+    row of B. :func:`SALib.analyze.sobol.analyze` reads the outputs in that order. Every factor must be a
+    range (``low`` .. ``high``; a log scale is sampled uniformly in log space, as :meth:`Factor.from_unit`
+    does). Same ``seed``, same cases.
+    """
+    from SALib.sample import sobol as salib_sobol
+
+    n = _check_n(n)
+    if not factors:
+        raise ValueError("parameters: a saltelli design needs at least one parameter with a range")
+    for f in factors:
+        if f.levels is not None:
+            kind = "categorical" if f.categorical else "a list of values"
+            raise ValueError(
+                f"{f.name}: a saltelli design varies ranges only and this parameter is {kind}; "
+                "give it a range (start, stop)"
+            )
+    total = saltelli_cases(n, len(factors), second_order)
+    if total > GRID_LIMIT:
+        raise ValueError(
+            f"design.samples: {n} base samples over {len(factors)} parameters make {total} cases, "
+            f"more than {GRID_LIMIT}"
+        )
+    problem = {
+        "num_vars": len(factors),
+        "names": [f.name for f in factors],
+        "bounds": [[0.0, 1.0]] * len(factors),
+    }
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*balance properties of Sobol.*", category=UserWarning)
+        warnings.filterwarnings("ignore", category=DeprecationWarning)
+        u = salib_sobol.sample(
+            problem, n, calc_second_order=bool(second_order), scramble=True, seed=np.random.default_rng(seed)
+        )
+    return _sampled(factors, np.clip(u, 0.0, np.nextafter(1.0, 0.0)))
 
 
 def random(factors: list[Factor], n: int, seed: int = 0) -> Design:
@@ -227,4 +291,4 @@ def explicit(factors: list[Factor], cases: list[dict[str, object]]) -> Design:
             if not np.all(np.isfinite(arr)):
                 raise ValueError(f"design.cases: {f.name} must be finite")
             values[f.name] = arr
-    return Design("sampled", names, values, {}, paths, units)
+    return _shown(Design("sampled", names, values, {}, paths, units), factors)

@@ -19,10 +19,25 @@ Chunk size rule (:func:`choose_chunk_size`):
 4. when the whole study is too short for rules 1 and 2 together, rule 1 wins, but never with fewer chunks
    than workers (each worker still gets a share).
 
-Studies share the cluster: a run submits its chunks together at Dask priority minus their number, so a
-study of few chunks submitted while a large one runs starts as soon as a worker finishes its current
-chunk, instead of waiting for every queued chunk of the large one (Dask otherwise runs tasks in submission
-order); studies of equal size run first come, first served.
+Studies share the cluster by a fair-share rule (:func:`run_chunks`, :class:`ReservedLane`). A run does not
+hand Dask all its chunks at once: it keeps at most ``LOW_LANE_PER_WORKER`` (2) chunks per worker in
+flight at the *low* priority (minus its number of chunks, so among these a study of fewer chunks runs
+first, equal ones first come, first served; one chunk running and one queued to follow it without a gap)
+and submits the next one each time one comes back: a chunk is never submitted twice nor re-prioritised.
+A run that has chunks waiting beyond those (a large study) also keeps ONE chunk in flight at
+:data:`RESERVED_PRIORITY`, above every other task of the service (small studies' chunks, accuracy pilots,
+error-estimate reruns and finish tasks), and sends its next chunk there each time that one comes back. At
+most ``max(1, n_workers // 2)`` reserved chunks are in flight at once on one cluster (a process-wide
+registry per scheduler address; when more runs ask, the slots go round first come, first served), so:
+
+* a small study (at most two chunks per worker) sends them all at once and runs before every queued
+  low-priority chunk of the large ones: it waits for at most one chunk per worker (rule 3), and reserved
+  chunks hold at most half the workers, so the others serve it first;
+* a large study keeps at least one worker even under a steady stream of small studies, instead of only
+  the workers' idle moments: on the service's 2 workers about half its rate alone (when there are more
+  large studies than reserved slots, they take the slots in turn);
+* alone on the cluster a study still uses every worker (its low-priority chunks fill the rest, and a
+  worker that finishes one starts the next at once).
 
 Inside a chunk the engine runs on batches of at most ``ENGINE_BATCH_CASES`` cases. The chunk size is then a
 scheduling choice only: a worker's memory does not grow with it (the exact integrator holds a few step
@@ -40,6 +55,7 @@ from __future__ import annotations
 
 import math
 import os
+import queue
 import threading
 import time
 import uuid
@@ -63,11 +79,94 @@ TASK_TIMING_FIELDS = ("task_start", "task_end", "prepare_s", "engine_s", "engine
 """Figures a chunk task returns under the key ``"timing"``: start and end (Unix time, s), time to rebuild
 the study and build the batches (s), engine wall and CPU time (s), time to pack the result arrays (s), and
 the worker's process id."""
+RESERVED_PRIORITY = 2
+"""Dask priority of a run's reserved chunk (see the module docstring): above the small studies' chunks
+(minus their number), accuracy pilots (0), and the error-estimate reruns and finish tasks (1)."""
+LOW_LANE_PER_WORKER = 2
+"""Chunks per worker a run keeps in flight at the low priority: one running, one queued to follow it."""
 _POLL_SECONDS = 0.05
 
 
 class FanoutError(RuntimeError):
     """Every chunk of a run failed: nothing was computed."""
+
+
+def reserved_slots(n_workers: int) -> int:
+    """Reserved chunks a cluster of ``n_workers`` worker threads may run at once: ``max(1, n_workers // 2)``
+    (the other half serves everything else first)."""
+    return max(1, int(n_workers) // 2)
+
+
+def worker_threads(client) -> int:
+    """Worker threads of ``client``'s cluster (1 when the scheduler cannot be asked)."""
+    try:
+        workers = client.scheduler_info().get("workers", {})
+        return max(1, sum(int(w.get("nthreads", 1)) for w in workers.values()))
+    except Exception:  # no live scheduler: size for one worker
+        return 1
+
+
+class ReservedLane:
+    """The reserved chunks in flight on one cluster (see the module docstring); thread-safe.
+
+    A run asks with :meth:`take` each time it has no reserved chunk in flight and chunks waiting; it gets
+    a slot when fewer than ``slots`` are held and no run that asked before it is still waiting, so the
+    slots go round first come, first served. It gives the slot back with :meth:`give_back` when the
+    chunk comes back (or the run ends), and :meth:`leave` when it stops asking (no chunk waiting any more,
+    or the run ended), so that it does not hold up the runs behind it.
+
+    Attributes:
+        peak: most reserved chunks ever in flight at once.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._holders: set[str] = set()
+        self._waiting: list[str] = []
+        self.peak = 0
+
+    @property
+    def in_flight(self) -> int:
+        """Reserved chunks in flight now."""
+        with self._lock:
+            return len(self._holders)
+
+    def take(self, run: str, slots: int) -> bool:
+        """Whether ``run`` may submit a reserved chunk now (then it holds a slot until :meth:`give_back`);
+        otherwise it waits its turn (ask again later)."""
+        with self._lock:
+            if run in self._holders:
+                return False
+            if run not in self._waiting:
+                self._waiting.append(run)
+            if self._waiting.index(run) >= int(slots) - len(self._holders):
+                return False
+            self._waiting.remove(run)
+            self._holders.add(run)
+            self.peak = max(self.peak, len(self._holders))
+            return True
+
+    def give_back(self, run: str) -> None:
+        """``run``'s reserved chunk came back: free its slot."""
+        with self._lock:
+            self._holders.discard(run)
+
+    def leave(self, run: str) -> None:
+        """``run`` stops waiting for a slot (it has no chunk waiting any more, or it ended)."""
+        with self._lock:
+            if run in self._waiting:
+                self._waiting.remove(run)
+
+
+_LANES: dict[str, ReservedLane] = {}
+_LANES_LOCK = threading.Lock()
+
+
+def reserved_lane(client) -> ReservedLane:
+    """The process-wide :class:`ReservedLane` of ``client``'s cluster (keyed by the scheduler address)."""
+    address = getattr(getattr(client, "scheduler", None), "address", None) or f"client-{id(client)}"
+    with _LANES_LOCK:
+        return _LANES.setdefault(str(address), ReservedLane())
 
 
 def plan_chunks(n_cases: int, chunk_size: int) -> list[np.ndarray]:
@@ -184,6 +283,7 @@ class ChunkTiming:
         fetch_s: time to fetch the result from the worker (transfer and deserialisation).
         result_bytes: size of the result arrays.
         handled_s: time in ``on_chunk`` (the runner saves the chunk and updates the catalog there).
+        reserved: the chunk ran at the reserved priority (see the module docstring).
     """
 
     n_cases: int
@@ -199,6 +299,7 @@ class ChunkTiming:
     fetch_s: float = 0.0
     result_bytes: int = 0
     handled_s: float = 0.0
+    reserved: bool = False
 
 
 @dataclass
@@ -206,7 +307,7 @@ class FanoutReport:
     """What :func:`run_chunks` did.
 
     Attributes:
-        submitted: chunk indices sent to the cluster (not skipped).
+        submitted: chunk indices sent to the cluster, in order (a cancelled run does not send the rest).
         completed: chunk indices whose arrays were handed to ``on_chunk`` (including failed ones).
         failed: chunk index -> error text, for chunks whose task raised.
         cancelled: the run was cancelled before every chunk came back.
@@ -235,6 +336,9 @@ def run_chunks(
 ) -> FanoutReport:
     """Run every chunk not in ``skip`` on ``client`` and hand back each chunk's arrays as it arrives.
 
+    The chunks go out a few at a time, by the fair-share rule of the module docstring (one per worker at the
+    low priority, plus one at the reserved priority when the cluster's :func:`reserved_lane` has room).
+
     Args:
         client: a ``dask.distributed.Client``.
         definition_json: the study definition as a JSON string.
@@ -255,8 +359,6 @@ def run_chunks(
         OSError: a chunk's task failed for want of space in the store (ENOSPC, e.g.
             :class:`studies.store.StoreFull`): the outstanding chunks are cancelled.
     """
-    from dask.distributed import as_completed
-
     skip = {int(k) for k in skip}
     total = int(sum(len(c) for c in chunks))
     done = int(sum(len(chunks[k]) for k in skip if 0 <= k < len(chunks)))
@@ -271,6 +373,10 @@ def run_chunks(
         return report
 
     token = uuid.uuid4().hex[:8]
+    n_workers = worker_threads(client)
+    slots = reserved_slots(n_workers)
+    lane = reserved_lane(client)
+    run = f"{key_prefix}-{token}"
     record_timing(
         "fanout_start",
         key_prefix=key_prefix,
@@ -278,44 +384,73 @@ def run_chunks(
         n_todo=len(todo),
         n_cases=total,
         chunk_cases=[len(chunks[k]) for k in todo],
+        n_workers=n_workers,
+        reserved_slots=slots,
     )
-    futures = {}
-    # one call for every chunk (the scheduler queues them all, none waits in a busy worker's own queue),
-    # at a priority that puts studies with fewer chunks to run first (see the module docstring)
-    args = [[definition_json] * len(todo), [np.asarray(chunks[k], dtype=np.int64) for k in todo]]
-    if store_target is not None:
-        args += [[str(store_target[0])] * len(todo), [str(store_target[1])] * len(todo), list(todo)]
-    submitted = client.map(
-        task,
-        *args,
-        key=[f"{key_prefix}-chunk-{k}-{token}" for k in todo],
-        pure=False,
-        retries=TASK_RETRIES,
-        priority=-len(todo),
-    )
-    for k, fut in zip(todo, submitted, strict=True):
-        futures[fut] = k
-        report.submitted.append(k)
-        report.timings[k] = ChunkTiming(n_cases=len(chunks[k]), submitted=time.time())
+    # the fair-share rule of the module docstring: LOW_LANE_PER_WORKER chunks per worker in flight at the
+    # low priority and, while chunks wait beyond those, one more at the reserved priority when the lane
+    # has room; each chunk that comes back wakes the loop at once (the done callback) to send the next
+    futures: dict = {}  # future -> chunk index
+    pending: set = set()
+    waiting = list(reversed(todo))  # popped from the end: chunks go out in order
+    low_in_flight = 0
+    reserved_future = None
+    arrived: queue.SimpleQueue = queue.SimpleQueue()  # futures as they finish (Dask's callback thread)
 
-    pending = set(futures)
-    ac = as_completed(list(futures))
+    def submit(reserved: bool):
+        k = waiting.pop()
+        args = [definition_json, np.asarray(chunks[k], dtype=np.int64)]
+        if store_target is not None:
+            args += [str(store_target[0]), str(store_target[1]), k]
+        fut = client.submit(
+            task,
+            *args,
+            key=f"{key_prefix}-chunk-{k}-{token}",
+            pure=False,
+            retries=TASK_RETRIES,
+            priority=RESERVED_PRIORITY if reserved else -len(todo),
+        )
+        futures[fut] = k
+        pending.add(fut)
+        report.submitted.append(k)
+        report.timings[k] = ChunkTiming(n_cases=len(chunks[k]), submitted=time.time(), reserved=reserved)
+        fut.add_done_callback(arrived.put)
+        return fut
+
+    def top_up() -> None:
+        nonlocal low_in_flight, reserved_future
+        while waiting and low_in_flight < LOW_LANE_PER_WORKER * n_workers:
+            submit(reserved=False)
+            low_in_flight += 1
+        if waiting and reserved_future is None and lane.take(run, slots):
+            reserved_future = submit(reserved=True)
+        if not waiting:
+            lane.leave(run)
+
     try:
+        top_up()
         while pending:
             if cancel is not None and cancel.is_set():
                 report.cancelled = True
                 client.cancel(list(pending))
                 break
-            batch = ac.next_batch(block=False) if ac.has_ready() else []
-            if not batch:
-                if cancel is not None:
-                    cancel.wait(_POLL_SECONDS)
-                else:
-                    time.sleep(_POLL_SECONDS)
+            try:  # wake up as soon as a chunk comes back, or every _POLL_SECONDS to look at cancel
+                batch = [arrived.get(timeout=_POLL_SECONDS)]
+            except queue.Empty:
+                if waiting and reserved_future is None:
+                    top_up()  # ask the reserved lane again
                 continue
+            while not arrived.empty():
+                batch.append(arrived.get())
+            batch = [f for f in batch if f in pending]
             for fut in batch:
                 pending.discard(fut)
                 k = futures[fut]
+                if fut is reserved_future:
+                    reserved_future = None
+                    lane.give_back(run)
+                else:
+                    low_in_flight -= 1
                 timing = report.timings[k]
                 timing.arrived = time.time()
                 if fut.status == "finished":
@@ -344,9 +479,15 @@ def run_chunks(
                 done += len(chunks[k])
                 if progress is not None:
                     progress(done, total)
+            if not (cancel is not None and cancel.is_set()):
+                top_up()  # the next chunks go out as these came back
     except BaseException:
         client.cancel(list(pending))
         raise
+    finally:
+        lane.leave(run)
+        if reserved_future is not None:
+            lane.give_back(run)
     record_timing(
         "fanout_end", key_prefix=key_prefix, cancelled=report.cancelled, n_failed_chunks=len(report.failed)
     )

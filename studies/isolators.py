@@ -17,6 +17,28 @@ from isolab.studies.units import STANDARD_GRAVITY
 
 
 @dataclass(frozen=True)
+class Feedforward:
+    """Feedforward of the stages' inertial wrench to an active mount's actuators.
+
+    The stage controller knows its acceleration command; the isolation controller feeds it forward: each
+    mount's actuators push on the base with their share of the opposite of the stages' reaction (the
+    inertial force ``-sum m a`` and its moment about the c.g.), through a first-order low-pass.
+
+    Attributes:
+        gain: fraction of the wrench fed forward, 1 (0: none).
+        bandwidth: corner frequency of the low-pass, Hz.
+        force_limit: largest actuator force per mount and axis, N (``inf``: none).
+        weight: also feed forward the change of the stages' weight moment (a stage that has travelled),
+            as a levelling loop would hold it; False: the inertial wrench only.
+    """
+
+    gain: float = 1.0
+    bandwidth: float = 50.0
+    force_limit: float = float("inf")
+    weight: bool = False
+
+
+@dataclass(frozen=True)
 class IsolatorPreset:
     """Typical figures of one kind of isolator.
 
@@ -25,17 +47,30 @@ class IsolatorPreset:
         f_horizontal: natural frequency along X and Y, Hz.
         zeta: viscous damping ratio, 1.
         skyhook: True when the damping acts on the machine's absolute velocity (active control).
+        feedforward: the stage-force feedforward of an active mount, or None (passive mounts).
     """
 
     f_vertical: float
     f_horizontal: float
     zeta: float
     skyhook: bool
+    feedforward: Feedforward | None = None
 
 
 PRESETS: dict[str, IsolatorPreset] = {
-    # Active (electronically controlled) isolators: about 1 Hz, heavily damped, sky-hook damping.
-    "active": IsolatorPreset(f_vertical=1.0, f_horizontal=1.0, zeta=0.4, skyhook=True),
+    # Active (electronically controlled) isolators: about 1 Hz, heavily damped, sky-hook damping, and the
+    # stage controller's acceleration command and position fed forward to the actuators: 95 % of the
+    # stages' inertial wrench and of the change of their weight moment (as the system's levelling would
+    # hold it: on 1 Hz mounts a travelling stage would otherwise tilt the base far more than its
+    # acceleration does) through a 50 Hz low-pass, at most 5 kN per mount and axis (voice-coil or
+    # piezo-pneumatic actuators of a few kN).
+    "active": IsolatorPreset(
+        f_vertical=1.0,
+        f_horizontal=1.0,
+        zeta=0.4,
+        skyhook=True,
+        feedforward=Feedforward(gain=0.95, bandwidth=50.0, force_limit=5000.0, weight=True),
+    ),
     # Air (pneumatic) mounts: about 3 Hz in both directions, about 10 % damping (orifice damping).
     "air": IsolatorPreset(f_vertical=3.0, f_horizontal=3.0, zeta=0.10, skyhook=False),
     # Passive elastomer pads: about 10 Hz, a few percent damping.

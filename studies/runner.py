@@ -17,6 +17,10 @@ Around the fan-out (see :mod:`studies.accuracy`): a study that asks for an accur
 model gets the cheapest fidelity, integrator and step that meets it, measured on pilot cases on a worker
 before the chunks run (the chunks then run the resolved definition); and every dataset carries its
 measured error, from a seeded sample of cases rerun at the reference level on the same client.
+
+An ``optimize`` design does not plan its cases: once its model is resolved, :func:`run_study` hands it to
+:func:`studies.optimisation.run_optimisation`, which runs it a generation at a time through the same
+fan-out and keeps its own journal in the study's chunk directory.
 """
 
 from __future__ import annotations
@@ -53,8 +57,10 @@ from isolab.studies.accuracy import (
     sample_arrays,
 )
 from isolab.studies.costs import estimate_seconds_per_case
+from isolab.studies.criteria import add_criteria
 from isolab.studies.dataset import add_error_estimate, failures, from_chunks, to_dataset
 from isolab.studies.fanout import TASK_RETRIES, choose_chunk_size, plan_chunks, run_chunks
+from isolab.studies.optimisation import run_optimisation
 from isolab.studies.store import Store, StoreFull, copy_atomic, is_no_space, utc_now
 from isolab.studies.study import isolator_names, study_from_json
 
@@ -137,7 +143,7 @@ def run_study(
     # keys keep their order: the order of points in the definition is the order of the point labels
     definition_json = json.dumps(definition)
     design = study.design()
-    n_cases = int(study.n_cases)
+    n_cases = int(study.planned_cases)  # an optimize design: its budget
     sim = study.simulation
     if study_id is None:
         study_id = store.create(
@@ -165,6 +171,11 @@ def run_study(
             run_json = json.dumps(resolved_definition(study, choice))
             run = study_from_json(run_json)
             store.update(study_id, fidelity=choice.fidelity, integrator=choice.integrator, dt=choice.dt)
+        if study.goals is not None:  # optimize: the optimiser picks the cases, a generation at a time
+            model = {"engine_version": engine_version, **choice.attrs(), "auto_step": bool(sim.auto_step)}
+            return run_optimisation(
+                study, run_json, store, client, study_id, model, _worker_count(client), progress, cancel
+            )
         chunks = store.load_chunk_plan(study_id)
         if chunks is None or int(sum(len(c) for c in chunks)) != n_cases:
             store.clear_chunks(study_id)
@@ -284,6 +295,7 @@ def assemble_dataset(
         store.load_chunks(study_id), chunks, n_isolators=len(iso_names), n_points=len(point_names)
     )
     ds = to_dataset(result, run.design(), isolator_names=iso_names, point_names=point_names, attrs=attrs)
+    ds = add_criteria(ds, run.criteria)
     ds = add_error_estimate(
         ds,
         estimate.values,
@@ -394,9 +406,13 @@ def _counts(arrays: dict[str, np.ndarray]) -> tuple[int, int]:
 
 
 def _design_extra(study: Any) -> dict[str, Any]:
-    """What the design summary adds from the study's ``design:`` block (type, samples, seed)."""
+    """What the design summary adds from the study's ``design:`` block (type, samples, seed; saltelli:
+    second_order, which the sensitivity analysis reads)."""
     dump = study.design_spec.model_dump(mode="json")
-    return {k: v for k, v in dump.items() if k in ("type", "seed", "samples") and v is not None}
+    if dump.get("type") == "saltelli":
+        dump["second_order"] = bool(dump.get("second_order"))
+    keys = ("type", "seed", "samples", "second_order")
+    return {k: v for k, v in dump.items() if k in keys and v is not None}
 
 
 def make_client(
@@ -424,23 +440,24 @@ def make_client(
 
 
 def run_local(
-    source: str | Path | dict,
+    source: str | Path | dict | Any,
     out_path: str | Path,
     workers: int = 2,
     progress: Progress | None = None,
     store: Store | None = None,
 ) -> xr.Dataset:
-    """Run a study (YAML/JSON file, text or dict, as :func:`studies.study.load_study` takes) on a private
-    LocalCluster of ``workers`` processes (one thread each) and write its dataset to ``out_path``
-    atomically. Uses ``store`` if given (the study stays in its catalog), else a temporary one.
-    Returns the dataset (loaded in memory)."""
+    """Run a study (YAML/JSON file, text or dict, as :func:`studies.study.load_study` takes, or a validated
+    :class:`studies.study.Study`) on a private LocalCluster of ``workers`` processes (one thread each) and
+    write its dataset to ``out_path`` atomically, with the mode a new file gets under the umask. Uses
+    ``store`` if given (the study stays in its catalog), else a temporary one. Returns the dataset (loaded
+    in memory)."""
     from dask.distributed import Client, LocalCluster
 
-    from isolab.studies.study import load_study
+    from isolab.studies.study import Study, load_study
 
     if int(workers) < 1:
         raise ValueError(f"workers: {workers} must be at least 1")
-    study = load_study(source)
+    study = source if isinstance(source, Study) else load_study(source)
     with tempfile.TemporaryDirectory(prefix="isolab-") as tmp:
         own = store if store is not None else Store(Path(tmp))
         with (

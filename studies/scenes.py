@@ -25,6 +25,7 @@ from isolab.engine import profiles
 from isolab.engine.results import AXES
 from isolab.engine.scene import GRAVITY, SceneBatch, SceneError
 from isolab.studies.block import MAX_TRAVEL, beyond_travel, block_properties, travel_bound
+from isolab.studies.floor import scene_band_velocity
 from isolab.studies.isolators import (
     CollinearIsolatorsError,
     damping_from_ratio,
@@ -75,10 +76,12 @@ def shape_signature(scene: Scene) -> tuple:
         else:
             kind = (p.type,)
         stages.append((s.name, s.parent, kind))
-    floor = None
-    if scene.floor is not None:
+    floor = None  # the time-domain floor motion (a floor spectrum is per case and shapes nothing)
+    if scene.floor is not None and scene.floor.sine is not None:
+        floor = ("sine",)
+    elif scene.floor is not None and scene.floor.recorded is not None:
         rec = scene.floor.recorded
-        floor = ("sine",) if rec is None else ("recorded", rec.dt, len(rec.displacement.samples()[0]))
+        floor = ("recorded", rec.dt, len(rec.displacement.samples()[0]))
     return machine, mounts, tuple(stages), tuple(scene.points), floor
 
 
@@ -201,6 +204,41 @@ def _mount_values(cases: _Cases, n: int) -> tuple[np.ndarray, np.ndarray, np.nda
 
         sky[:, j] = cases.each(flag)
     return out["f_vertical"], out["f_horizontal"], out["zeta"], sky
+
+
+def _mount_feedforward(cases: _Cases, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per case and mount: feedforward gain (1), bandwidth (Hz), actuator force limit (N, inf: none) and
+    whether the weight shift is fed forward too (bool).
+
+    The feedforward comes as a whole from the mount's own, its own preset's, the group's or the group
+    preset's, in that order; none gives gain 0. (Not a design parameter: a study varies it through
+    ``isolators.preset``.)
+    """
+    listed = cases.scenes[0].isolators.mounts is not None
+
+    def resolved(s: Scene, j: int):
+        iso = s.isolators
+        if listed:
+            mt = iso.mounts[j]
+            if mt.feedforward is not None:
+                return mt.feedforward.figures()
+            if mt.preset is not None:
+                return iso.preset_of(mt.preset).feedforward
+        if iso.feedforward is not None:
+            return iso.feedforward.figures()
+        return iso.preset_of(iso.preset).feedforward
+
+    keys = ("gain", "bandwidth", "force_limit")
+    off = {"gain": 0.0, "bandwidth": 0.0, "force_limit": np.inf}
+    out = {k: np.zeros((cases.c, n)) for k in keys}
+    for j in range(n):
+        ff = cases.each(lambda s, j=j: resolved(s, j))
+        for key in keys:
+            out[key][:, j] = [off[key] if f is None else getattr(f, key) for f in ff]
+    weight = np.zeros((cases.c, n), dtype=bool)
+    for j in range(n):
+        weight[:, j] = [f is not None and f.weight for f in cases.each(lambda s, j=j: resolved(s, j))]
+    return out["gain"], out["bandwidth"], out["force_limit"], weight
 
 
 def _profiles(cases: _Cases) -> profiles.Pieces:
@@ -365,6 +403,7 @@ def build_batch(
         raise SceneError("isolators", str(err).removeprefix("isolators: ")) from None
 
     f_v, f_h, zeta, skyhook = _mount_values(cases, n)
+    ff_gain, ff_bandwidth, ff_limit, ff_weight = _mount_feedforward(cases, n)
     k_explicit = np.full((c, n, 3), np.nan)
     c_explicit = np.full((c, n, 3), np.nan)
     for a, axis in enumerate(AXES):
@@ -435,11 +474,13 @@ def build_batch(
         floor_amp = cases.vec("floor.sine.amplitude", lambda s: s.floor.sine.amplitude)
         floor_freq = cases.vec("floor.sine.frequency", lambda s: s.floor.sine.frequency)
         floor_phase = cases.vec("floor.sine.phase", lambda s: s.floor.sine.phase)
-    elif s0.floor is not None:
+    elif s0.floor is not None and s0.floor.recorded is not None:
         rec = s0.floor.recorded
         samples = np.array(cases.each(lambda s: s.floor.recorded.displacement.samples()), dtype=np.float64)
         floor_t = np.arange(samples.shape[-1]) * rec.dt
         floor_disp = samples.reshape(c, 3, -1)
+    # the floor spectrum: one-third-octave band velocity per axis (studies.floor)
+    floor_bands = np.array(cases.each(scene_band_velocity), dtype=np.float64).reshape(c, 3, -1)
 
     # simulation
     def sim(s: Scene) -> Simulation:
@@ -448,11 +489,21 @@ def build_batch(
     gravity_stiffness = {sim(s).gravity_stiffness for s in scenes}
     if len(gravity_stiffness) != 1:
         raise ValueError("build_batch: scenes of one batch must agree on simulation.gravity_stiffness")
+    preload = {sim(s).preload for s in scenes}
+    if len(preload) != 1:
+        raise ValueError("build_batch: scenes of one batch must agree on simulation.preload")
     duration = cases.get(
         "simulation.duration", lambda s: None if sim(s).duration == "auto" else sim(s).duration
     )
     last_move = profiles.end_time(pieces).max(axis=-1) if m else np.zeros(c)
     settle = cases.get("simulation.settle_tolerance", lambda s: sim(s).settle_tolerance)
+    # each point settles to its own criterion's ``within`` (studies.criteria), else to settle_tolerance
+    point_tol = np.repeat(np.asarray(settle, dtype=np.float64).reshape(-1, 1), len(point_names), axis=1)
+    within = [s.criteria.settle_tolerances() if s.criteria is not None else {} for s in scenes]
+    for j, name in enumerate(point_names):
+        for i, w in enumerate(within):
+            if name in w:
+                point_tol[slice(None) if len(scenes) == 1 else i, j] = w[name]
 
     batch = SceneBatch(
         mass=np.array(mass, dtype=np.float64),
@@ -477,10 +528,17 @@ def build_batch(
         floor_phase=np.array(floor_phase, dtype=np.float64),
         floor_t=floor_t,
         floor_disp=floor_disp,
+        floor_band_velocity=floor_bands,
         duration=np.array(duration, dtype=np.float64),
         settle_tol=np.array(settle, dtype=np.float64),
+        point_settle_tol=point_tol,
         gravity_stiffness=gravity_stiffness.pop(),
         g=g,
+        iso_ff_gain=ff_gain,
+        iso_ff_bandwidth=ff_bandwidth,
+        iso_ff_limit=ff_limit,
+        iso_ff_weight=ff_weight,
+        preload_with_base=preload.pop() == "base",
     )
     auto = np.isnan(duration)
     if auto.any():

@@ -11,16 +11,18 @@ A study (parameters and design on top of a scene) is :class:`studies.study.Study
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import (
-    AfterValidator,
     BaseModel,
+    BeforeValidator,
     ConfigDict,
     Discriminator,
     Field,
+    GetCoreSchemaHandler,
+    GetJsonSchemaHandler,
     StrictFloat,
     StrictInt,
     StrictStr,
@@ -30,16 +32,21 @@ from pydantic import (
     field_validator,
     model_validator,
 )
+from pydantic_core import CoreSchema, core_schema
 
 from isolab.engine.results import AXES
 from isolab.studies.block import MAX_TRAVEL, beyond_travel, block_properties, travel_bound
-from isolab.studies.isolators import PRESETS, CollinearIsolatorsError, IsolatorPreset, load_share
+from isolab.studies.criteria import Criteria
+from isolab.studies.floor import MAX_BAND_VELOCITY, band_number, canonical_vc
+from isolab.studies.isolators import PRESETS, CollinearIsolatorsError, Feedforward, IsolatorPreset, load_share
 from isolab.studies.units import (
     Acceleration,
     Angle,
     Damping,
     Density,
     Dimensionless,
+    DisplacementPSD,
+    Force,
     Frequency,
     Inertia,
     Jerk,
@@ -48,6 +55,7 @@ from isolab.studies.units import (
     Stiffness,
     Time,
     Velocity,
+    VelocityPSD,
     si_unit,
     to_si,
 )
@@ -94,20 +102,46 @@ reach kHz, and they shift with the stages' positions faster than the stability g
 # from: within them every result is finite and bounded, or flagged unstable/tipping, or refused.
 
 
-def _within(low: float, high: float, dimension: str, why: str) -> AfterValidator:
-    """Refuse a value of ``dimension`` outside [low, high] (SI), saying ``why`` the range is what it is."""
-    unit = si_unit(dimension)
+@dataclass(frozen=True)
+class _Within:
+    """Refuses a value outside [low, high] (SI) after conversion, saying ``why`` the range is what it is;
+    its JSON schema carries the range as ``minimum``/``maximum`` and ``why`` as ``x-range-reason`` (what
+    the study-file reference, :mod:`studies.file_reference`, and editors show)."""
 
-    def check(value: float) -> float:
-        if not low <= value <= high:
+    low: float
+    high: float
+    dimension: str
+    why: str
+
+    def check(self, value: float) -> float:
+        if not self.low <= value <= self.high:
+            unit = si_unit(self.dimension)
             u = f" {unit}" if unit else ""
-            raise ValueError(f"must lie between {low:g}{u} and {high:g}{u} ({why}), got {value:.6g}{u}")
+            raise ValueError(
+                f"must lie between {self.low:g}{u} and {self.high:g}{u} ({self.why}), got {value:.6g}{u}"
+            )
         return value
 
-    return AfterValidator(check)
+    def __get_pydantic_core_schema__(self, source: Any, handler: GetCoreSchemaHandler) -> CoreSchema:
+        return core_schema.no_info_after_validator_function(self.check, handler(source))
+
+    def __get_pydantic_json_schema__(
+        self, schema: CoreSchema, handler: GetJsonSchemaHandler
+    ) -> dict[str, Any]:
+        out = dict(handler(schema))
+        out["minimum"] = max(self.low, out.get("minimum", self.low))
+        out["maximum"] = min(self.high, out.get("maximum", self.high))
+        out["x-range-reason"] = self.why
+        return out
 
 
-def _tested_range(low: float, high: float, dimension: str) -> AfterValidator:
+def _within(low: float, high: float, dimension: str, why: str) -> _Within:
+    """Refuse a value of ``dimension`` outside [low, high] (SI), saying ``why`` the range is what it is."""
+    si_unit(dimension)  # a known dimension
+    return _Within(low, high, dimension, why)
+
+
+def _tested_range(low: float, high: float, dimension: str) -> _Within:
     """Refuse a value of ``dimension`` outside [low, high] (SI): the range tests/engine/test_extremes.py
     covers."""
     return _within(low, high, dimension, "the range the engine is tested over")
@@ -333,6 +367,36 @@ LAYOUT_ORDER = "(-x,-y), (+x,-y), (+x,+y), (-x,+y)"
 """Order of the four mounts of a layout around the c.g."""
 
 
+class FeedforwardSpec(_Model):
+    """Feedforward of the stages' inertial wrench to an active mount's actuators (docs/physics.md, "Active
+    mounts with feedforward"): ``gain`` times the opposite of the stages' reaction, low-passed at
+    ``bandwidth``, clipped to ``force_limit`` per mount and axis. ``gain: 0`` turns it off."""
+
+    gain: Annotated[
+        Dimensionless, _within(0.0, 1.5, "dimensionless", "0 (off) to a 50 % over-compensation")
+    ] = Field(1.0, description="fraction of the stages' inertial wrench fed forward, 1")
+    bandwidth: Annotated[
+        Frequency, _within(1.0, 1000.0, "frequency", "the corner of an isolation controller's feedforward")
+    ] = Field(50.0, description="corner frequency of the first-order low-pass, Hz")
+    force_limit: (
+        Annotated[Force, _within(1.0, 1e6, "force", "an actuator of 1 N to 1 MN per mount and axis")] | None
+    ) = Field(None, description="largest actuator force per mount and axis, N (none: unlimited)")
+    weight: bool = Field(
+        False,
+        description="also feed forward the change of the stages' weight moment (a stage that has travelled); "
+        "false: the inertial wrench only",
+    )
+
+    def figures(self) -> Feedforward:
+        """The engine's figures (SI; an unlimited actuator as ``inf``)."""
+        return Feedforward(
+            gain=float(self.gain),
+            bandwidth=float(self.bandwidth),
+            force_limit=float("inf") if self.force_limit is None else float(self.force_limit),
+            weight=bool(self.weight),
+        )
+
+
 class Mount(_Model):
     """One isolator of an explicit list. Its own values win over the group's: explicit ``k``/``c`` first,
     then its overrides, then its own ``preset``; without a preset of its own it takes the group's
@@ -344,6 +408,7 @@ class Mount(_Model):
     f_horizontal: MountFrequency | None = None
     zeta: DampingRatio | None = None
     skyhook: bool | None = None
+    feedforward: FeedforwardSpec | None = None
     k: tuple[NonNegativeStiffness, NonNegativeStiffness, NonNegativeStiffness] | None = Field(
         None, description="[kx, ky, kz], N/m"
     )
@@ -359,6 +424,7 @@ class PresetTuning(_Model):
     f_horizontal: MountFrequency | None = None
     zeta: DampingRatio | None = None
     skyhook: bool | None = None
+    feedforward: FeedforwardSpec | None = None
 
 
 class Isolators(_Model):
@@ -369,7 +435,9 @@ class Isolators(_Model):
     ``f_horizontal``, Z from ``f_vertical``) and ``zeta`` applied to the static load the mount carries.
     ``tuning`` replaces a type's preset figures by those of the model this machine would use, whenever
     that type is chosen: a study that varies ``preset`` then compares those models, where the group's
-    overrides would apply to every type alike.
+    overrides would apply to every type alike. ``feedforward`` (active mounts: the stages' inertial wrench
+    fed to the actuators) comes as a whole from the mount's own, its preset's, the group's, or the group
+    preset's (on for ``active``, off for ``air`` and ``elastomer``).
     """
 
     preset: PresetName = "air"
@@ -378,6 +446,7 @@ class Isolators(_Model):
     f_horizontal: MountFrequency | None = None
     zeta: DampingRatio | None = None
     skyhook: bool | None = None
+    feedforward: FeedforwardSpec | None = None
     k: AxisStiffness | None = None
     c: AxisDamping | None = None
     layout: Layout | None = None
@@ -409,7 +478,10 @@ class Isolators(_Model):
         tune = self.tuning.get(name)
         if tune is None:
             return base
-        return replace(base, **{k: v for k, v in tune.model_dump().items() if v is not None})
+        given = {k: getattr(tune, k) for k, v in tune.model_dump().items() if v is not None}
+        if "feedforward" in given:
+            given["feedforward"] = given["feedforward"].figures()
+        return replace(base, **given)
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -559,16 +631,121 @@ class RecordedFloor(_Model):
     displacement: RecordedDisplacement
 
 
+BandVelocity = Annotated[
+    Velocity,
+    _within(0.0, MAX_BAND_VELOCITY, "velocity", "a floor vibration in one band, not an earthquake"),
+]
+MAX_SPECTRUM_POINTS = 100_000
+"""Most points of a floor PSD per axis."""
+
+
+class SpectrumBands(_Model):
+    """One-third-octave RMS velocity of the floor by band centre (``{4 Hz: 20 um/s, 8 Hz: 10 um/s}``):
+    bands between given ones are interpolated on log-log axes, bands outside them are zero
+    (:mod:`studies.floor`)."""
+
+    bands: dict[Annotated[Frequency, Field(gt=0)], BandVelocity] = Field(
+        min_length=1, description="band centre (Hz, nominal or exact) -> RMS velocity in that band, m/s"
+    )
+
+    @field_validator("bands")
+    @classmethod
+    def _centres(cls, value: dict[float, float]) -> dict[float, float]:
+        seen: dict[int, float] = {}
+        for f in value:
+            n = band_number(f)  # ValueError naming the frequency
+            if n in seen:
+                raise ValueError(f"{f:g} Hz and {seen[n]:g} Hz are the same band")
+            seen[n] = f
+        return value
+
+
+class SpectrumPSD(_Model):
+    """A one-sided power spectral density of the floor: ``frequency`` (Hz, increasing) with either
+    ``displacement`` (m^2/Hz) or ``velocity`` ((m/s)^2/Hz) at each frequency."""
+
+    frequency: list[Annotated[Frequency, Field(gt=0)]] = Field(
+        min_length=2, max_length=MAX_SPECTRUM_POINTS, description="Hz, increasing"
+    )
+    displacement: list[Annotated[DisplacementPSD, Field(ge=0)]] | None = Field(
+        None, max_length=MAX_SPECTRUM_POINTS, description="displacement PSD, m^2/Hz"
+    )
+    velocity: list[Annotated[VelocityPSD, Field(ge=0)]] | None = Field(
+        None, max_length=MAX_SPECTRUM_POINTS, description="velocity PSD, (m/s)^2/Hz (m^2/s^2/Hz)"
+    )
+
+    @model_validator(mode="after")
+    def _one_series(self) -> SpectrumPSD:
+        if (self.displacement is None) == (self.velocity is None):
+            raise ValueError("psd: give either displacement (m^2/Hz) or velocity ((m/s)^2/Hz)")
+        values = self.displacement if self.displacement is not None else self.velocity
+        if len(values) != len(self.frequency):
+            raise ValueError(
+                f"psd: {len(values)} PSD values for {len(self.frequency)} frequencies; give one per frequency"
+            )
+        if any(b <= a for a, b in zip(self.frequency, self.frequency[1:], strict=False)):
+            raise ValueError("psd.frequency: must increase")
+        return self
+
+
+class PSDSpectrum(_Model):
+    psd: SpectrumPSD
+
+
+def _axis_spectrum(value: Any) -> Any:
+    """One axis of a floor spectrum: a VC level name, ``{bands: ...}`` or ``{psd: ...}``; errors name the
+    reason (pydantic adds the axis)."""
+    if value is None or isinstance(value, SpectrumBands | PSDSpectrum):
+        return value
+    if isinstance(value, str):
+        return canonical_vc(value)
+    if isinstance(value, dict) and len(value) == 1 and ("bands" in value or "psd" in value):
+        kind = SpectrumBands if "bands" in value else PSDSpectrum
+        try:
+            return kind.model_validate(value)
+        except ValidationError as err:
+            raise ValueError("; ".join(error_messages(err))) from None
+    raise ValueError(
+        "give a VC level (such as 'VC-D'), {bands: {<centre>: <RMS velocity>, ...}} or "
+        f"{{psd: {{frequency: [...], displacement: [...]}}}}, got {value!r}"
+    )
+
+
+AxisSpectrum = Annotated[str | SpectrumBands | PSDSpectrum | None, BeforeValidator(_axis_spectrum)]
+
+
+class FloorSpectrum(_Model):
+    """The floor's steady vibration per axis as a spectrum (what ``floor_point_velocity`` is computed
+    from; :mod:`studies.floor`): per floor axis a VC level (``z: VC-D``), one-third-octave band levels
+    (``z: {bands: {4 Hz: 20 um/s, ...}}``) or a PSD (``z: {psd: {frequency: [...], displacement:
+    [...]}}``). An axis left out does not move; the axes are uncorrelated."""
+
+    x: AxisSpectrum = None
+    y: AxisSpectrum = None
+    z: AxisSpectrum = None
+
+    @model_validator(mode="after")
+    def _some_axis(self) -> FloorSpectrum:
+        if self.x is None and self.y is None and self.z is None:
+            raise ValueError("floor.spectrum: give at least one of x, y, z")
+        return self
+
+
 class Floor(_Model):
-    """Motion of the floor under the isolators: a sine per axis, or a recorded displacement."""
+    """Motion of the floor under the isolators: a sine per axis or a recorded displacement (the time
+    integration sees them), and/or a ``spectrum`` (steady state, one-third-octave bands: the velocity at
+    the points of interest, :mod:`studies.floor`)."""
 
     sine: SineFloor | None = None
     recorded: RecordedFloor | None = None
+    spectrum: FloorSpectrum | None = None
 
     @model_validator(mode="after")
     def _one_kind(self) -> Floor:
-        if (self.sine is None) == (self.recorded is None):
-            raise ValueError("floor: give either sine or recorded")
+        if self.sine is not None and self.recorded is not None:
+            raise ValueError("floor: give either sine or recorded, not both")
+        if self.sine is None and self.recorded is None and self.spectrum is None:
+            raise ValueError("floor: give sine, recorded or spectrum")
         return self
 
 
@@ -626,6 +803,49 @@ def parse_tolerance(value: Any, field: str = "simulation.tolerance") -> tuple[fl
     return x, relative
 
 
+TOLERANCE_OUTPUTS = {
+    "peak_displacement": "length",
+    "peak_point_displacement": "length",
+    "peak_rotation": "angle",
+    "peak_isolator_force": "force",
+    "peak_isolator_deflection": "length",
+    "min_isolator_load": "force",
+    "max_isolator_load": "force",
+    "settling_time": "time",
+}
+"""Outputs a per-output tolerance may name, and the dimension of an absolute tolerance on each."""
+
+
+def parse_output_tolerance(name: str, value: Any, field: str) -> tuple[float, bool]:
+    """One entry of a per-output tolerance: ``(value, relative)``; ``"1 %"`` relative to each component's
+    own reference value, or an absolute error in the output's unit (``"10 um"``, ``"0.1 mrad"``,
+    ``"50 N"``, ``"5 ms"``: :data:`TOLERANCE_OUTPUTS`), SI."""
+    if name not in TOLERANCE_OUTPUTS:
+        raise ValueError(f"{field}: unknown output {name!r}; one of {', '.join(TOLERANCE_OUTPUTS)}")
+    dimension = TOLERANCE_OUTPUTS[name]
+    example = {"length": "10 um", "angle": "0.1 mrad", "force": "50 N", "time": "5 ms"}[dimension]
+    if not isinstance(value, str) or "%" not in value and not any(c.isalpha() for c in value):
+        raise ValueError(
+            f"{field}: give a relative error such as '1 %' or an absolute one in {dimension} such as "
+            f"{example!r}, got {value!r}"
+        )
+    if "%" in value:
+        x, relative = to_si(value, "dimensionless", field), True
+        if not 0.0 < x <= 1.0:
+            raise ValueError(f"{field}: a relative tolerance must lie in (0, 100 %], got {value!r}")
+    else:
+        x, relative = to_si(value, dimension, field), False
+        if not (np.isfinite(x) and x > 0.0):
+            raise ValueError(f"{field}: an absolute tolerance must be positive, got {value!r}")
+    return x, relative
+
+
+def tolerance_text(x: float, relative: bool, dimension: str = "length") -> str:
+    """A parsed tolerance as text: ``"1 %"`` or ``"1e-05 m"`` (SI unit of ``dimension``)."""
+    unit = {"length": "m", "angle": "rad", "force": "N", "time": "s"}[dimension]
+    return f"{x * 100:.6g} %" if relative else f"{x:.6g} {unit}"
+
+
 class Simulation(_Model):
     """How to simulate: model fidelity, integrator and step, or an accuracy request; duration and settling
     tolerance.
@@ -659,10 +879,13 @@ class Simulation(_Model):
         description="let the runner pick fidelity, integrator and step: fast (~5 % error), balanced (~0.5 %) "
         "or reference (nonlinear level, reference integrator)",
     )
-    tolerance: str | None = Field(
+    tolerance: str | dict[str, str] | None = Field(
         None,
         description="let the runner pick fidelity, integrator and step for this error: a length such as "
-        "'10 um' (peak displacement) or a relative error such as '1 %'",
+        "'10 um' (peak displacement) or a relative error such as '1 %' (of every sizing output, relative "
+        "to the largest reference peak of its kind); or per output, bounding each component of each named "
+        "output: {peak_point_displacement: '1 %', settling_time: '5 ms'} (relative to the component's own "
+        "reference value, or absolute in the output's unit)",
     )
     auto_step: bool = Field(True, description="shorten the step where the integrator would be unstable")
 
@@ -685,14 +908,27 @@ class Simulation(_Model):
     gravity_stiffness: bool = Field(
         True, description="include the rocking stiffness of preload and weights that tilt with the base"
     )
+    preload: Literal["floor", "base"] = Field(
+        "floor",
+        description="nonlinear level: the mounts' preload stays vertical (floor) or turns with the base "
+        "(base: mounts that tilt with it, no rocking stiffness -W h from the preload)",
+    )
 
     @field_validator("tolerance", mode="before")
     @classmethod
-    def _tolerance_text(cls, value: Any) -> str | None:
+    def _tolerance_text(cls, value: Any) -> str | dict[str, str] | None:
         if value is None:
             return value
+        if isinstance(value, dict):
+            if not value:
+                raise ValueError("simulation.tolerance: name at least one output, e.g. {settling_time: 5 %}")
+            out = {}
+            for name, v in value.items():
+                x, relative = parse_output_tolerance(str(name), v, f"simulation.tolerance.{name}")
+                out[str(name)] = tolerance_text(x, relative, TOLERANCE_OUTPUTS[str(name)])
+            return out
         x, relative = parse_tolerance(value)
-        return f"{x * 100:.6g} %" if relative else f"{x:.6g} m"
+        return tolerance_text(x, relative)
 
     @model_validator(mode="after")
     def _choice_or_request(self) -> Simulation:
@@ -719,6 +955,11 @@ class Simulation(_Model):
                     "which always has the weights' rocking stiffness; gravity_stiffness: false is for the "
                     "lti and ltv levels named explicitly"
                 )
+            if self.preload != "floor":
+                raise ValueError(
+                    "simulation.preload: 'base' is a choice of the nonlinear level; an accuracy request "
+                    "picks the level itself (name fidelity: nonlinear)"
+                )
             # a request overrides a scene's choice as a whole when this block is merged over it
             fields_set.update(_CHOICE_FIELDS)
             if self.dt is None:
@@ -740,6 +981,11 @@ class Simulation(_Model):
                 "weights that tilt with the base (false applies to lti and ltv only); without it a base that "
                 "would tip is not reported as tipping"
             )
+        if self.preload != "floor" and self.fidelity != "nonlinear":
+            raise ValueError(
+                f"simulation.preload: 'base' (the preload turning with the base) is a choice of the "
+                f"nonlinear level, got fidelity {self.fidelity!r}"
+            )
         if self.integrator == "exact" and self.fidelity != "lti":
             raise ValueError(
                 f"simulation.integrator: 'exact' discretisation needs a time-invariant model "
@@ -752,6 +998,8 @@ class Simulation(_Model):
         """The accuracy request as text (``"fast"``, ``"tolerance 1 %"``), or None for an explicit choice."""
         if self.accuracy is not None:
             return self.accuracy
+        if isinstance(self.tolerance, dict):
+            return "tolerance " + ", ".join(f"{k} {v}" for k, v in self.tolerance.items())
         return None if self.tolerance is None else f"tolerance {self.tolerance}"
 
 
@@ -770,6 +1018,9 @@ class Scene(_Model):
     )
     floor: Floor | None = None
     simulation: Simulation = Field(default_factory=Simulation)
+    criteria: Criteria | None = Field(
+        None, description="limits at the points of interest and on the mounts (studies.criteria)"
+    )
 
     @field_validator("stages")
     @classmethod
@@ -832,6 +1083,16 @@ class Scene(_Model):
             )
         return self
 
+    @model_validator(mode="after")
+    def _criteria_points(self) -> Scene:
+        if self.criteria is not None:
+            self.criteria.check_points(self.points, self.has_floor_spectrum())
+        return self
+
+    def has_floor_spectrum(self) -> bool:
+        """Whether the floor's vibration is given as a spectrum (what a velocity criterion judges)."""
+        return self.floor is not None and getattr(self.floor, "spectrum", None) is not None
+
     def total_mass(self) -> float:
         """Machine plus all stages, kg."""
         return float(self.machine.properties()[0] + sum(s.mass for s in self.stages))
@@ -872,12 +1133,39 @@ class ParameterSpec(_Model):
 
 
 class DesignSpec(_Model):
-    """How cases are drawn: full factorial ``grid``, ``lhs``, ``sobol``, ``random`` or explicit ``list``."""
+    """How cases are drawn: full factorial ``grid``, ``lhs``, ``sobol``, ``random``, ``saltelli`` (Sobol'
+    indices: ``samples`` is the base sample N and the study runs N (D + 2) cases, N (2D + 2) with
+    ``second_order``), explicit ``list``, or ``optimize`` (a pymoo optimiser picks the cases generation
+    by generation within ``budget``: :mod:`studies.optimisation`)."""
 
-    type: Literal["grid", "lhs", "sobol", "random", "list"] = "grid"
+    type: Literal["grid", "lhs", "sobol", "random", "saltelli", "list", "optimize"] = "grid"
     samples: int | None = Field(None, ge=1, le=10_000_000)
     seed: int = Field(0, ge=0)
+    second_order: bool | None = Field(
+        None, description="saltelli only: also run the cases pairwise (second-order) indices need; default no"
+    )
     cases: list[dict[str, Value]] | None = Field(None, max_length=MAX_LIST_ENTRIES)
+    # optimize only (see studies.optimisation and studies.goals, which check them against the outputs)
+    objective: str | list[str] | None = Field(
+        None,
+        description="optimize: 'minimize <quantity>' or 'maximize <quantity>', or a list of them "
+        "(multi-objective), e.g. 'minimize settling_time.tool'",
+    )
+    constraints: list[str] | None = Field(
+        None,
+        max_length=100,
+        description="optimize: 'criteria' (every criterion of the study's criteria block is met) or "
+        "'<quantity> <= <value>' / '<quantity> >= <value>' with units, e.g. 'min_isolator_load >= 0 N'",
+    )
+    algorithm: str | None = Field(
+        None,
+        description="optimize: a pymoo algorithm (ga, de, pso, nelder-mead, pattern, nsga2); default "
+        "ga for one objective, nsga2 for several",
+    )
+    budget: int | None = Field(None, ge=1, le=1_000_000, description="optimize: total cases to evaluate")
+    population: int | None = Field(
+        None, ge=2, le=10_000, description="optimize: cases per generation (default 40, at most the budget)"
+    )
 
 
 def error_messages(err: ValidationError) -> list[str]:

@@ -7,6 +7,7 @@ Layout under ``root``::
     studies/<id>.nc              a finished study's dataset
     studies/<id>.chunks/<k>.npz  results of chunk k of a study still running (removed once the .nc exists)
     studies/<id>.chunks/plan.npz the case indices of every chunk, so a resumed run splits the same way
+    studies/<id>.results/        what is derived from the dataset and cached beside it (sensitivity JSON)
     service.lock                 held (``flock``) by the one service that runs this store's studies
 
 A study id is a uuid4 hex string (32 lowercase hex digits); every id is checked before it becomes part of a
@@ -73,6 +74,7 @@ __all__ = [
     "check_writable",
     "is_no_space",
     "copy_atomic",
+    "new_file_mode",
     "utc_now",
     "write_netcdf",
 ]
@@ -211,11 +213,26 @@ def write_netcdf(ds: xr.Dataset, path: str | Path) -> Path:
     return path
 
 
+def new_file_mode() -> int:
+    """The mode ``open()`` gives a new file: 0o666 less the process's umask (a temporary file from
+    :func:`tempfile.mkstemp` is 0o600 whatever the umask). Read from ``/proc`` where it says, so the umask
+    is never changed, even for a moment."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            mask = next(int(line.split()[1], 8) for line in f if line.startswith("Umask:"))
+    except (OSError, StopIteration, ValueError, IndexError):
+        mask = os.umask(0o022)
+        os.umask(mask)
+    return 0o666 & ~mask
+
+
 def copy_atomic(source: str | Path, target: str | Path) -> Path:
-    """Copy a file to ``target`` atomically."""
+    """Copy a file to ``target`` atomically, with the mode a new file gets (:func:`new_file_mode`): a file
+    written for the user, not one of the store's own."""
     target = Path(target)
     with atomic_path(target) as tmp:
         shutil.copyfile(source, tmp)
+        os.chmod(tmp, new_file_mode())
     return target
 
 
@@ -367,12 +384,18 @@ class Store:
         if chunk_dir.exists():
             shutil.rmtree(chunk_dir)
             found = True
+        shutil.rmtree(self.results_dir(study_id), ignore_errors=True)
         return found
 
     # --------------------------------------------------------------------------------------- files
     def path(self, study_id: str) -> Path:
         """Path of a study's netCDF file (whether or not it exists)."""
         return self.studies_dir / f"{check_id(study_id)}.nc"
+
+    def results_dir(self, study_id: str) -> Path:
+        """Directory of what is derived from a study's dataset and kept beside it (sensitivity analyses;
+        whether or not it exists). Removed with the study."""
+        return self.studies_dir / f"{check_id(study_id)}.results"
 
     def write_dataset(self, study_id: str, ds: xr.Dataset) -> Path:
         """Write a study's dataset atomically to :meth:`path`."""

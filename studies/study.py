@@ -28,14 +28,18 @@ from isolab.engine import modal, model
 from isolab.engine.results import DOF_NAMES
 from isolab.engine.scene import SceneBatch, concat
 from isolab.studies import designs
+from isolab.studies.criteria import Criteria
 from isolab.studies.designs import Design, Factor
+from isolab.studies.goals import Goals, plan_goals
 from isolab.studies.isolators import mount_labels
 from isolab.studies.parameters import Target, apply, resolve, scene_dict
 from isolab.studies.scenes import build_batch, check_scene
-from isolab.studies.schema import DesignSpec, ParameterSpec, Scene, Simulation, _Model, error_messages
-from isolab.studies.units import to_si
+from isolab.studies.schema import DesignSpec, Floor, ParameterSpec, Scene, Simulation, _Model, error_messages
+from isolab.studies.units import to_si, written_unit
 
-SAMPLED_TYPES = ("lhs", "sobol", "random")
+SAMPLED_TYPES = ("lhs", "sobol", "random", "saltelli")
+"""Designs whose cases are drawn: ``design.samples`` sets their count (a saltelli design runs
+:func:`~isolab.studies.designs.saltelli_cases` of it)."""
 _EXTREME_CHECK_LEVELS = 16
 DRY_RUN_LIMIT = 200_000
 """Studies of at most this many cases have every case built when they are validated."""
@@ -62,6 +66,14 @@ class Study(_Model):
         description="overrides the scene's simulation block; after validation, the block every case "
         "runs with",
     )
+    criteria: Criteria | None = Field(
+        None,
+        description="replaces the scene's criteria block; after validation, the block the cases are "
+        "judged by",
+    )
+    floor: Floor | None = Field(
+        None, description="replaces the scene's floor block: the same machine on another site's floor"
+    )
     parameters: list[ParameterSpec] = Field(default_factory=list)
     design_spec: DesignSpec = Field(default_factory=DesignSpec, alias="design")
 
@@ -69,6 +81,7 @@ class Study(_Model):
     _design: Design | None = PrivateAttr(default=None)
     _groups: dict[tuple, Scene] = PrivateAttr(default_factory=dict)
     _base: dict[str, Any] = PrivateAttr(default_factory=dict)
+    _goals: Goals | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
     def _plan(self) -> Study:
@@ -77,6 +90,19 @@ class Study(_Model):
                 "scene: missing; give the scene inline (scene_file is read only when loading a study file)"
             )
         self.simulation = _merged_simulation(self.scene.simulation, self.simulation)
+        # the study's own floor and criteria replace the scene's: ``scene`` is then the scene of the study
+        if self.floor is not None:
+            self.scene = self.scene.model_copy(update={"floor": self.floor})
+        if self.criteria is None:
+            self.criteria = self.scene.criteria
+        else:
+            self.scene = self.scene.model_copy(update={"criteria": self.criteria})
+        if self.scene.criteria is not None:
+            try:
+                self.scene.criteria.check_points(self.scene.points, self.scene.has_floor_spectrum())
+            except ValueError as err:
+                where = "criteria" if self.criteria is not None else "scene.criteria"
+                raise ValueError(str(err).replace("criteria", where, 1)) from None
         self._base = scene_dict(self.scene)  # the scene as every case starts from it
         self._base["simulation"] = self.simulation.model_dump(mode="json")
         targets, factors = [], []
@@ -105,6 +131,11 @@ class Study(_Model):
                     "give each a distinct name"
                 )
         self._targets = targets
+        self._goals = None
+        if self.design_spec.type == "optimize":  # checked against the outputs' names; nothing runs
+            self._goals = plan_goals(
+                self.design_spec, factors, isolator_names(self.scene), list(self.scene.points), self.criteria
+            )
         self._design = _make_design(self.design_spec, factors, targets)
         self._groups = {}
         return self
@@ -120,6 +151,17 @@ class Study(_Model):
     @property
     def n_cases(self) -> int:
         return self._design.n_cases
+
+    @property
+    def goals(self) -> Goals | None:
+        """An optimize design's objectives, constraints and settings (:mod:`studies.goals`); else None."""
+        return self._goals
+
+    @property
+    def planned_cases(self) -> int:
+        """Cases the study will run: its design's, or an optimize design's budget (its :meth:`design` then
+        holds only the few cases the study is checked with: every parameter at its low, high and middle)."""
+        return self._goals.budget if self._goals is not None else self.n_cases
 
     @property
     def targets(self) -> list[Target]:
@@ -309,6 +351,12 @@ def _factor(i: int, p: ParameterSpec, t: Target, design_type: str) -> Factor:
     name = p.name or t.name
     where = f"parameters[{i}]"
     if t.categorical:
+        if design_type == "saltelli":
+            raise ValueError(
+                f"{where}.{'range' if p.range is not None else 'values'}: {name} ({t.path}) is categorical "
+                f"({', '.join(t.levels)}); a saltelli design varies ranges only: fix it in the scene, or use "
+                "an lhs, sobol or grid design"
+            )
         if p.range is not None:
             raise ValueError(
                 f"{where}.range: {t.path} is categorical; list its values ({', '.join(t.levels)})"
@@ -331,13 +379,17 @@ def _factor(i: int, p: ParameterSpec, t: Target, design_type: str) -> Factor:
             if plain is not None and np.isfinite(plain).all():
                 return Factor(name, t.path, t.unit, levels=plain)
         levels = [to_si(v, t.dimension, f"{where}.values[{k}]") for k, v in enumerate(p.values)]
-        return Factor(name, t.path, t.unit, levels=np.array(levels))
+        shown = _written_unit(p.values, t.dimension)
+        return Factor(name, t.path, t.unit, levels=np.array(levels), display_unit=shown)
     if p.range is not None:
         r = p.range
         low = to_si(r.start, t.dimension, f"{where}.range.start")
         high = to_si(r.stop, t.dimension, f"{where}.range.stop")
         try:
-            return Factor(name, t.path, t.unit, low=low, high=high, scale=r.scale, num=r.num)
+            shown = _written_unit([r.start, r.stop], t.dimension)
+            return Factor(
+                name, t.path, t.unit, low=low, high=high, scale=r.scale, num=r.num, display_unit=shown
+            )
         except ValueError as err:
             raise ValueError(f"{where}.range: {err}") from None
     if design_type == "list":
@@ -345,8 +397,28 @@ def _factor(i: int, p: ParameterSpec, t: Target, design_type: str) -> Factor:
     raise ValueError(f"{where}: give values or range")
 
 
+def _written_unit(values: list[Any], dimension: str) -> str:
+    """The unit the first value written with one was written in (``["0.5 g", "2 g"]`` -> ``"g"``), or ""
+    when every value is a plain number (SI): the unit figures show the parameter in."""
+    for v in values:
+        unit = written_unit(v, dimension)
+        if unit is not None:
+            return unit
+    return ""
+
+
+_OPTIMIZE_FIELDS = ("objective", "constraints", "algorithm", "budget", "population")
+
+
 def _make_design(spec: DesignSpec, factors: list[Factor], targets: list[Target]) -> Design:
     try:
+        if spec.type != "optimize":
+            given = [k for k in _OPTIMIZE_FIELDS if getattr(spec, k) is not None]
+            if given:
+                raise ValueError(f"design.{given[0]}: only an optimize design takes it (type: {spec.type})")
+        else:  # the cases the study is checked with: each parameter at its low, high and middle together
+            checks = [{f.name: float(f.from_unit(np.float64(u))) for f in factors} for u in (0.0, 1.0, 0.5)]
+            return designs.explicit(factors, checks)
         if spec.type == "grid":
             for f in factors:
                 if f.levels is None and f.num is None:
@@ -355,6 +427,16 @@ def _make_design(spec: DesignSpec, factors: list[Factor], targets: list[Target])
         if spec.type in SAMPLED_TYPES:
             if spec.samples is None:
                 raise ValueError(f"design.samples: a {spec.type} design needs the number of samples")
+            if spec.type == "saltelli":
+                for i, f in enumerate(factors):
+                    if f.levels is not None:
+                        raise ValueError(
+                            f"parameters[{i}].values: {f.name} is "
+                            + ("categorical" if f.categorical else "a list of values")
+                            + "; a saltelli design varies ranges only: give it a range (start, stop), or "
+                            "use an lhs, sobol or grid design"
+                        )
+                return designs.saltelli(factors, spec.samples, spec.seed, bool(spec.second_order))
             make = {"lhs": designs.latin_hypercube, "sobol": designs.sobol, "random": designs.random}[
                 spec.type
             ]
@@ -371,7 +453,12 @@ def _make_design(spec: DesignSpec, factors: list[Factor], targets: list[Target])
                     v = to_si(v, t.dimension, f"design.cases[{i}].{k}")
                 row[k] = v
             cases.append(row)
-        return designs.explicit(factors, cases)
+        listed = designs.explicit(factors, cases)
+        for f, t in zip(factors, targets, strict=True):  # a parameter given only in the cases: their unit
+            if not f.categorical and not f.display_unit:
+                written = [case[f.name] for case in spec.cases if f.name in case]
+                listed.display_units[f.name] = _written_unit(written, t.dimension) or f.unit
+        return listed
     except ValueError as err:
         msg = str(err)
         raise ValueError(

@@ -15,11 +15,12 @@ from __future__ import annotations
 import functools
 import math
 import re
+from dataclasses import dataclass
 from typing import Annotated, Any
 
 import numpy as np
 import pint
-from pydantic import BeforeValidator, ValidationInfo, WithJsonSchema
+from pydantic import BeforeValidator, GetJsonSchemaHandler, ValidationInfo
 
 UREG: Any = pint.UnitRegistry()
 """The one unit registry of the product (creating a registry is slow, and quantities of two registries do
@@ -42,6 +43,8 @@ DIMENSIONS: dict[str, tuple[str, str, str]] = {
     "density": ("kg/m^3", "[mass]/[length]**3", "2700 kg/m^3"),
     "inertia": ("kg m^2", "[mass]*[length]**2", "1e4 kg m^2"),
     "force": ("N", "[mass]*[length]/[time]**2", "2 kN"),
+    "displacement_psd": ("m^2/Hz", "[length]**2*[time]", "1e-12 m^2/Hz"),
+    "velocity_psd": ("m^2/s^2/Hz", "[length]**2/[time]", "1e-10 m^2/s^2/Hz"),
     "angle": ("rad", "", "3 mrad"),
     "dimensionless": ("", "", "5 %"),
 }
@@ -290,15 +293,47 @@ def _validator(dimension: str):
     return BeforeValidator(parse)
 
 
-def _json_schema(dimension: str) -> WithJsonSchema:
-    unit, _, example = DIMENSIONS[dimension]
-    return WithJsonSchema(
-        {
+_NUMERIC_BOUNDS = {
+    "gt": "exclusiveMinimum",
+    "ge": "minimum",
+    "lt": "exclusiveMaximum",
+    "le": "maximum",
+    "exclusiveMinimum": "exclusiveMinimum",
+    "minimum": "minimum",
+    "exclusiveMaximum": "exclusiveMaximum",
+    "maximum": "maximum",
+}
+
+
+@dataclass(frozen=True)
+class QuantityJsonSchema:
+    """The JSON schema of a quantity of ``dimension``: a number (SI) or a string with units.
+
+    Besides ``anyOf`` number/string and a description, it carries ``x-dimension`` and ``x-unit`` (the SI
+    unit numbers are read in), and the numeric bounds of the field (``Field(gt=...)`` and the like) as
+    JSON Schema's ``exclusiveMinimum``/``minimum``/... at its top level, where they apply to numbers
+    only (a string is converted, then checked, by the validator)."""
+
+    dimension: str
+
+    def __get_pydantic_json_schema__(self, core_schema: Any, handler: GetJsonSchemaHandler) -> dict[str, Any]:
+        unit, _, example = DIMENSIONS[self.dimension]
+        number = handler(core_schema)  # the float's schema with its constraints: {"type": "number", "gt": 0}
+        out: dict[str, Any] = {
             "anyOf": [{"type": "number"}, {"type": "string"}],
-            "description": f"{dimension}: a number in SI ({unit or 'dimensionless'}) or a string with units, "
-            f"e.g. {example!r}",
+            "description": f"{self.dimension}: a number in SI ({unit or 'dimensionless'}) or a string with "
+            f"units, e.g. {example!r}",
+            "x-dimension": self.dimension,
+            "x-unit": unit,
         }
-    )
+        for key, value in number.items():
+            if key in _NUMERIC_BOUNDS:
+                out[_NUMERIC_BOUNDS[key]] = value
+        return out
+
+
+def _json_schema(dimension: str) -> QuantityJsonSchema:
+    return QuantityJsonSchema(dimension)
 
 
 def _quantity(dimension: str):
@@ -318,3 +353,74 @@ Density = _quantity("density")
 Inertia = _quantity("inertia")
 Angle = _quantity("angle")
 Dimensionless = _quantity("dimensionless")
+Force = _quantity("force")
+DisplacementPSD = _quantity("displacement_psd")
+VelocityPSD = _quantity("velocity_psd")
+
+
+# ------------------------------------------------------------------------------ units for people to read
+def unit_value(unit: str, dimension: str) -> float | None:
+    """What one ``unit`` is in the SI unit of ``dimension`` (``"g"``, acceleration -> 9.80665; ``"%"``,
+    dimensionless -> 0.01; ``"rad/s"``, frequency -> 1/(2 pi) Hz), or None when ``unit`` is not a
+    readable, positive multiple of that dimension. The SI unit itself (and ``""``/``"1"`` for a
+    dimensionless number) is 1."""
+    if dimension not in DIMENSIONS:
+        return None
+    if unit == DIMENSIONS[dimension][0] or (dimension == "dimensionless" and unit in ("", "1")):
+        return 1.0
+    try:
+        one = to_si(f"1 {unit}", dimension, "unit")
+    except ValueError:
+        return None
+    return one if math.isfinite(one) and one > 0.0 else None
+
+
+def written_unit(value: Any, dimension: str) -> str | None:
+    """The unit a quantity was written in (``"0.5 g"`` -> ``"g"``, ``"5 %"`` -> ``"%"``, ``"20 kN/m"`` ->
+    ``"kN/m"``), or None for a plain number (SI) or text that is not ``<number> <unit>`` with a unit of
+    ``dimension``."""
+    if not isinstance(value, str):
+        return None
+    simple = _simple_quantity(value.strip())
+    if simple is None:
+        return None
+    unit = " ".join(simple[1].split())
+    return unit if unit_value(unit, dimension) is not None else None
+
+
+# SI unit -> (smallest magnitude of the values, unit they are then shown in, its value in SI), largest first
+_READABLE: dict[str, tuple[tuple[float, str, float], ...]] = {
+    "m": ((1.0, "m", 1.0), (1e-3, "mm", 1e-3), (0.0, "um", 1e-6)),
+    "rad": ((1.0, "rad", 1.0), (1e-3, "mrad", 1e-3), (0.0, "urad", 1e-6)),
+    "N": ((1e6, "MN", 1e6), (1e3, "kN", 1e3), (0.0, "N", 1.0)),
+    "m/s": ((1.0, "m/s", 1.0), (1e-3, "mm/s", 1e-3), (0.0, "um/s", 1e-6)),
+}
+
+
+def readable_unit(si: str, values: Any) -> tuple[str, float]:
+    """The unit to show values in SI unit ``si`` in, chosen by their largest magnitude, and its value in
+    SI (shown = SI value / that): lengths in m, mm or um; angles in rad, mrad or urad; forces in N, kN or
+    MN; velocities in m/s, mm/s or um/s; SI when every value is zero or missing. Other units stay SI (``"1"``
+    and ``""`` shown as ``""``)."""
+    if si not in _READABLE:
+        return ("" if si in ("", "1") else si), 1.0
+    a = np.abs(np.asarray(values, dtype=np.float64))
+    a = a[np.isfinite(a)]
+    top = float(a.max()) if a.size else 0.0
+    if top == 0.0:  # nothing to size by (all zero or missing): SI
+        return si, 1.0
+    for least, unit, value in _READABLE[si]:
+        if top >= least:
+            return unit, value
+    return si, 1.0
+
+
+def shown_in(values: Any, si: str, unit: str) -> tuple[np.ndarray, str]:
+    """``values`` in SI unit ``si`` converted to ``unit`` (a unit of the same dimension, e.g. ``"g"`` for
+    m/s^2), and the unit they are then in: ``si`` itself when ``unit`` is empty or not of that dimension."""
+    v = np.asarray(values, dtype=np.float64)
+    dimension = dimension_of(si)
+    one = unit_value(unit, dimension) if unit and dimension is not None else None
+    if one is None:
+        return v, si
+    return v / one, unit

@@ -19,7 +19,7 @@ import numpy as np
 import scipy.linalg
 from numba import njit
 
-from isolab.engine.dynamics import _cross, lti_forcing, recorded_floor, stage_state
+from isolab.engine.dynamics import _cross, feedforward_generalised, lti_forcing, recorded_floor, stage_state
 
 NAME = "exact"
 LEVELS = ("lti",)
@@ -33,7 +33,14 @@ PREPARE_BLOCK = 256
 
 
 def _degree(P) -> int:
-    """Highest derivative of the forcing that can be non-zero within a piece."""
+    """Highest derivative of the forcing that can be non-zero within a piece (at least 1 with feedforward
+    actuators: their force enters each sub-step as a ramp, see :func:`_feedforward_ramp`)."""
+    if P.ffon:
+        return max(_polynomial_degree(P), 1)
+    return _polynomial_degree(P)
+
+
+def _polynomial_degree(P) -> int:
     if np.any(P.pj != 0.0):
         return 3
     if P.sm.shape[1]:
@@ -277,6 +284,26 @@ def next_split(ev, c, passed, t_end, tol):
     return t_end
 
 
+@njit(cache=True)
+def _feedforward_ramp(P, c, ta, tb, idx, W, Fv, sign):
+    """Add (``sign`` 1) or take back (-1) the feedforward actuators' generalised force as the ramp through
+    its values at ``ta`` and ``tb`` (s) to the forcing's ``F0``, ``F1``: a first-order hold over the
+    sub-step. The actuator force (a low-passed, clipped wrench) is not polynomial in time; this hold is
+    the exact integrator's one approximation, O(h^2) in the force. ``W.ffs`` (24,) keeps the forcing as it
+    was, restored bit for bit on the take-back."""
+    if sign < 0:
+        for i in range(12):
+            Fv[i] = W.ffs[12 + i]
+        return
+    feedforward_generalised(P, c, ta, idx, W, W.ffs, 0)
+    feedforward_generalised(P, c, tb, idx, W, W.ffs, 6)
+    for i in range(6):
+        W.ffs[6 + i] = (W.ffs[6 + i] - W.ffs[i]) / (tb - ta)
+    for i in range(12):
+        W.ffs[12 + i] = Fv[i]
+        Fv[i] += W.ffs[i]
+
+
 @njit(cache=True, inline="always")
 def step(P, c, ta, tb, t0, t1, fresh, passed, z, Fv, xn, idx, W, full, sub_b, sub_a, deg, osc_on):
     """Advance ``x`` (12,) exactly from ``ta`` to ``tb`` (s) inside the step ``[t0, t1]``.
@@ -289,16 +316,24 @@ def step(P, c, ta, tb, t0, t1, fresh, passed, z, Fv, xn, idx, W, full, sub_b, su
     """
     if tb < t1:
         _forcing_poly(P, c, ta, idx, W, deg, Fv)
+        if P.ffon:
+            _feedforward_ramp(P, c, ta, tb, idx, W, Fv, 1.0)
         _apply(sub_b[c, passed], z, osc_on, ta, P, c, xn)
+        if P.ffon:
+            _feedforward_ramp(P, c, ta, tb, idx, W, Fv, -1.0)
         z[:12] = xn
         return True
     split = ta > t0
     if split or fresh or P.ft.shape[0] > 0:
         _forcing_poly(P, c, ta, idx, W, deg, Fv)
+    if P.ffon:
+        _feedforward_ramp(P, c, ta, t1, idx, W, Fv, 1.0)
     if split:
         _apply(sub_a[c, passed - 1], z, osc_on, ta, P, c, xn)
     else:
         _apply(full[c], z, osc_on, ta, P, c, xn)
+    if P.ffon:
+        _feedforward_ramp(P, c, ta, t1, idx, W, Fv, -1.0)
     z[:12] = xn
     _shift(Fv, deg, t1 - ta)
     return True

@@ -195,10 +195,11 @@ async def get_case_plot(
     case: Annotated[int, PathParam(description="case number")],
     store: Store = Depends(study_store),
 ) -> Response:
-    """C.g. translation (mm), base rotation (mrad) and isolator forces per axis (N) against time, stacked."""
+    """C.g. translation, base rotation and isolator forces per axis against time, stacked (mm or um, mrad,
+    N or kN as the magnitude reads best); the title gives the case's parameters in the study's units."""
     study = await run_heavy(request, _case_study, store, study_id, case)
     h = await run_heavy(request, _history, study, case, 1)
-    params = ", ".join(f"{k}={plots.format_value(v)}" for k, v in h.parameters.items())
+    params = plots.parameters_text(h.parameters, study.design())
     title = f"{study.name} case {case}" + (f" ({params})" if params else "")
     png = await run_heavy(
         request, plots.case_png, h.time, h.displacement, h.rotation, h.isolator_force, h.isolator_names, title
@@ -232,7 +233,9 @@ async def get_study_plot(
     store: Store = Depends(study_store),
 ) -> Response:
     """A line per isolator type when the study varies it (one line otherwise) of ``y`` against ``x``;
-    with ``x2`` a heat map per isolator type. Sampled studies give scatter plots."""
+    with ``x2`` a heat map per isolator type. Sampled studies give scatter plots. Parameters are drawn in
+    the unit the study was written in (on a log axis for a log-scaled range), outputs in mm, um, kN or
+    mrad as their magnitude reads best."""
     row = await run_in_threadpool(study_row, store, study_id)
     require_done(row)
     table = await run_in_threadpool(case_table_of, store, study_id)
@@ -259,9 +262,9 @@ async def get_study_plot(
     png = await run_heavy(
         request,
         plots.study_png,
-        y=plots.Series(y, table.data[y], table.units[y]),
-        x=plots.Series(x, table.data[x], table.units[x]),
-        x2=plots.Series(x2, table.data[x2], table.units[x2]) if x2 else None,
+        y=plots.series(table, y),
+        x=plots.series(table, x),
+        x2=plots.series(table, x2) if x2 else None,
         group=plots.Series(group, table.data[group], "") if group else None,
         sampled=table.design_kind == "sampled",
         reduce=how,

@@ -106,6 +106,8 @@ def summary(row: dict[str, Any]) -> dict[str, Any]:
         "fidelity": row["fidelity"],
         "integrator": row["integrator"],
         "dt": row["dt"],
+        "generation": row.get("generation"),
+        "generations": row.get("generations"),
         "links": links(row["id"]),
     }
 
@@ -184,7 +186,7 @@ def accept_study(
         study = check_definition(definition, settings.max_cases)
     except DefinitionError as err:
         raise unprocessable(err.details) from None
-    n_cases = int(study.n_cases)
+    n_cases = int(study.planned_cases)  # an optimize design: its budget
     sim = study.simulation
     study_id = store.create(
         stored_definition(study),

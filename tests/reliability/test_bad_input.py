@@ -619,6 +619,7 @@ NON_FINITE_BODIES: list[tuple[str, str, list]] = [
         '{"scene": {}, "isolator_types": ["air"], "simulation": {"dt": -Infinity}}',
         ["body", "simulation", "dt"],
     ),
+    ("/comparisons/floor.png", '{"scene": {}, "point": NaN}', ["body", "point"]),
     ("/studies", "NaN", ["body"]),
     ("/studies", "[NaN]", ["body", 0]),
     ("/studies", '{"name": "x", "scene": Infinity}', ["body", "scene"]),

@@ -69,6 +69,7 @@ CHECKED_BEYOND_THE_SCHEMA = [
     ("GET", r"^/studies/\{study_id\}/cases$"),
     ("GET", r"^/studies/\{study_id\}/plot\.png$"),
     ("GET", r"^/studies/\{study_id\}/cases/\{case\}/timeseries$"),
+    ("GET", r"^/studies/\{study_id\}/sensitivity(\.png)?$"),
 ]
 
 

@@ -48,6 +48,20 @@ ROUTES: dict[tuple[str, str], dict[str, Any]] = {
         "params": {"y": "peak_displacement_y", "x": "isolator_type"},
     },
     ("POST", "/comparisons"): {"status": 200, "json": EXAMPLE_COMPARISON},
+    ("POST", "/comparisons/floor.png"): {
+        "status": 200,
+        "json": {
+            **EXAMPLE_COMPARISON,
+            "scene": {**EXAMPLE_COMPARISON["scene"], "floor": {"spectrum": {"z": "VC-D"}}},
+            "point": "tool",
+        },
+    },
+    # the guarded study has two cases, too few for an index: answered (422, naming the output) with the token
+    ("GET", "/studies/{study_id}/sensitivity"): {"status": 422, "params": {"output": "peak_displacement.y"}},
+    ("GET", "/studies/{study_id}/sensitivity.png"): {
+        "status": 422,
+        "params": {"output": "peak_displacement.y"},
+    },
     ("POST", "/calibrations"): {"status": 200, "json": EXAMPLE_CALIBRATION},
     ("DELETE", "/studies/{study_id}"): {"status": 204},
     ("GET", "/examples"): {"status": 200},

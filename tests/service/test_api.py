@@ -151,17 +151,22 @@ def test_dataset_numbers_equal_a_direct_engine_run(dataset: xr.Dataset) -> None:
     )
     np.testing.assert_allclose(cell.natural_frequency.values, direct.natural_frequency[0], rtol=1e-12)
     assert float(cell.settling_time) == pytest.approx(float(direct.settling_time[0]), rel=1e-9)
-    # physics: the stiffer the isolator, the less the base moves under the stage's inertial force
+    # physics: of the passive mounts, the stiffer moves less under the stage's inertial force; the active
+    # ones, softest of all, move less than air mounts because they feed that force forward
     y = dataset.peak_displacement.sel(axis="y", stage_y_acceleration=2 * G)
-    assert (
-        float(y.sel(isolator_type="elastomer"))
-        < float(y.sel(isolator_type="air"))
-        < float(y.sel(isolator_type="active"))
-    )
+    assert float(y.sel(isolator_type="elastomer")) < float(y.sel(isolator_type="air"))
+    assert float(y.sel(isolator_type="active")) < float(y.sel(isolator_type="air"))
     # the heave mode of mounts tuned to one frequency sits at the preset's vertical frequency
     for kind, fz in (("active", 1.0), ("air", 3.0), ("elastomer", 10.0)):
         f = dataset.natural_frequency.sel(isolator_type=kind, stage_y_acceleration=G).values
         assert np.min(np.abs(f - fz)) < 1e-6 * fz, (kind, f)
+
+
+def test_parameters_carry_the_unit_they_were_written_in(dataset: xr.Dataset) -> None:
+    acc = dataset.stage_y_acceleration
+    assert acc.attrs["units"] == "m/s^2" and acc.attrs["display_units"] == "g"  # written "1 g", "2 g"
+    assert acc.attrs["scale"] == "linear" and acc.values.tolist() == [G, 2 * G]
+    assert "display_units" not in dataset.isolator_type.attrs  # text: nothing to convert
 
 
 # ------------------------------------------------------------------------------------------ cases
@@ -226,8 +231,10 @@ def test_cases_filter_sort_columns_and_csv(http: TestClient, grid: dict) -> None
     )
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/csv")
     table = list(csv.DictReader(io.StringIO(r.text)))
+    # the header carries each column's SI unit; the JSON answer keeps bare names and its units map
+    assert list(table[0]) == ["case", "isolator_type", "peak_displacement_y [m]", "liftoff_any"]
     assert [int(row["case"]) for row in table] == list(range(6))
-    assert [float(row["peak_displacement_y"]) for row in table] == [y[c] for c in range(6)]
+    assert [float(row["peak_displacement_y [m]"]) for row in table] == [y[c] for c in range(6)]
     assert {row["liftoff_any"] for row in table} <= {"true", "false"}
 
 
@@ -308,13 +315,15 @@ def test_timeseries_recomputes_the_case(
     assert t[0] == 0.0 and t[-1] == pytest.approx(2.0) and np.allclose(np.diff(t), 0.002)
     cell = dataset.sel(isolator_type="air", stage_y_acceleration=2 * G)
     for k, axis in enumerate("xyz"):
+        # the stored peak is the extremum between output samples too: the samples reach it within 0.5 %
         trace = np.abs(np.array(body["displacement"][axis]))
-        assert trace.max() == pytest.approx(float(cell.peak_displacement[k]), rel=1e-9, abs=1e-15)
+        peak = float(cell.peak_displacement[k])
+        assert peak * (1 - 5e-3) - 1e-15 <= trace.max() <= peak * (1 + 1e-12) + 1e-15
     assert sorted(body["isolator_force"]) == ["mount_0", "mount_1", "mount_2", "mount_3"]
     fz = np.array([body["isolator_force"][m]["z"] for m in sorted(body["isolator_force"])])
-    np.testing.assert_allclose(
-        np.abs(fz).max(axis=1), cell.peak_isolator_force.sel(axis="z").values, rtol=1e-9
-    )
+    peak_fz = cell.peak_isolator_force.sel(axis="z").values
+    assert (np.abs(fz).max(axis=1) <= peak_fz * (1 + 1e-12)).all()
+    np.testing.assert_allclose(np.abs(fz).max(axis=1), peak_fz, rtol=5e-3)
     assert list(body["point_displacement"]) == ["tool"]
     # the stage profile on the same time axis, the modes and the settling of the same run
     accel = np.array(body["stages"]["y"]["acceleration"])
@@ -357,8 +366,9 @@ def test_a_study_asking_for_an_accuracy_recomputes_its_cases_with_the_chosen_mod
     assert body["status"] == "ok", body["message"]
     t = np.array(body["time"])
     assert np.allclose(np.diff(t), info["dt"])
-    # the recomputed trace is the stored case: same model, same step, same peak
-    assert np.abs(body["displacement"]["y"]).max() == pytest.approx(peak_y, rel=1e-9)
+    # the recomputed trace is the stored case: same model, same step; its samples reach the stored peak
+    # (an extremum between samples) within 0.5 %
+    assert peak_y * (1 - 5e-3) <= np.abs(body["displacement"]["y"]).max() <= peak_y * (1 + 1e-12)
     # a comparison asking for an accuracy reports and runs the model chosen for it
     r = http.post("/comparisons", json={"scene": s, "isolator_types": ["air", "elastomer"]})
     assert r.status_code == 200, r.text

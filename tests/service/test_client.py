@@ -137,10 +137,24 @@ def test_cases_status_list_and_timeseries(url: str, done: dict) -> None:
 
 def test_compare(url: str) -> None:
     with Client(url) as api:
-        body = api.compare(EXAMPLE_SCENE, types=["elastomer", "active"], simulation={"duration": "1 s"})
-    assert body["isolator_types"] == ["elastomer", "active"]
-    assert body["best"]["natural_frequency_1"] == "active"
-    assert body["best"]["peak_displacement_y"] == "elastomer"
+        scene = {**EXAMPLE_SCENE, "criteria": {"tool": {"displacement": "2 mm"}}}
+        df = api.compare(scene, types=["elastomer", "active"], simulation={"duration": "1 s"})
+    assert list(df.index) == ["elastomer", "active"]
+    assert df.attrs["best"]["natural_frequency_1"] == "active"
+    assert df.attrs["best"]["peak_displacement_y"] == "elastomer"
+    assert df.attrs["units"]["peak_displacement_y"] == "m"
+    # one table of types x criteria, and one recommendation: the stiff elastomer mounts move least
+    assert df.at["elastomer", "peak_displacement_y"] < df.at["active", "peak_displacement_y"]
+    tool = df[
+        ["peak_point_displacement_tool_x", "peak_point_displacement_tool_y", "peak_point_displacement_tool_z"]
+    ]
+    assert df["margin_tool_displacement"].to_numpy() == pytest.approx(1 - tool.max(axis=1).to_numpy() / 2e-3)
+    meets = df["meets_criteria"].to_dict()
+    rec = df.attrs["recommendation"]
+    assert rec["isolator_type"] == (
+        "elastomer" if meets["elastomer"] else "active" if meets["active"] else None
+    )
+    assert rec["cost_order"] == ["elastomer", "active"]
 
 
 def test_errors_carry_the_server_message(url: str, study_file: Path) -> None:

@@ -41,6 +41,9 @@ def fake_result(types: list[str], masses: np.ndarray, status: np.ndarray | None 
         final_displacement=base[:, None] * np.array([0.0, 0.1, -0.2, 1e3, 0.0, 0.0]),
         settling_time=1.0 / fn,
         settled=fn > 2.0,
+        point_settling_time=np.outer(1.0 / fn, np.arange(1, p + 1)),
+        peak_isolator_deflection=m[:, None, None] * np.arange(1, n * 3 + 1).reshape(n, 3) * 1e-9,
+        max_isolator_load=static + m[:, None] * fn[:, None] * 0.5,
         natural_frequency=fn[:, None] * np.array([1.0, 1.1, 1.2, 1.5, 1.7, 2.0]),
         damping_ratio=np.full((c, 6), 0.05),
         mode_energy=np.tile(np.eye(6), (c, 1, 1)),
@@ -151,6 +154,34 @@ def test_every_variable_and_coordinate_has_units_and_long_name() -> None:
     assert ds.peak_isolator_force.attrs["units"] == "N"
     assert ds.natural_frequency.attrs["units"] == "Hz"
     assert ds.settling_time.attrs["units"] == "s"
+
+
+def test_settling_per_point_mount_deflection_and_largest_load_are_stored_and_tabled() -> None:
+    from isolab.studies.cases import case_table
+
+    design, t, m = grid_design()
+    res = fake_result(t, m, np.array([OK, UNSTABLE, OK, OK, OK, OK], dtype=np.int8))
+    ds = to_dataset(res, design, isolator_names=ISOLATORS, point_names=POINTS, attrs={})
+    assert ds.point_settling_time.dims == ("isolator_type", "stage_y_mass", "point")
+    assert ds.peak_isolator_deflection.dims == ("isolator_type", "stage_y_mass", "isolator", "axis")
+    assert ds.max_isolator_load.dims == ("isolator_type", "stage_y_mass", "isolator")
+    units = {"point_settling_time": "s", "peak_isolator_deflection": "m", "max_isolator_load": "N"}
+    for name, unit in units.items():
+        assert ds[name].attrs["units"] == unit and ds[name].attrs["long_name"]
+    table = case_table(ds)
+    # case 0: active, 500 kg; its columns are the worst isolator, or one point
+    np.testing.assert_allclose(table.data["point_settling_time_camera"][0], 2.0 / FN["active"])
+    np.testing.assert_allclose(table.data["peak_isolator_deflection_z"][0], 500.0 * 12 * 1e-9)
+    np.testing.assert_allclose(table.data["max_isolator_load_max"][0], res.max_isolator_load[0].max())
+    np.testing.assert_allclose(table.data["max_isolator_load_rear_left"][2], res.max_isolator_load[2, 2])
+    np.testing.assert_allclose(table.data["peak_isolator_deflection_front_right_y"][2], 500.0 * 5 * 1e-9)
+    for col in ("point_settling_time_tool", "peak_isolator_deflection_x", "max_isolator_load_max"):
+        assert col in table.default and np.isnan(table.data[col][1])  # case 1 is unstable: missing
+    assert "max_isolator_load_front_left" not in table.default
+    assert "peak_isolator_deflection_front_left_z" not in table.default
+    # a dataset stored before these outputs existed still tables
+    old = case_table(ds.drop_vars(list(units)))
+    assert "max_isolator_load_max" not in old.data and "point_settling_time_tool" not in old.data
 
 
 def test_sampled_design_has_a_case_dimension_with_parameter_coordinates() -> None:
