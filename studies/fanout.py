@@ -61,6 +61,7 @@ import time
 import uuid
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -399,7 +400,7 @@ def run_chunks(
 
     def submit(reserved: bool):
         k = waiting.pop()
-        args = [definition_json, np.asarray(chunks[k], dtype=np.int64)]
+        args: list[Any] = [definition_json, np.asarray(chunks[k], dtype=np.int64)]
         if store_target is not None:
             args += [str(store_target[0]), str(store_target[1]), k]
         fut = client.submit(
