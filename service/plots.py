@@ -404,6 +404,20 @@ def _edges(centres: np.ndarray, log: bool = False) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------------ floor spectra
+def _label_line(ax: Any, name: str, x: float, y: float, color: str) -> None:
+    """Name a criterion line at its right end (``x``, ``y`` in data units), outside the axes if need be."""
+    ax.annotate(
+        name,
+        (x, y),
+        xytext=(3, 0),
+        textcoords="offset points",
+        va="center",
+        fontsize="x-small",
+        color=color,
+        annotation_clip=False,
+    )
+
+
 def floor_velocity_png(spectra: dict[str, Any], title: str = "") -> bytes:
     """One-third-octave RMS velocity of a point per floor axis (a panel each), one stepped line per
     isolator type, the floor's own spectrum dashed, against the VC curves (and the ISO workshop and office
@@ -433,16 +447,7 @@ def floor_velocity_png(spectra: dict[str, Any], title: str = "") -> bytes:
         for name, level in VC_LEVELS.items():
             ax.hlines(level * um, lo_vc, hi_vc, colors="0.6", linewidth=0.8)
             if k == 2:
-                ax.annotate(
-                    name,
-                    (hi_vc, level * um),
-                    xytext=(3, 0),
-                    textcoords="offset points",
-                    va="center",
-                    fontsize="x-small",
-                    color="0.4",
-                    annotation_clip=False,
-                )
+                _label_line(ax, name, hi_vc, level * um, "0.4")
         for name, level in ISO_LEVELS.items():
             if level * um > top:
                 continue
@@ -455,16 +460,7 @@ def floor_velocity_png(spectra: dict[str, Any], title: str = "") -> bytes:
                 linestyles="dotted",
             )
             if k == 2:
-                ax.annotate(
-                    name,
-                    (hi_vc, level * um),
-                    xytext=(3, 0),
-                    textcoords="offset points",
-                    va="center",
-                    fontsize="x-small",
-                    color="0.5",
-                    annotation_clip=False,
-                )
+                _label_line(ax, name, hi_vc, level * um, "0.5")
         if np.any(floor[k] > 0):
             ax.stairs(
                 np.where(floor[k] > 0, floor[k] * um, np.nan),

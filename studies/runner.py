@@ -59,7 +59,7 @@ from isolab.studies.accuracy import (
 from isolab.studies.costs import estimate_seconds_per_case
 from isolab.studies.criteria import add_criteria
 from isolab.studies.dataset import add_error_estimate, failures, from_chunks, to_dataset
-from isolab.studies.fanout import TASK_RETRIES, choose_chunk_size, plan_chunks, run_chunks
+from isolab.studies.fanout import TASK_RETRIES, choose_chunk_size, plan_chunks, run_chunks, worker_threads
 from isolab.studies.optimisation import run_optimisation
 from isolab.studies.store import Store, StoreFull, copy_atomic, is_no_space, utc_now
 from isolab.studies.study import isolator_names, study_from_json
@@ -67,15 +67,6 @@ from isolab.studies.study import isolator_names, study_from_json
 log = logging.getLogger(__name__)
 
 Progress = Callable[[int, int], None]
-
-
-def _worker_count(client: Any) -> int:
-    try:
-        info = client.scheduler_info()
-        threads = sum(int(w.get("nthreads", 1)) for w in info.get("workers", {}).values())
-        return max(1, threads)
-    except Exception:  # a client without a live scheduler: size for one worker
-        return 1
 
 
 def study_labels(study: Any) -> tuple[list[str], list[str]]:
@@ -174,13 +165,13 @@ def run_study(
         if study.goals is not None:  # optimize: the optimiser picks the cases, a generation at a time
             model = {"engine_version": engine_version, **choice.attrs(), "auto_step": bool(sim.auto_step)}
             return run_optimisation(
-                study, run_json, store, client, study_id, model, _worker_count(client), progress, cancel
+                study, run_json, store, client, study_id, model, worker_threads(client), progress, cancel
             )
         chunks = store.load_chunk_plan(study_id)
         if chunks is None or int(sum(len(c) for c in chunks)) != n_cases:
             store.clear_chunks(study_id)
             size = chunk_size or choose_chunk_size(
-                n_cases, _worker_count(client), estimate_seconds_per_case(run)
+                n_cases, worker_threads(client), estimate_seconds_per_case(run)
             )
             chunks = plan_chunks(n_cases, size)
             store.save_chunk_plan(study_id, chunks)
