@@ -61,6 +61,7 @@ test-fast: $(TEST_STAMP)
 bench: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m benchmarks kernels
 	$(PY) -m benchmarks endtoend
+	$(PY) -m benchmarks million
 
 # Load on a real `isolab serve`: 50 clients and a 100,000-case study on loopback; stops within 2 minutes.
 load: $(STAMP)

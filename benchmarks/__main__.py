@@ -1,14 +1,15 @@
-"""``python -m benchmarks [pairs|kernels|accuracy|endtoend] ...``: run the benchmarks and print their figures."""
+"""``python -m benchmarks [pairs|kernels|accuracy|endtoend|million] ...``: run the benchmarks and print their figures."""
 
 import sys
 
-from benchmarks import accuracy, endtoend, kernels, pairs
+from benchmarks import accuracy, endtoend, kernels, million, pairs
 
 COMMANDS = {
     "pairs": pairs.main,
     "kernels": kernels.main,
     "accuracy": accuracy.main,
     "endtoend": endtoend.main,
+    "million": million.main,
 }
 
 if __name__ == "__main__":

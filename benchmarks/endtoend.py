@@ -16,7 +16,7 @@ a small warm-up study first (the workers load the compiled kernels), then Latin 
   against 2 GB, and that the stored dataset holds no time histories;
 * the single-core kernel throughput on the same scene and settings, measured just before the study in a
   child process with BLAS limited to one thread (as the Dask workers run), batched like the workers
-  (``ENGINE_BATCH_CASES``), and the ratio of end-to-end throughput to twice that (target >= 80 %);
+  (``ENGINE_BATCH_CASES``), and the ratio of end-to-end throughput to twice that (target >= 85 % at 10,000 cases, >= 90 % at 100,000);
 * the CPU other jobs took on the machine meanwhile (the machine may be shared).
 """
 
@@ -45,7 +45,15 @@ ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "studies" / "examples" / "lhs-10000.yaml"
 GB = 1e9
 MEMORY_LIMIT = 2 * GB
-RATIO_TARGET = 0.80
+RATIO_TARGETS = {10_000: 0.85, 100_000: 0.90}
+"""End-to-end throughput over twice the single-core kernel's, by study size (the nearest size's applies)."""
+
+
+def ratio_target(n_cases: int) -> float:
+    """The target ratio for a study of ``n_cases``: that of the nearest listed size."""
+    return RATIO_TARGETS[min(RATIO_TARGETS, key=lambda n: abs(np.log(n / max(n_cases, 1))))]
+
+
 SAMPLE_SECONDS = 0.2
 ONE_THREAD = {
     "OMP_NUM_THREADS": "1",
@@ -483,10 +491,11 @@ def print_run(run: StudyRun, n_workers: int, duration: float) -> None:
         f"wall ({1 / k['wall_per_case']:.1f} cases/s), {k['cpu_per_case'] * 1e3:.3f} ms/case CPU"
     )
     ratio = run.ratio(n_workers)
-    verdict = "meets" if ratio >= RATIO_TARGET else "MISSES"
+    target = ratio_target(run.n_cases)
+    verdict = "meets" if ratio >= target else "MISSES"
     print(
         f"end to end / ({n_workers} x single-core kernel) = {ratio * 100:.1f} %  ({verdict} the "
-        f"{RATIO_TARGET * 100:.0f} % target)"
+        f"{target * 100:.0f} % target)"
     )
     if run.workers:
         print(

@@ -23,6 +23,8 @@ from isolab.studies.study import load_scene, scene_batch
 
 DURATION = 5.0
 DT = 1e-3
+TARGET_NS = {("lti", "exact"): 100, ("ltv", "rk4"): 800, ("nonlinear", "rk4"): 800}
+"""Targets, ns per step per case on the largest batch."""
 PAIRS = [pair for pair in pairs.PAIRS if pair[1] != "reference"]
 """The fixed-step pairs of ``benchmarks.pairs`` (the reference is timed against, not as a kernel)."""
 
@@ -165,6 +167,7 @@ def main(argv: list[str]) -> None:
         f"{'fidelity':10s} {'integrator':10s} {'cases':>6s} {'ms/case':>9s} {'cases/s':>9s} {'ns/step':>8s}"
     )
     per_case = {}
+    ns_step = {}
     for fid, integ in PAIRS:
         simulate(one, fid, integ, DT)  # compile, warm up
         for n in (1, 100, a.big if (fid, integ) == ("lti", "exact") else a.others):
@@ -173,6 +176,7 @@ def main(argv: list[str]) -> None:
                 lambda b=b, fid=fid, integ=integ: simulate(b, fid, integ, DT), a.repeat if n <= 100 else 1
             )
             per_case[(fid, integ, n)] = t / n
+            ns_step[(fid, integ)] = t / n / n_steps * 1e9
             print(
                 f"{fid:10s} {integ:10s} {n:6d} {t / n * 1e3:9.3f} {n / t:9.1f} {t / n / n_steps * 1e9:8.0f}"
             )
@@ -202,6 +206,17 @@ def main(argv: list[str]) -> None:
     print(
         f"scipy solve_ivp RK45 (one case):  {t_ivp * 1e3:9.1f} ms/case   batched exact is {t_ivp / batched:7.0f}x faster"
     )
+    print()
+    print("targets (largest batch of each pair):")
+    for (fid, integ), limit in TARGET_NS.items():
+        got = ns_step[(fid, integ)]
+        print(
+            f"  {fid}/{integ}: {got:6.0f} ns/step  (target <= {limit} ns: {'met' if got <= limit else 'MISSED'})"
+        )
+    for what, got, want in (("numpy loop", t_np / batched, 50), ("solve_ivp", t_ivp / batched, 200)):
+        print(
+            f"  batched exact vs {what}: {got:6.0f}x  (target >= {want}x: {'met' if got >= want else 'MISSED'})"
+        )
     flops = exact_flops_per_step(P)
     mhz = cpu_mhz()
     achieved = flops * n_steps / batched

@@ -14,7 +14,7 @@ from numba.experimental import structref
 from isolab.engine.dynamics import KernelWork, Params, WorkType, feedforward_transients, kernel_struct
 from isolab.engine.scene import SceneBatch
 
-_WORK_FIELDS = "rho vr ar jr xf vf acc f M R F x1 k1 k2 Fa ffx ffy ffs"
+_WORK_FIELDS = "rho vr ar jr xf vf acc f M R F x1 k1 k2 Fa ffx ffy ffs key tc cc cs cm cK sw"
 Work = namedtuple("Work", _WORK_FIELDS.split())
 structref.define_proxy(KernelWork, WorkType, list(Work._fields))
 
@@ -317,7 +317,8 @@ def _params(b: SceneBatch) -> Params:
 
 
 def work(b: SceneBatch) -> Work:
-    """Scratch arrays for one case at a time."""
+    """Scratch arrays for one case at a time. They keep terms of the ``Params`` they serve (packed per
+    case, per time; ``engine.dynamics.time_terms``): one ``Work`` serves one ``Params``."""
     m, n = b.n_stages, b.n_isolators
     return Work(
         rho=np.zeros((m, 3)),
@@ -338,4 +339,13 @@ def work(b: SceneBatch) -> Work:
         ffx=np.zeros((8, 6)),
         ffy=np.zeros(6),
         ffs=np.zeros(24),
+        # the accelerations' time-only terms and their key (case, level, time, mass matrix positive
+        # definite, pieces; case -1: none yet), and the packed case (``engine.dynamics.time_terms``)
+        key=np.concatenate([[-1.0, -1.0, np.nan, 0.0], np.zeros(m)]),
+        tc=np.zeros((21, 3)),
+        cc=np.concatenate([[-1.0], np.zeros(21)]),
+        cs=np.zeros((m, 8 + 5 * b.prof_t.shape[-1])),
+        cm=np.zeros((n, 11)),
+        cK=np.zeros((12, 6)),
+        sw=np.zeros((m, 9)),
     )

@@ -16,18 +16,25 @@ Yes/no outputs (``liftoff``, ``settled``, ``mechanism``) are float32 in memory (
 missing) and int8 with ``_FillValue`` -1 on disk, so they too can be missing.
 
 Results that arrive in chunks (see :mod:`studies.fanout`) travel as plain dicts of numpy arrays
-(:func:`result_arrays`) and are put back together in case order by :func:`from_chunks`.
+(:func:`result_arrays`) and are put back together in case order by :func:`from_chunks`, or, for a study's
+stored dataset, read one block of chunks at a time as the file is written (:func:`streamed_dataset`: the
+same dataset, whose memory does not grow with the number of cases).
 """
 
 from __future__ import annotations
 
 import datetime as _dt
 import json
-from collections.abc import Mapping, Sequence
+import operator
+import threading
+import uuid
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+import dask.array as da
 import numpy as np
 import xarray as xr
+from dask.highlevelgraph import HighLevelGraph
 
 from isolab.engine.results import (
     AXES,
@@ -105,6 +112,9 @@ _VARIABLES: dict[str, tuple[tuple[str, ...], str, str, str]] = {
 }
 
 _BOOL_ENCODING = {"dtype": "int8", "_FillValue": np.int8(-1)}
+BLOCK_CASES = 4096
+"""Fewest cases a block of :func:`streamed_dataset` holds (consecutive chunks are read together up to it),
+so that the file's chunks (one per block) stay large enough to compress and read well."""
 _BOOL_FLAGS = {"flag_values": np.array([0, 1], dtype=np.int8), "flag_meanings": "false true"}
 
 
@@ -172,25 +182,54 @@ def from_chunks(
 
     for k, idx in enumerate(chunks):
         idx = np.asarray(idx, dtype=np.int64)
-        arrays = parts[k]
-        st = np.asarray(arrays["status"], dtype=np.int8)
-        if st.shape != (len(idx),):
-            raise ValueError(
-                f"parts[{k}]: status has {st.shape[0] if st.ndim else 0} cases, the chunk has {len(idx)}"
-            )
-        if "indices" in arrays and not np.array_equal(np.asarray(arrays["indices"]), idx):
-            raise ValueError(f"parts[{k}]: computed for other cases than chunk {k} holds")
-        status[idx] = st
-        for i, m in zip(idx, np.asarray(arrays["message"]).reshape(-1).tolist(), strict=True):
-            message[int(i)] = str(m)
+        part = chunk_result(parts[k], idx, n_isolators=n_isolators, n_points=n_points, chunk_index=k)
+        status[idx] = part.status
+        for i, m in zip(idx.tolist(), part.message, strict=True):
+            message[i] = m
         for name in OUTPUT_FIELDS:
-            if name in arrays:
-                v = np.asarray(arrays[name])
-                want = (len(idx), *output_shape(name, n_isolators, n_points))
-                if v.shape != want:
-                    raise ValueError(f"parts[{k}]: {name} has shape {v.shape}, expected {want}")
-                fields[name][idx] = v
+            if name in parts[k]:
+                fields[name][idx] = getattr(part, name)
     return SimulationResult(status=status, message=message, **fields)  # type: ignore[arg-type]
+
+
+def chunk_result(
+    arrays: Mapping[str, np.ndarray],
+    indices: np.ndarray,
+    *,
+    n_isolators: int,
+    n_points: int,
+    chunk_index: int = 0,
+) -> SimulationResult:
+    """One chunk's result from its arrays (as from :func:`result_arrays`), for the cases ``indices``; an
+    output the arrays lack is missing (NaN, or False for yes/no; the chunk's status is then not OK).
+
+    Raises:
+        ValueError: the arrays do not match the chunk's size, or were computed for other cases
+            (``parts[<chunk_index>]: ...``).
+    """
+    k = chunk_index
+    idx = np.asarray(indices, dtype=np.int64)
+    st = np.asarray(arrays["status"], dtype=np.int8)
+    if st.shape != (len(idx),):
+        raise ValueError(
+            f"parts[{k}]: status has {st.shape[0] if st.ndim else 0} cases, the chunk has {len(idx)}"
+        )
+    if "indices" in arrays and not np.array_equal(np.asarray(arrays["indices"]), idx):
+        raise ValueError(f"parts[{k}]: computed for other cases than chunk {k} holds")
+    fields: dict[str, np.ndarray] = {}
+    for name in OUTPUT_FIELDS:
+        want = (len(idx), *output_shape(name, n_isolators, n_points))
+        if name in arrays:
+            v = np.asarray(arrays[name])
+            if v.shape != want:
+                raise ValueError(f"parts[{k}]: {name} has shape {v.shape}, expected {want}")
+            fields[name] = v.astype(bool if name in FLAG_FIELDS else np.float64, copy=False)
+        else:
+            fields[name] = np.zeros(want, dtype=bool) if name in FLAG_FIELDS else np.full(want, np.nan)
+    message = [str(m) for m in np.asarray(arrays["message"]).reshape(-1).tolist()]
+    if len(message) != len(idx):
+        raise ValueError(f"parts[{k}]: message has {len(message)} cases, the chunk has {len(idx)}")
+    return SimulationResult(status=st, message=message, **fields)  # type: ignore[arg-type]
 
 
 # -------------------------------------------------------------------------------------------- dataset
@@ -247,6 +286,26 @@ def to_dataset(
             f"point_names: {n_pts} names for {np.shape(result.peak_point_displacement)[1]} "
             "points in the result"
         )
+    _check_parameter_names(design)
+
+    case_dims, case_coords, order = _case_layout(design)
+    case_shape = tuple(len(case_coords[d][1]) for d in case_dims) if design.kind == "grid" else (n,)
+
+    def lay_out(a: np.ndarray) -> np.ndarray:
+        a = np.asarray(a)
+        return a[order].reshape(case_shape + a.shape[1:])
+
+    data_vars = _case_variables(result, case_dims, lay_out)
+    coords: dict[str, xr.Variable] = {
+        name: xr.Variable(dims, values, attrs=a) for name, (dims, values, a) in case_coords.items()
+    }
+    coords.update(_fixed_coords(isolator_names, point_names))
+    ds = xr.Dataset(data_vars, coords=coords)
+    ds.attrs = _dataset_attrs(design, attrs or {})
+    return ds
+
+
+def _check_parameter_names(design: Design) -> None:
     reserved = set(_VARIABLES) | {
         "status",
         "message",
@@ -262,13 +321,197 @@ def to_dataset(
         if name in reserved:
             raise ValueError(f"design.names: parameter {name!r} clashes with a dataset dimension or variable")
 
+
+def chunk_dataset(
+    arrays: Mapping[str, np.ndarray],
+    indices: np.ndarray,
+    *,
+    isolator_names: Sequence[str],
+    point_names: Sequence[str],
+    criteria: Any = None,
+    chunk_index: int = 0,
+) -> xr.Dataset:
+    """One chunk's cases as a dataset along a ``case`` dimension (no case coordinates, no dataset
+    attributes): every per-case variable :func:`to_dataset` stores, with the same values, attributes and
+    encodings, plus ``criterion_margin`` and ``meets_criteria`` for a ``criteria`` block
+    (:func:`studies.criteria.add_criteria`). ``arrays`` and ``indices`` are as :func:`chunk_result`
+    takes them."""
+    from isolab.studies.criteria import add_criteria
+
+    result = chunk_result(
+        arrays,
+        indices,
+        n_isolators=len(isolator_names),
+        n_points=len(point_names),
+        chunk_index=chunk_index,
+    )
+    ds = xr.Dataset(
+        _case_variables(result, ("case",), np.asarray), coords=_fixed_coords(isolator_names, point_names)
+    )
+    return add_criteria(ds, criteria)
+
+
+def streamed_dataset(
+    load_chunk: Callable[[int], Mapping[str, np.ndarray]],
+    chunks: Sequence[np.ndarray],
+    design: Design,
+    *,
+    isolator_names: Sequence[str],
+    point_names: Sequence[str],
+    attrs: Mapping[str, Any] | None = None,
+    criteria: Any = None,
+) -> xr.Dataset:
+    """A study's dataset whose per-case variables are read from its chunks only when they are computed.
+
+    Equal to ``add_criteria(to_dataset(from_chunks(...), design, ...), criteria)`` (see :func:`to_dataset`,
+    :func:`studies.criteria.add_criteria`), but every per-case variable is a dask array with one block per
+    chunk: ``load_chunk(k)`` gives the arrays of the cases ``chunks[k]`` (as :func:`from_chunks` takes
+    them) when a block of chunk ``k`` is computed, and only the last chunk read is kept. Written with
+    :func:`studies.store.write_netcdf`, each chunk's slice goes into the file as it is read, so the
+    memory the write takes does not grow with the number of cases. The coordinates and attributes are
+    built at once (the parameter values of every case: 8 bytes a case per numeric parameter).
+
+    Raises:
+        ValueError: the chunks do not partition the design's cases, or a parameter name clashes with a
+            dimension or variable name. A chunk whose arrays do not fit raises when it is read.
+    """
+    n = int(sum(len(c) for c in chunks))
+    if design.n_cases != n:
+        raise ValueError(f"chunks: {n} cases, but the design has {design.n_cases}")
+    all_idx = np.concatenate([np.asarray(c, dtype=np.int64) for c in chunks]) if chunks else np.zeros(0, int)
+    if not np.array_equal(np.sort(all_idx), np.arange(n)):
+        raise ValueError("chunks: the chunks must cover the cases 0..N-1 exactly once")
+    del all_idx
+    _check_parameter_names(design)
     case_dims, case_coords, order = _case_layout(design)
     case_shape = tuple(len(case_coords[d][1]) for d in case_dims) if design.kind == "grid" else (n,)
+    # case order along the blocks: the chunks' own order, put in the design's case order when they are
+    # not consecutive runs of it
+    position = np.concatenate([np.asarray(c, dtype=np.int64) for c in chunks])
+    if not np.array_equal(position, np.arange(n)):
+        order = np.argsort(position)[order]
+    groups = _block_groups([len(c) for c in chunks], BLOCK_CASES)
+    source = _ChunkSource(load_chunk, chunks, groups, isolator_names, point_names, criteria)
+    first = source.dataset(0)
+    sizes = tuple(int(sum(len(chunks[k]) for k in g)) for g in groups)
+    # the file's chunks (HDF5) along the cases are the blocks, so that each block written fills whole
+    # file chunks: none is ever held half-written (see write_netcdf)
+    aligned = all(size == sizes[0] for size in sizes[:-1]) and sizes[-1] <= sizes[0]
+    identity = np.array_equal(order, np.arange(n))
+    # one task per block reads its chunks and builds every variable's slice; each variable's block takes
+    # its own from that task, so the chunks are read once and let go once all their slices are written
+    read = f"isolab-chunk-{uuid.uuid4().hex}"
+    read_layer: dict[Any, Any] = {(read, j): (source.values, j) for j in range(len(groups))}
+    data_vars: dict[str, xr.Variable] = {}
+    for name, var in first.data_vars.items():
+        key = f"{read}-{name}"
+        inner = (0,) * (var.ndim - 1)
+        layer: dict[Any, Any] = {
+            (key, j, *inner): (operator.getitem, (read, j), str(name)) for j in range(len(groups))
+        }
+        graph = HighLevelGraph({read: read_layer, key: layer}, {read: set(), key: {read}})
+        blocks = da.Array(
+            graph,
+            key,
+            chunks=(sizes, *((s,) for s in var.shape[1:])),
+            dtype=var.dtype,
+            meta=np.empty((0,) * var.ndim, dtype=var.dtype),
+        )
+        if not identity:
+            blocks = blocks[order]
+        encoding = dict(var.encoding)
+        if case_shape == (n,):
+            laid = blocks if identity and aligned else blocks.rechunk({0: sizes[0]})
+            if var.dtype.kind != "U":
+                encoding["chunksizes"] = (sizes[0], *var.shape[1:])
+        elif case_shape:  # a grid: whole rows of its first dimension per block
+            row = int(np.prod(case_shape[1:]))
+            rows = max(1, sizes[0] // row)
+            laid = blocks.reshape(case_shape + var.shape[1:]).rechunk({0: rows})
+            if var.dtype.kind != "U":
+                encoding["chunksizes"] = (rows, *case_shape[1:], *var.shape[1:])
+        else:  # no varied parameter: one case
+            laid = blocks.reshape(var.shape[1:])
+        out = xr.Variable(case_dims + var.dims[1:], laid, attrs=dict(var.attrs))
+        out.encoding = encoding
+        data_vars[str(name)] = out
+    coords: dict[str, xr.Variable] = {
+        name: xr.Variable(dims, values, attrs=a) for name, (dims, values, a) in case_coords.items()
+    }
+    coords.update({str(k): v.variable for k, v in first.coords.items()})
+    ds = xr.Dataset(data_vars, coords=coords)
+    ds.attrs = _dataset_attrs(design, attrs or {})
+    if "criteria" in first.attrs:
+        ds.attrs["criteria"] = first.attrs["criteria"]
+    return ds
 
-    def lay_out(a: np.ndarray) -> np.ndarray:
-        a = np.asarray(a)
-        return a[order].reshape(case_shape + a.shape[1:])
 
+class _ChunkSource:
+    """Where a streamed dataset's blocks come from: :func:`chunk_dataset` of one chunk, the last one built
+    kept (a chunk's blocks of every variable are asked for one after another)."""
+
+    def __init__(
+        self,
+        load_chunk: Callable[[int], Mapping[str, np.ndarray]],
+        chunks: Sequence[np.ndarray],
+        groups: Sequence[Sequence[int]],
+        isolator_names: Sequence[str],
+        point_names: Sequence[str],
+        criteria: Any,
+    ):
+        self.load_chunk, self.chunks, self.groups, self.criteria = load_chunk, chunks, groups, criteria
+        self.isolator_names, self.point_names = list(isolator_names), list(point_names)
+        self.built = 0  # chunk datasets built so far (each reads its chunk)
+        self._last: tuple[int, xr.Dataset] | None = None
+        self._lock = threading.Lock()
+
+    def dataset(self, k: int) -> xr.Dataset:
+        with self._lock:
+            if self._last is None or self._last[0] != k:
+                self._last = None  # let the previous chunk go before reading the next
+                ds = chunk_dataset(
+                    self.load_chunk(k),
+                    self.chunks[k],
+                    isolator_names=self.isolator_names,
+                    point_names=self.point_names,
+                    criteria=self.criteria,
+                    chunk_index=k,
+                )
+                self._last = (k, ds)
+                self.built += 1
+            return self._last[1]
+
+    def values(self, j: int) -> dict[str, np.ndarray]:
+        """Block ``j``'s slice of every variable (its chunks, in order): name -> array (case first)."""
+        parts = [
+            {str(name): np.asarray(v.values) for name, v in self.dataset(k).data_vars.items()}
+            for k in self.groups[j]
+        ]
+        if len(parts) == 1:
+            return parts[0]
+        return {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
+
+
+def _block_groups(sizes: Sequence[int], least: int) -> list[list[int]]:
+    """Consecutive chunks (their sizes given) grouped into blocks of at least ``least`` cases (the last
+    block may be smaller), chunk indices per block."""
+    groups: list[list[int]] = []
+    count = 0
+    for k, size in enumerate(sizes):
+        if not groups or count >= least:
+            groups.append([])
+            count = 0
+        groups[-1].append(k)
+        count += int(size)
+    return groups
+
+
+def _case_variables(
+    result: SimulationResult, case_dims: tuple[str, ...], lay_out: Callable[[np.ndarray], np.ndarray]
+) -> dict[str, xr.Variable]:
+    """Every per-case variable of ``result`` (outputs, ``status``, ``message``) along ``case_dims``, each
+    array put there by ``lay_out`` (case order in, the case dimensions' layout out). Outputs of a case
+    whose status is not OK are NaN."""
     bad = ~np.asarray(result.status == OK)
 
     def masked(a: np.ndarray, kind: str) -> np.ndarray:
@@ -317,9 +560,12 @@ def to_dataset(
         attrs={"units": "1", "long_name": "why the case is not ok (empty when ok)"},
     )
 
-    coords: dict[str, xr.Variable] = {
-        name: xr.Variable(dims, values, attrs=a) for name, (dims, values, a) in case_coords.items()
-    }
+    return data_vars
+
+
+def _fixed_coords(isolator_names: Sequence[str], point_names: Sequence[str]) -> dict[str, xr.Variable]:
+    """The coordinates of the per-case dimensions: axis, rotation, isolator, point, mode, dof."""
+    coords: dict[str, xr.Variable] = {}
     coords["axis"] = xr.Variable("axis", np.array(AXES), {"units": "1", "long_name": "floor axis (Z up)"})
     coords["rotation"] = xr.Variable(
         "rotation",
@@ -349,9 +595,7 @@ def to_dataset(
             "long_name": "degree of freedom of the base: c.g. translation x, y, z; rotation rx, ry, rz",
         },
     )
-    ds = xr.Dataset(data_vars, coords=coords)
-    ds.attrs = _dataset_attrs(design, attrs or {})
-    return ds
+    return coords
 
 
 def _case_layout(design: Design):
@@ -473,12 +717,20 @@ def netcdf_encoding(ds: xr.Dataset) -> dict[str, dict[str, Any]]:
 
     zlib at level 1 with the byte-shuffle filter: on a 10,000-case study the same size as level 4 (7.0 MB,
     against 8.6 MB uncompressed) in 60 % of the time; the outputs are float64 peaks with little
-    redundancy, so higher levels buy almost nothing."""
+    redundancy, so higher levels buy almost nothing.
+
+    A variable backed by a dask array (:func:`streamed_dataset`) keeps the ``chunksizes`` its encoding
+    names (its blocks); the others get the netCDF library's default chunking."""
     enc: dict[str, dict[str, Any]] = {}
     for name, var in ds.variables.items():
         e: dict[str, Any] = {}
         if var.dtype.kind in "fiub" and var.ndim > 0:
             e.update(zlib=True, complevel=1, shuffle=True)
+            chunks = var.encoding.get("chunksizes") if var.chunks is not None else None
+            if chunks is not None and len(chunks) == var.ndim and 0 < min(*chunks, *var.shape):
+                e["chunksizes"] = tuple(
+                    min(int(c), int(size)) for c, size in zip(chunks, var.shape, strict=True)
+                )
         if var.encoding.get("dtype") == "int8" and "_FillValue" in var.encoding:
             e.update(dtype="int8", _FillValue=np.int8(var.encoding["_FillValue"]))
         elif var.dtype.kind == "f" and name not in ds.dims:
@@ -543,14 +795,16 @@ def failures(path: Any) -> str:
     case is ok."""
     with xr.open_dataset(path) as ds:
         status = np.asarray(ds["status"].values, dtype=np.int8).reshape(-1)
-        message = np.asarray(ds["message"].values).reshape(-1)
-    bad = np.flatnonzero(status != OK)
-    if bad.size == 0:
-        return ""
+        bad = np.flatnonzero(status != OK)
+        if bad.size == 0:
+            return ""
+        # the first message only (a large study's messages are not all read)
+        first = np.unravel_index(int(bad[0]), ds["status"].shape)
+        message = str(ds["message"][first].values)
     counts = ", ".join(
         f"{int((status == code).sum())} {name}"
         for code, name in enumerate(STATUS_NAMES)
         if code != OK
         if (status == code).any()
     )
-    return f"{counts}; case {int(bad[0])}: {message[bad[0]]}"
+    return f"{counts}; case {int(bad[0])}: {message}"

@@ -57,8 +57,7 @@ from isolab.studies.accuracy import (
     sample_arrays,
 )
 from isolab.studies.costs import estimate_seconds_per_case
-from isolab.studies.criteria import add_criteria
-from isolab.studies.dataset import add_error_estimate, failures, from_chunks, to_dataset
+from isolab.studies.dataset import add_error_estimate, failures, streamed_dataset
 from isolab.studies.fanout import TASK_RETRIES, choose_chunk_size, plan_chunks, run_chunks, worker_threads
 from isolab.studies.optimisation import run_optimisation
 from isolab.studies.store import Store, StoreFull, copy_atomic, is_no_space, utc_now
@@ -175,7 +174,7 @@ def run_study(
             )
             chunks = plan_chunks(n_cases, size)
             store.save_chunk_plan(study_id, chunks)
-        saved = store.load_chunks(study_id)
+        saved = store.load_chunks(study_id, fields=("indices", "status"))  # not the outputs
         skip = {
             k
             for k, arrays in saved.items()
@@ -275,18 +274,32 @@ def assemble_dataset(
     store: Store, study_id: str, run_json: str, attrs: dict[str, Any], estimate: ErrorEstimate
 ) -> int:
     """Build a study's dataset from its saved chunks, add the error ``estimate`` and write it atomically;
-    the number of cases that did not end OK."""
+    the number of cases that did not end OK.
+
+    The dataset is streamed (:func:`studies.dataset.streamed_dataset`): each chunk is read when its slice
+    is written and let go after, so the memory this takes does not grow with the number of cases (only
+    the statuses, 1 byte a case, and the parameter values, 8 bytes a case per parameter, are held)."""
 
     run = study_from_json(run_json)
     iso_names, point_names = study_labels(run)
     chunks = store.load_chunk_plan(study_id)
     if chunks is None:
         raise RuntimeError(f"study {study_id}: its chunk plan is missing from the store")
-    result = from_chunks(
-        store.load_chunks(study_id), chunks, n_isolators=len(iso_names), n_points=len(point_names)
+    statuses = store.load_chunks(study_id, fields=("status",))
+    missing = [k for k in range(len(chunks)) if k not in statuses]
+    if missing:
+        raise ValueError(f"study {study_id}: chunks {missing} have no results")
+    n_failed = sum(int(np.count_nonzero(statuses[k]["status"] != 0)) for k in range(len(chunks)))
+    del statuses
+    ds = streamed_dataset(
+        lambda k: store.load_chunk(study_id, k),
+        chunks,
+        run.design(),
+        isolator_names=iso_names,
+        point_names=point_names,
+        attrs=attrs,
+        criteria=run.criteria,
     )
-    ds = to_dataset(result, run.design(), isolator_names=iso_names, point_names=point_names, attrs=attrs)
-    ds = add_criteria(ds, run.criteria)
     ds = add_error_estimate(
         ds,
         estimate.values,
@@ -297,8 +310,8 @@ def assemble_dataset(
         meaning=OUTPUT_MEANING,
         units=OUTPUT_UNITS,
     )
-    store.write_dataset(study_id, ds)
-    return int(np.count_nonzero(result.status != 0))
+    store.write_dataset(study_id, ds)  # each chunk's slice is read and written in turn
+    return n_failed
 
 
 def finish_study(

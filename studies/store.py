@@ -41,6 +41,7 @@ from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import netCDF4
 import numpy as np
 import xarray as xr
 
@@ -190,6 +191,11 @@ def _put_reserve(root: Path) -> bool:
     return True
 
 
+STREAM_CHUNK_CACHE_BYTES = 1 << 20
+"""Chunk cache (bytes per variable) of the netCDF library while a streamed dataset is written: its blocks
+fill whole file chunks, so none waits there half-written (the library's default is 64 MB per variable,
+which holds a large study's every chunk until the file closes)."""
+
 NETCDF_LOCK = threading.RLock()
 """Held around every netCDF open, read and write of this process: the netCDF-C and HDF5 libraries are not
 thread-safe (two threads in them at once, even on different files, can crash the process), and the
@@ -197,11 +203,30 @@ service reads and writes datasets from several threads."""
 
 
 def write_netcdf(ds: xr.Dataset, path: str | Path) -> Path:
-    """Write ``ds`` to ``path`` atomically (see :func:`atomic_path`), with :func:`netcdf_encoding`."""
+    """Write ``ds`` to ``path`` atomically (see :func:`atomic_path`), with :func:`netcdf_encoding`.
+
+    Variables backed by dask arrays (:func:`isolab.studies.dataset.streamed_dataset`) are computed here,
+    in this thread, one block at a time as they are written (never on a Dask cluster this process may be
+    part of)."""
     path = Path(path)
+    encoding = netcdf_encoding(ds)
+    streamed = [str(k) for k, v in ds.variables.items() if v.chunks is not None]
+    # blocks that fill whole file chunks need no chunk cache: a small one keeps the write's memory flat
+    small_cache = bool(streamed) and all(
+        "chunksizes" in encoding[k] for k in streamed if encoding[k].get("zlib")
+    )
     with atomic_path(path) as tmp, NETCDF_LOCK:
+        cache = netCDF4.get_chunk_cache()
         try:
-            ds.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=netcdf_encoding(ds))
+            if small_cache:
+                netCDF4.set_chunk_cache(STREAM_CHUNK_CACHE_BYTES, cache[1], cache[2])
+            if streamed:
+                writes = ds.to_netcdf(
+                    tmp, format="NETCDF4", engine="netcdf4", encoding=encoding, compute=False
+                )
+                writes.compute(scheduler="synchronous")
+            else:
+                ds.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=encoding)
         except Exception as err:
             # netCDF-C reports a full disk as anything (EACCES, "HDF error"): ask the file system. The
             # size needed is the data uncompressed, an upper bound.
@@ -210,6 +235,8 @@ def write_netcdf(ds: xr.Dataset, path: str | Path) -> Path:
             if is_no_space(err) or 0 <= free < min(needed, RESERVE_BYTES):
                 raise _store_full(f"writing {path.name}", needed, path.parent, err) from err
             raise
+        finally:
+            netCDF4.set_chunk_cache(*cache)
     return path
 
 
@@ -438,15 +465,24 @@ class Store:
         )
         return path
 
-    def load_chunks(self, study_id: str) -> dict[int, dict[str, np.ndarray]]:
-        """Every saved chunk of a study: chunk index -> arrays."""
+    def load_chunks(
+        self, study_id: str, fields: Sequence[str] | None = None
+    ) -> dict[int, dict[str, np.ndarray]]:
+        """Every saved chunk of a study: chunk index -> arrays (only ``fields`` when given, see
+        :meth:`load_chunk`)."""
         t0 = time.perf_counter()
-        out: dict[int, dict[str, np.ndarray]] = {}
-        for k in self.done_chunks(study_id):
-            with np.load(self.chunk_dir(study_id) / f"{k}.npz", allow_pickle=False) as z:
-                out[k] = {name: z[name] for name in z.files}
+        out = {k: self.load_chunk(study_id, k, fields) for k in self.done_chunks(study_id)}
         record_timing("load_chunks", study_id=study_id, n_chunks=len(out), seconds=time.perf_counter() - t0)
         return out
+
+    def load_chunk(
+        self, study_id: str, chunk_index: int, fields: Sequence[str] | None = None
+    ) -> dict[str, np.ndarray]:
+        """One saved chunk's arrays; with ``fields``, only those it has (the others are not even read, so
+        a study's statuses come back without its outputs). Raises FileNotFoundError if it is not saved."""
+        k = _chunk_index(chunk_index)
+        with np.load(self.chunk_dir(study_id) / f"{k}.npz", allow_pickle=False) as z:
+            return {name: z[name] for name in z.files if fields is None or name in fields}
 
     def done_chunks(self, study_id: str) -> set[int]:
         """Indices of the chunks of a study whose results are saved."""

@@ -20,6 +20,7 @@ import scipy.linalg
 from numba import njit
 
 from isolab.engine.dynamics import _cross, feedforward_generalised, lti_forcing, recorded_floor, stage_state
+from isolab.engine.integrators.step_maps import maps as structured_maps
 
 NAME = "exact"
 LEVELS = ("lti",)
@@ -144,17 +145,21 @@ def breakpoints(P, dt: np.ndarray, duration: np.ndarray) -> np.ndarray:
 def prepare(P, dt: np.ndarray, duration: np.ndarray):
     """Step maps for the full step and for the split steps around each breakpoint.
 
+    Without a sine floor motion the maps come from the structured exponential of
+    ``engine.integrators.step_maps``; with one (the oscillator's rotation blocks break that structure)
+    from scipy's dense ``expm`` of the augmented matrix, as below.
+
     Per breakpoint ``t`` in step ``[k h, (k + 1) h]``: the map from the previous breakpoint of the step (or
     the step's start) to ``t``, and the map from ``t`` to the step's end, ``expm(Z h) expm(Z (t - k h))^-1``
     (see :func:`_rest_of_step`). Where ``t`` is the step's only breakpoint both use one exponential.
     """
-    Z, deg, osc = augmented(P)
-    E_full = _expm(Z, dt)
-    full = _top(E_full)
+    deg = _degree(P)
+    osc = int(np.any(P.famp != 0.0))
     ev = breakpoints(P, dt, duration)
     C, E = ev.shape
     before = np.zeros((C, E))
     offset = np.zeros((C, E))  # from the step's start
+    n_events = np.zeros(C, dtype=np.int64)
     for c in range(C):
         h = dt[c]
         prev = -np.inf
@@ -167,6 +172,21 @@ def prepare(P, dt: np.ndarray, duration: np.ndarray):
             before[c, e] = t - start
             offset[c, e] = t - k * h
             prev = t
+            n_events[c] = e + 1
+    # the structured exponential (engine.integrators.step_maps) for every case without a sine floor
+    N0 = 12 + 6 * (deg + 1)
+    s_full = np.zeros((C, N0, 12))
+    s_b = np.zeros((C, E, N0, 12))
+    s_a = np.zeros((C, E, N0, 12))
+    a21, a22, minv = (np.ascontiguousarray(a, dtype=float) for a in (P.a21, P.a22, P.minv))
+    h = np.asarray(dt, dtype=float)
+    structured_maps(a21, a22, minv, deg, h, before, offset, n_events, s_full, s_b, s_a)
+    if not osc:
+        return s_full, ev, s_b, s_a, deg, osc
+    # a case with a sine floor: scipy's dense expm of the augmented matrix with the oscillator
+    Z, deg, osc = augmented(P)
+    E_full = _expm(Z, dt)
+    full = _top(E_full)
     N = Z.shape[-1]
     sub_b = np.empty((C, E, N, 12))
     sub_a = np.empty((C, E, N, 12))
@@ -178,6 +198,12 @@ def prepare(P, dt: np.ndarray, duration: np.ndarray):
         if cs.size:
             E_offset[cs, es] = _expm(Z[blk][cs], before[blk][cs, es])
         sub_b[blk] = _top(E_offset)
+    # the others keep the structured maps (their oscillator columns are zero), so that a case's maps do
+    # not depend on the batch it runs in
+    still = ~np.any(np.asarray(P.famp) != 0.0, axis=1)
+    for arr, structured in ((full, s_full), (sub_b, s_b), (sub_a, s_a)):
+        arr[still] = 0.0
+        arr[still, ..., :N0, :] = structured[still]
     return full, ev, sub_b, sub_a, deg, osc
 
 
@@ -236,7 +262,7 @@ def _forcing_poly(P, c, t, idx, W, deg, Fv):
             Fv[11] += m2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _shift(Fv, deg, h):
     """Carry the forcing derivatives ``F0..F_deg`` (6 each) of a polynomial piece forward by ``h`` s."""
     for i in range(6):
@@ -259,20 +285,58 @@ def _shift(Fv, deg, h):
 @njit(cache=True)
 def _apply(ET, z, osc_on, t, P, c, xn):
     """``xn = E [x, F, oscillator(t)]`` for one (sub)step map given transposed, ``ET`` (N, 12); ``z``
-    holds ``[x, F]``. Column by column, so the inner loop runs over 12 contiguous numbers (vectorised)."""
+    holds ``[x, F]``. Column by column into twelve accumulators held in registers: each column is 12
+    contiguous numbers, three 4-wide multiply-adds."""
     nz = z.shape[0]
-    for i in range(12):
-        xn[i] = 0.0
+    a0 = a1 = a2 = a3 = a4 = a5 = a6 = a7 = a8 = a9 = a10 = a11 = 0.0
     for j in range(nz):
         zj = z[j]
-        for i in range(12):
-            xn[i] += ET[j, i] * zj
+        a0 += ET[j, 0] * zj
+        a1 += ET[j, 1] * zj
+        a2 += ET[j, 2] * zj
+        a3 += ET[j, 3] * zj
+        a4 += ET[j, 4] * zj
+        a5 += ET[j, 5] * zj
+        a6 += ET[j, 6] * zj
+        a7 += ET[j, 7] * zj
+        a8 += ET[j, 8] * zj
+        a9 += ET[j, 9] * zj
+        a10 += ET[j, 10] * zj
+        a11 += ET[j, 11] * zj
+    xn[0], xn[1], xn[2], xn[3], xn[4], xn[5] = a0, a1, a2, a3, a4, a5
+    xn[6], xn[7], xn[8], xn[9], xn[10], xn[11] = a6, a7, a8, a9, a10, a11
     if osc_on:
         for a in range(3):
             arg = P.fomega[c, a] * t + P.fphase[c, a]
             sa, ca = np.sin(arg), np.cos(arg)
             for i in range(12):
                 xn[i] += ET[nz + 2 * a, i] * sa + ET[nz + 2 * a + 1, i] * ca
+
+
+@njit(cache=True, inline="always")
+def full_step(ET, z, Fv, deg, h):
+    """Advance ``z = [x (12), F0..F_deg]`` over one whole step of ``h`` s inside one polynomial piece,
+    the forcing without feedforward, oscillator or recorded floor: ``x <- E z`` through the full step's
+    map ``ET`` (N, 12), in twelve register accumulators, then the forcing's Taylor shift."""
+    nz = z.shape[0]
+    a0 = a1 = a2 = a3 = a4 = a5 = a6 = a7 = a8 = a9 = a10 = a11 = 0.0
+    for j in range(nz):
+        zj = z[j]
+        a0 += ET[j, 0] * zj
+        a1 += ET[j, 1] * zj
+        a2 += ET[j, 2] * zj
+        a3 += ET[j, 3] * zj
+        a4 += ET[j, 4] * zj
+        a5 += ET[j, 5] * zj
+        a6 += ET[j, 6] * zj
+        a7 += ET[j, 7] * zj
+        a8 += ET[j, 8] * zj
+        a9 += ET[j, 9] * zj
+        a10 += ET[j, 10] * zj
+        a11 += ET[j, 11] * zj
+    z[0], z[1], z[2], z[3], z[4], z[5] = a0, a1, a2, a3, a4, a5
+    z[6], z[7], z[8], z[9], z[10], z[11] = a6, a7, a8, a9, a10, a11
+    _shift(Fv, deg, h)
 
 
 @njit(cache=True, inline="always")

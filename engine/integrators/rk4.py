@@ -12,7 +12,22 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from isolab.engine.dynamics import NONLINEAR, derivative
+from isolab.engine.dynamics import (
+    LTI,
+    LTV,
+    NONLINEAR,
+    derivative,
+    extra_inputs,
+    key_holds,
+    ltv_acc,
+    moving_terms,
+    nonlinear_acc,
+    pack_case,
+    rates,
+    recorded_and_feedforward,
+    set_key,
+    stages_and_floor,
+)
 
 NAME = "rk4"
 LEVELS = ("lti", "ltv", "nonlinear")
@@ -27,28 +42,80 @@ SCRATCH_ROWS = 5
 @njit(cache=True)
 def step(P, c, level, t, h, x, S, idx, W):
     """One RK4 step of ``h`` s from ``t`` (s) on the pieces ``idx``, ``x`` in place; ``S`` (5, nx)
-    scratch. Returns False when a mass matrix is singular."""
+    scratch. Returns False when a mass matrix is singular.
+
+    At the time-varying levels the terms that depend on time only are evaluated at ``t``, ``t + h/2`` and
+    ``t + h`` (``engine.dynamics.time_terms``; those at ``t`` are usually still there from the previous
+    step's end), and the slopes read them through arrays bound once per step."""
+    if level == LTI:
+        return _step_lti(P, c, t, h, x, S, idx, W)
     nx = x.shape[0]
-    xs, k1, k2, k3, k4 = S[0], S[1], S[2], S[3], S[4]
-    ok = derivative(P, c, level, t, x, idx, W, k1)
+    xs = S[0]
+    # The workspace's arrays bound once, and only functions that call no other (whose own references
+    # numba leaves out) called on the way: an array read from ``P`` or ``W``, or handed to a function that
+    # calls others, counts a reference (an atomic add) each time, which costs more than the arithmetic.
+    key, tc, cc, cs, cm, sw, K, R, F, acc = W.key, W.tc, W.cc, W.cs, W.cm, W.sw, W.cK, W.R, W.F, W.acc
+    g, ffon, gstiff, pbase = P.g, P.ffon, P.gstiff, P.pbase
+    pack_case(P, c, W, cc)
+    extra = extra_inputs(ffon, cc)
     for i in range(nx):
-        xs[i] = x[i] + 0.5 * h * k1[i]
-    ok &= derivative(P, c, level, t + 0.5 * h, xs, idx, W, k2)
-    for i in range(nx):
-        xs[i] = x[i] + 0.5 * h * k2[i]
-    ok &= derivative(P, c, level, t + 0.5 * h, xs, idx, W, k3)
-    for i in range(nx):
-        xs[i] = x[i] + h * k3[i]
-    ok &= derivative(P, c, level, t + h, xs, idx, W, k4)
+        xs[i] = x[i]
+    ok = True
+    for s in range(4):
+        # the slope at t (from x), t + h/2 (twice) and t + h, each at the stage state xs
+        ts = t if s == 0 else (t + h if s == 3 else t + 0.5 * h)
+        if s != 2 and not key_holds(c, level, ts, idx, key):
+            stages_and_floor(ts, idx, cc, cs, sw, tc)
+            if extra:
+                recorded_and_feedforward(P, c, ts, idx, W, cm, tc)
+            set_key(c, level, ts, moving_terms(level, g, cc, cs, cm, sw, tc), idx, key)
+        ok &= key[3] != 0.0
+        k = S[1 + s]
+        if level == LTV:
+            ltv_acc(xs, tc, K, cc, g, ffon, gstiff, acc)
+        else:
+            nonlinear_acc(xs, tc, cc, cm, R, F, acc, g, pbase)
+        rates(level, xs, acc, k)
+        if s < 3:
+            a = h if s == 2 else 0.5 * h
+            for i in range(nx):
+                xs[i] = x[i] + a * k[i]
     if not ok:
         return False
+    _combine(level, h, x, S[1], S[2], S[3], S[4])
+    return True
+
+
+@njit(cache=True)
+def _step_lti(P, c, t, h, x, S, idx, W):
+    """:func:`step` at the LTI level (each slope through ``engine.dynamics.derivative``)."""
+    nx = x.shape[0]
+    xs, k1, k2, k3, k4 = S[0], S[1], S[2], S[3], S[4]
+    ok = derivative(P, c, LTI, t, x, idx, W, k1)
     for i in range(nx):
+        xs[i] = x[i] + 0.5 * h * k1[i]
+    ok &= derivative(P, c, LTI, t + 0.5 * h, xs, idx, W, k2)
+    for i in range(nx):
+        xs[i] = x[i] + 0.5 * h * k2[i]
+    ok &= derivative(P, c, LTI, t + 0.5 * h, xs, idx, W, k3)
+    for i in range(nx):
+        xs[i] = x[i] + h * k3[i]
+    ok &= derivative(P, c, LTI, t + h, xs, idx, W, k4)
+    if not ok:
+        return False
+    _combine(LTI, h, x, k1, k2, k3, k4)
+    return True
+
+
+@njit(cache=True, inline="always")
+def _combine(level, h, x, k1, k2, k3, k4):
+    """The RK4 update of ``x`` from the four slopes (and the quaternion back to unit length)."""
+    for i in range(x.shape[0]):
         x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
     if level == NONLINEAR:
         n = np.sqrt(x[3] ** 2 + x[4] ** 2 + x[5] ** 2 + x[6] ** 2)
         for i in range(3, 7):
             x[i] /= n
-    return True
 
 
 def step_matrix(A: np.ndarray, h: np.ndarray) -> np.ndarray:

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numba import literally, njit
 
+from isolab.engine import output_map
 from isolab.engine.dynamics import LTI, LTV, NONLINEAR, advance_pieces, kernel_struct, next_breakpoint
 from isolab.engine.integrators import euler, exact, rk4
 from isolab.engine.peaks import observe
@@ -29,14 +30,16 @@ EULER, RK4, EXACT = 0, 1, 2
 
 
 @njit(cache=True, nogil=True)
-def drive(method, P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc):
+def drive(method, P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap):
     """Integrate every case ``c`` whose ``status[c]`` is OK over ``n_steps[c]`` steps of ``dt[c]`` s.
 
     Each step ``[k h, (k + 1) h]`` is split at the breakpoints inside it, so every sub-step sees one
     polynomial piece of every profile; the outputs are observed at the end of each step. ``status[c]``
     becomes UNSTABLE when the base runs away (``engine.peaks.observe``) and FAILED on a singular mass
     matrix; the case stops there. ``full``, ``ev``, ``sub_b``, ``sub_a``, ``deg``, ``osc`` are the exact
-    method's prepared maps (empty for the others).
+    method's prepared maps (empty for the others). ``outmap`` is the linear output map ``(G, KF, target,
+    rest_target, still)`` (``engine.output_map``; empty at the nonlinear level), through which the linear
+    levels observe every case whose floor stands still and that is not recorded.
     """
     literally(method)  # one compiled (and cached) loop per method and level, with no branch on either
     literally(level)
@@ -48,9 +51,21 @@ def drive(method, P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, d
     S = np.zeros((rk4.SCRATCH_ROWS, nx))  # RK4's stage state and slopes
     xn = np.zeros(nx)  # exact: the new state
     idx = np.zeros(P.sm.shape[1], dtype=np.int64)
+    G, KF, tgt, rtgt, still = outmap
+    m = G.shape[2]
+    # exact: a whole step inside one piece with no actuator, oscillator or recorded floor input takes the
+    # lean path (exact.full_step)
+    lean = not P.ffon and not osc and P.ft.shape[0] == 0
+    Smap = np.zeros((10, max(m, 1)))  # the output map's running state and scratch (output_map.observe)
+    Vmap = np.zeros((9, max(m, 1)))
+    Qmap = np.zeros(13)
+    F0, rest, ptol = P.f0, O.rest, O.point_tol
     for c in range(C):
         if status[c] != OK:
             continue
+        linear = level != NONLINEAR and m > 0 and still[c] and O.slot[c] < 0
+        if linear:
+            output_map.start(O, c, Smap, Qmap)
         x[:] = 0.0
         if level == NONLINEAR:
             x[3] = 1.0
@@ -60,7 +75,11 @@ def drive(method, P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, d
         tol = 1e-6 * h
         passed = 0
         piece_end = -np.inf  # the earliest start of a stage's next piece, s
-        observe(P, c, level, 0.0, x, W, O, 0)
+        if linear:
+            output_map.observe(c, 0.0, x, 0, G, KF, F0, tgt, rtgt, rest, ptol, Smap, Vmap, Qmap)
+        else:
+            observe(P, c, level, 0.0, x, W, O, 0)
+        ET = full[c if method == EXACT else 0]
         for k in range(n_steps[c]):
             t0 = k * h
             t1 = (k + 1) * h
@@ -72,9 +91,30 @@ def drive(method, P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, d
                     piece_end = next_breakpoint(P, c, idx, np.inf, tol)
                 if method == EXACT:
                     tb = exact.next_split(ev, c, passed, t1, tol)
-                    ok = exact.step(
-                        P, c, ta, tb, t0, t1, fresh, passed, z, Fv, xn, idx, W, full, sub_b, sub_a, deg, osc
-                    )
+                    if lean and tb == t1 and ta == t0 and not fresh:
+                        exact.full_step(ET, z, Fv, deg, t1 - t0)  # as exact.step shifts: bit for bit
+                        ok = True
+                    else:
+                        ok = exact.step(
+                            P,
+                            c,
+                            ta,
+                            tb,
+                            t0,
+                            t1,
+                            fresh,
+                            passed,
+                            z,
+                            Fv,
+                            xn,
+                            idx,
+                            W,
+                            full,
+                            sub_b,
+                            sub_a,
+                            deg,
+                            osc,
+                        )
                 else:
                     tb = piece_end if piece_end < t1 - tol else t1
                     if method == RK4:
@@ -88,47 +128,61 @@ def drive(method, P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, d
             if not ok:
                 status[c] = FAILED
                 break
-            if not observe(P, c, level, t1, x, W, O, k + 1):
+            if linear:
+                seen = output_map.observe(c, t1, x, k + 1, G, KF, F0, tgt, rtgt, rest, ptol, Smap, Vmap, Qmap)
+            else:
+                seen = observe(P, c, level, t1, x, W, O, k + 1)
+            if not seen:
                 status[c] = UNSTABLE
                 break
+        if linear:
+            output_map.finish(O, c, Smap, Qmap)
 
 
 # Entry points: a call from Python with plain ints would send numba through its literal dispatch on every
 # call (milliseconds each); called from these cached kernels, the codes are compile-time constants.
 @njit(cache=True, nogil=True)
-def _run_euler(P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc):
+def _run_euler(P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap):
     if level == LTI:
-        drive(EULER, P, LTI, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc)
+        drive(EULER, P, LTI, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap)
     elif level == LTV:
-        drive(EULER, P, LTV, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc)
+        drive(EULER, P, LTV, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap)
     else:
-        drive(EULER, P, NONLINEAR, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc)
+        drive(EULER, P, NONLINEAR, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap)
 
 
 @njit(cache=True, nogil=True)
-def _run_rk4(P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc):
+def _run_rk4(P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap):
     if level == LTI:
-        drive(RK4, P, LTI, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc)
+        drive(RK4, P, LTI, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap)
     elif level == LTV:
-        drive(RK4, P, LTV, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc)
+        drive(RK4, P, LTV, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap)
     else:
-        drive(RK4, P, NONLINEAR, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc)
+        drive(RK4, P, NONLINEAR, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap)
 
 
 @njit(cache=True, nogil=True)
-def _run_exact(P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc):
-    drive(EXACT, P, LTI, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc)
+def _run_exact(P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap):
+    drive(EXACT, P, LTI, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap)
 
 
 _ENTRIES = {"euler": _run_euler, "rk4": _run_rk4, "exact": _run_exact}
 
 _NO_MAPS = (
-    np.zeros((0, 0, 12)),
+    np.zeros((1, 0, 12)),
     np.zeros((0, 1)),
     np.zeros((0, 1, 0, 12)),
     np.zeros((0, 1, 0, 12)),
     0,
     False,
+)
+
+_NO_OUTPUT_MAP = (
+    np.zeros((0, 6, 0)),
+    np.zeros((0, 2, 0)),
+    np.zeros((0, 0)),
+    np.zeros((0, 1, 0)),
+    np.zeros(0, dtype=np.bool_),
 )
 
 
@@ -151,6 +205,10 @@ def run(
     """
     maps = exact.prepare(P, dt, dt * n_steps) if name == "exact" else _NO_MAPS
     full, ev, sub_b, sub_a, deg, osc = maps
+    if level != NONLINEAR:
+        outmap = (*output_map.build(P, O.target, O.rest_target), output_map.still_floor(P))
+    else:
+        outmap = _NO_OUTPUT_MAP
     _ENTRIES[name](
         kernel_struct(P),
         level,
@@ -165,4 +223,5 @@ def run(
         sub_a,
         int(deg),
         bool(osc),
+        outmap,
     )

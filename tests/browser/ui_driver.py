@@ -33,10 +33,10 @@ CHROMIUM_FLAGS = [
 """Without the background-networking flags Chromium keeps trying to reach Google's hosts, which this
 machine's closed network refuses."""
 EXAMPLE = "isolator-comparison"
-STUDY_TIMEOUT_S = 300.0
+STUDY_TIMEOUT_S = 600.0
 """The first study of a fresh checkout compiles the engine's kernels on each worker (the scene's
-integrator and the error estimate's reference: one to two minutes on the 2-core machine) before it runs in
-seconds."""
+integrator and the error estimate's reference: about 100 s of compiling for the rk4 kernels alone, two to
+four minutes with both workers compiling at once on the 2-core machine) before it runs in seconds."""
 
 
 @contextmanager
