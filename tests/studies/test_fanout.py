@@ -603,3 +603,16 @@ def test_a_study_is_finished_by_a_worker(client: Client, tmp_path: Path, monkeyp
         np.testing.assert_array_equal(ds[name].values, direct[name].values, err_msg=name)
     # the error estimate's reference reruns ran from the worker's task too
     assert json.loads(ds.attrs["error_estimate_cases"]) and "DOP853" in ds.attrs["error_estimate_method"]
+
+
+def test_a_streamed_study_equals_one_assembled_in_memory(tmp_path: Path, monkeypatch) -> None:
+    """The runner streams the dataset of a study above ``ISOLAB_IN_MEMORY_CASES`` chunk by chunk: the file
+    it writes holds the same values, attributes and units as the one built whole in memory."""
+    whole = run_local(small_study(integrator="exact", duration="1 s"), tmp_path / "whole.nc", workers=1)
+    monkeypatch.setenv("ISOLAB_IN_MEMORY_CASES", "0")  # the worker processes inherit it
+    streamed = run_local(small_study(integrator="exact", duration="1 s"), tmp_path / "streamed.nc", workers=1)
+    for ds in (whole, streamed):
+        ds.attrs.pop("created", None)
+        ds.attrs.pop("timing", None)
+    xr.testing.assert_identical(streamed.drop_attrs(deep=False), whole.drop_attrs(deep=False))
+    assert set(streamed.attrs) == set(whole.attrs)
