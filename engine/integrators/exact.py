@@ -282,11 +282,11 @@ def _shift(Fv, deg, h):
                 Fv[i] += h * f1
 
 
-@njit(cache=True)
-def _apply(ET, z, osc_on, t, P, c, xn):
-    """``xn = E [x, F, oscillator(t)]`` for one (sub)step map given transposed, ``ET`` (N, 12); ``z``
-    holds ``[x, F]``. Column by column into twelve accumulators held in registers: each column is 12
-    contiguous numbers, three 4-wide multiply-adds."""
+@njit(cache=True, inline="always")
+def _product(ET, z, out):
+    """``out[:12] = E z`` for a step map given transposed, ``ET`` (N, 12), and ``z`` (N,): column by column
+    into twelve accumulators held in registers (each column is 12 contiguous numbers, three 4-wide
+    multiply-adds), written only after the last column, so ``out`` may be ``z`` itself."""
     nz = z.shape[0]
     a0 = a1 = a2 = a3 = a4 = a5 = a6 = a7 = a8 = a9 = a10 = a11 = 0.0
     for j in range(nz):
@@ -303,8 +303,16 @@ def _apply(ET, z, osc_on, t, P, c, xn):
         a9 += ET[j, 9] * zj
         a10 += ET[j, 10] * zj
         a11 += ET[j, 11] * zj
-    xn[0], xn[1], xn[2], xn[3], xn[4], xn[5] = a0, a1, a2, a3, a4, a5
-    xn[6], xn[7], xn[8], xn[9], xn[10], xn[11] = a6, a7, a8, a9, a10, a11
+    out[0], out[1], out[2], out[3], out[4], out[5] = a0, a1, a2, a3, a4, a5
+    out[6], out[7], out[8], out[9], out[10], out[11] = a6, a7, a8, a9, a10, a11
+
+
+@njit(cache=True)
+def _apply(ET, z, osc_on, t, P, c, xn):
+    """``xn = E [x, F, oscillator(t)]`` for one (sub)step map given transposed, ``ET`` (N, 12); ``z``
+    holds ``[x, F]`` (:func:`_product`), the oscillator's columns follow."""
+    _product(ET, z, xn)
+    nz = z.shape[0]
     if osc_on:
         for a in range(3):
             arg = P.fomega[c, a] * t + P.fphase[c, a]
@@ -317,25 +325,8 @@ def _apply(ET, z, osc_on, t, P, c, xn):
 def full_step(ET, z, Fv, deg, h):
     """Advance ``z = [x (12), F0..F_deg]`` over one whole step of ``h`` s inside one polynomial piece,
     the forcing without feedforward, oscillator or recorded floor: ``x <- E z`` through the full step's
-    map ``ET`` (N, 12), in twelve register accumulators, then the forcing's Taylor shift."""
-    nz = z.shape[0]
-    a0 = a1 = a2 = a3 = a4 = a5 = a6 = a7 = a8 = a9 = a10 = a11 = 0.0
-    for j in range(nz):
-        zj = z[j]
-        a0 += ET[j, 0] * zj
-        a1 += ET[j, 1] * zj
-        a2 += ET[j, 2] * zj
-        a3 += ET[j, 3] * zj
-        a4 += ET[j, 4] * zj
-        a5 += ET[j, 5] * zj
-        a6 += ET[j, 6] * zj
-        a7 += ET[j, 7] * zj
-        a8 += ET[j, 8] * zj
-        a9 += ET[j, 9] * zj
-        a10 += ET[j, 10] * zj
-        a11 += ET[j, 11] * zj
-    z[0], z[1], z[2], z[3], z[4], z[5] = a0, a1, a2, a3, a4, a5
-    z[6], z[7], z[8], z[9], z[10], z[11] = a6, a7, a8, a9, a10, a11
+    map ``ET`` (N, 12) (:func:`_product`), then the forcing's Taylor shift."""
+    _product(ET, z, z)
     _shift(Fv, deg, h)
 
 
