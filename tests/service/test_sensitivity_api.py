@@ -6,7 +6,6 @@ from __future__ import annotations
 import copy
 import io
 import json
-import time
 import uuid
 
 import matplotlib.image
@@ -21,6 +20,7 @@ from isolab.service.client import Client, sensitivity_frame
 from isolab.service.schemas import EXAMPLE_SCENE
 from isolab.service.settings import Settings
 from isolab.studies import sensitivity as sensitivity_module
+from tests.reliability.live_service import wait_finished
 
 pytestmark = pytest.mark.slow  # a cluster of its own
 
@@ -46,16 +46,6 @@ SALTELLI = {
 }
 
 
-def wait_done(http: TestClient, study_id: str, timeout: float = 60.0) -> dict:
-    deadline = time.monotonic() + timeout
-    while True:
-        info = http.get(f"/studies/{study_id}").json()
-        if info["status"] in ("done", "failed", "cancelled"):
-            return info
-        assert time.monotonic() < deadline, f"study still {info['status']} after {timeout} s"
-        time.sleep(0.1)
-
-
 @pytest.fixture(scope="module")
 def http(tmp_path_factory: pytest.TempPathFactory):
     settings = Settings(data_dir=tmp_path_factory.mktemp("data"), workers=2, max_cases=1000)
@@ -68,7 +58,7 @@ def study_id(http: TestClient) -> str:
     r = http.post("/studies", json=SALTELLI)
     assert r.status_code == 202, r.text
     assert r.json()["n_cases"] == N_BASE * (3 + 2)  # the true count, N (D + 2)
-    info = wait_done(http, r.json()["id"])
+    info = wait_finished(http, r.json()["id"])
     assert info["status"] == "done", info
     return r.json()["id"]
 
