@@ -43,9 +43,9 @@ serve: $(STAMP)
 	$(VENV)/bin/isolab serve --host $(HOST) --port $(PORT) --workers $(WORKERS) --data $(DATA)
 
 # docs/study-files.md, the reference of study and scene files, made from the models (a test fails while it
-# is not what they give: run this after changing a model of studies/schema.py or studies/study.py).
+# is not what they give: run this after changing a model of studies/inputs/schema.py or studies/inputs/study.py).
 docs: $(STAMP)
-	$(PY) -m isolab.studies.file_reference > docs/study-files.md.part
+	$(PY) -m isolab.studies.authoring.file_reference > docs/study-files.md.part
 	mv docs/study-files.md.part docs/study-files.md
 
 # The whole suite (about 5 minutes on 2 cores).

@@ -27,9 +27,9 @@ import numpy as np
 
 from isolab.engine import concat, simulate
 from isolab.engine.results import OK, STATUS_NAMES
-from isolab.studies.accuracy import CANDIDATE_PAIRS, output_errors, sizing_error
-from isolab.studies.costs import STEP_COST
-from isolab.studies.study import load_scene, scene_batch
+from isolab.studies.inputs.study import load_scene, scene_batch
+from isolab.studies.run.accuracy import CANDIDATE_PAIRS, output_errors, sizing_error
+from isolab.studies.run.costs import STEP_COST
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "studies" / "examples" / "article-scriber.yaml"
@@ -239,8 +239,8 @@ def chooser_rows() -> list[dict]:
     studies (their own fidelity, integrator and step left out), and how long it took."""
     import yaml
 
-    from isolab.studies.accuracy import choose
-    from isolab.studies.study import load_study
+    from isolab.studies.inputs.study import load_study
+    from isolab.studies.run.accuracy import choose
 
     examples = ROOT / "studies" / "examples"
     rows = []

@@ -84,8 +84,8 @@ def kernel_reference(definition: dict, n_cases: int) -> dict[str, float]:
     Run it where BLAS is limited to one thread (see :func:`measure_kernel`). Returns seconds per case of
     wall and CPU time and the number of cases."""
     from isolab.engine import simulate
-    from isolab.studies.fanout import ENGINE_BATCH_CASES
-    from isolab.studies.study import Study
+    from isolab.studies.inputs.study import Study
+    from isolab.studies.run.fanout import ENGINE_BATCH_CASES
 
     study = Study.model_validate(definition)
     sim = study.simulation

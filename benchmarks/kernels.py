@@ -19,7 +19,7 @@ from benchmarks.pairs import EXAMPLE
 from isolab.engine import concat, simulate
 from isolab.engine import model as engine_model
 from isolab.engine.integrators import exact
-from isolab.studies.study import load_scene, scene_batch
+from isolab.studies.inputs.study import load_scene, scene_batch
 
 DURATION = 5.0
 DT = 1e-3

@@ -41,7 +41,7 @@ from typing import Any
 
 import httpx
 
-from isolab.service.schemas import EXAMPLE_SCENE
+from isolab.service.api.schemas import EXAMPLE_SCENE
 
 TARGET_P99_S = 0.100
 CLIENT_NICENESS = 0

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from isolab.engine import concat, simulate
-from isolab.studies.study import load_scene, scene_batch
+from isolab.studies.inputs.study import load_scene, scene_batch
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "studies" / "examples" / "article-scriber.yaml"
 PAIRS = [

@@ -24,8 +24,8 @@ from typing import Any
 import httpx
 import uvicorn
 
-from isolab.service.app import create_app
-from isolab.service.schemas import EXAMPLE_SCENE
+from isolab.service.api.app import create_app
+from isolab.service.api.schemas import EXAMPLE_SCENE
 from isolab.service.settings import Settings
 
 

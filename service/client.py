@@ -240,7 +240,7 @@ class Client:
                             out.write(chunk)
                 except httpx.HTTPError as err:
                     raise self._unreached("GET", f"/studies/{study_id}/dataset", err) from err
-            from isolab.studies.store import new_file_mode
+            from isolab.studies.results.store import new_file_mode
 
             os.chmod(tmp_name, new_file_mode())  # as a file opened for writing would be, not mkstemp's 0600
             os.replace(tmp_name, path)
@@ -328,7 +328,7 @@ class Client:
             body["cost_order"] = list(cost_order)
         if tune:
             body["tune"] = True
-        from isolab.studies.comparisons import comparison_frame
+        from isolab.studies.answers.comparisons import comparison_frame
 
         return comparison_frame(self._request("POST", "/comparisons", json=body).json())
 
@@ -349,7 +349,7 @@ class Client:
         (``{"csv": text}`` or ``{"time", "channels"}``). ``fit``: ``"isolators.f_vertical=1:6"`` strings or
         ``{"path", "lower", "upper"}`` dicts. Answers fitted values +- 1 sigma (SI), the misfit per channel
         before and after and the calibrated scene (``scene_yaml``); ``plot=True`` adds a base64 PNG."""
-        from isolab.studies.calibration import parse_fit, read_measurement
+        from isolab.studies.answers.calibration import parse_fit, read_measurement
 
         if not isinstance(scene, Mapping):
             import yaml
@@ -390,7 +390,7 @@ class Client:
 
 
 # ------------------------------------------------------------------------------ command-line commands
-# ``isolab submit``, ``isolab status`` and ``isolab fetch``, registered in service/cli.py.
+# ``isolab submit``, ``isolab status`` and ``isolab fetch``, registered in service/cli/__init__.py.
 UrlOption = Annotated[str, typer.Option("--url", envvar=URL_ENV, help="Address of the isolab service.")]
 TokenOption = Annotated[
     str | None,

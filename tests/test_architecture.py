@@ -173,7 +173,9 @@ def test_the_engine_does_no_io_and_knows_no_schema_library():
 
 
 def test_route_modules_are_thin():
-    sizes = {p.name: len(p.read_text().splitlines()) for p in (ROOT / "service" / "routes").glob("*.py")}
+    sizes = {
+        p.name: len(p.read_text().splitlines()) for p in (ROOT / "service" / "api" / "routes").glob("*.py")
+    }
     fat = {name: n for name, n in sizes.items() if n > 400}
     assert not fat, f"route modules over 400 lines: {fat}"
 
@@ -240,7 +242,7 @@ def test_a_wheel_installs_the_three_packages_under_one_namespace(tmp_path):
     deps = next(p for p in sys.path if p.endswith("site-packages") and Path(p).is_dir())
     Path(site, "deps.pth").write_text(deps + "\n")
     code = (
-        "import importlib.metadata, isolab.engine, isolab.studies, isolab.service, isolab.service.app;"
+        "import importlib.metadata, isolab.engine, isolab.studies, isolab.service, isolab.service.api.app;"
         "print(isolab.engine.__file__);"
         "print(isolab.engine.__version__ == importlib.metadata.version('isolab'))"
     )

@@ -14,7 +14,7 @@ from distributed import LocalCluster
 from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
-from isolab.service.app import create_app, free_dashboard_address
+from isolab.service.api.app import create_app, free_dashboard_address
 from isolab.service.cli import app as cli_app
 from isolab.service.settings import ENV_VARS, Settings, SettingsError, load_settings
 

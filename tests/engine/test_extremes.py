@@ -4,6 +4,8 @@ whole range the schema accepts, which must come back finite and within physical 
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -24,9 +26,9 @@ from isolab.engine.modal import state_matrix
 from isolab.engine.profiles import Pieces, evaluate, scurve
 from isolab.engine.results import FAILED, OK, TIPPING, UNSTABLE
 from isolab.engine.stability import euler_limit, rk4_limit, spectral_radius, step_matrix
-from isolab.studies import schema
-from isolab.studies.schema import error_messages
-from isolab.studies.study import load_scene, scene_batch
+from isolab.studies.inputs import schema
+from isolab.studies.inputs.schema import error_messages
+from isolab.studies.inputs.study import load_scene, scene_batch
 
 # ------------------------------------------------------------------------ stability limits across damping
 ZETAS = (0.0, 0.1, 0.5, 0.9)
@@ -309,7 +311,7 @@ def test_the_bound_is_tight_enough_to_catch_a_blow_up() -> None:
     # too large would fail it
     import yaml
 
-    data = yaml.safe_load(open(schema.__file__.replace("schema.py", "examples/article-scriber.yaml")))
+    data = yaml.safe_load(open(Path(schema.__file__).parents[1] / "examples" / "article-scriber.yaml"))
     data["simulation"].update({"fidelity": "lti", "integrator": "exact", "duration": 6.0})
     ratios: list[float] = []
     assert check(data, ratios) == "ok"

@@ -12,7 +12,7 @@ import scipy.linalg
 from isolab.engine import concat, model, simulate
 from isolab.engine.integrators import exact
 from isolab.engine.integrators.step_maps import top_rows
-from isolab.studies.study import load_scene, scene_batch
+from isolab.studies.inputs.study import load_scene, scene_batch
 
 ARTICLE = Path(__file__).resolve().parents[2] / "studies" / "examples" / "article-scriber.yaml"
 

@@ -18,7 +18,7 @@ from pathlib import Path
 import httpx
 import uvicorn
 
-from isolab.service.schemas import EXAMPLE_SCENE
+from isolab.service.api.schemas import EXAMPLE_SCENE
 
 ISOLAB = Path(sys.executable).with_name("isolab")
 

@@ -20,8 +20,8 @@ import httpx
 import pytest
 from live_service import quick_scene, thread_server
 
-from isolab.service.app import create_app
-from isolab.service.request_limits import MAX_JSON_DEPTH
+from isolab.service.api.app import create_app
+from isolab.service.api.request_limits import MAX_JSON_DEPTH
 from isolab.service.settings import Settings
 
 pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
@@ -426,7 +426,7 @@ def study_files(data: Path) -> list[str]:
 def test_the_base_definition_is_valid(http: httpx.Client) -> None:
     """The catalogue's definitions differ from an accepted one by one field each (checked without storing
     it: the catalog stays empty for the tests below)."""
-    from isolab.studies.definitions import check_definition
+    from isolab.studies.inputs.definitions import check_definition
 
     assert check_definition(copy.deepcopy(BASE), MAX_CASES).n_cases == 4
 
@@ -583,7 +583,7 @@ def test_after_all_of_them_a_good_study_still_runs(http: httpx.Client, server: d
 def test_time_histories_too_long_are_refused_before_they_are_computed(http: httpx.Client) -> None:
     """A valid study whose cases run for an hour at 1 ms: recomputing a case's time histories would hold
     gigabytes in the API process, so the request is refused at once, naming what to change."""
-    from isolab.studies.history import MAX_RECORDED_SAMPLES, MAX_RETURNED_SAMPLES
+    from isolab.studies.answers.history import MAX_RECORDED_SAMPLES, MAX_RETURNED_SAMPLES
 
     hour = {"name": "an-hour", "scene": quick_scene(duration="1 h", dt="1 ms")}
     sid = http.post("/studies", json=hour).json()["id"]

@@ -17,7 +17,7 @@ from dask.distributed import WorkerPlugin
 from fastapi.testclient import TestClient
 from live_service import quick_scene, wait_finished
 
-from isolab.service.app import create_app
+from isolab.service.api.app import create_app
 from isolab.service.settings import Settings
 
 pytestmark = pytest.mark.slow  # a service with a cluster of its own

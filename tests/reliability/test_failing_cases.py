@@ -14,9 +14,9 @@ import httpx
 import pytest
 from live_service import quick_scene, thread_server, wait_finished
 
-from isolab.service.app import create_app
+from isolab.service.api.app import create_app
 from isolab.service.settings import Settings
-from isolab.studies.definitions import DefinitionError, check_definition
+from isolab.studies.inputs.definitions import DefinitionError, check_definition
 
 
 def study(

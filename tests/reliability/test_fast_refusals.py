@@ -17,10 +17,10 @@ import pytest
 from live_service import quick_scene, thread_server
 
 from benchmarks.refusals import post_and_probe
-from isolab.service.app import create_app
+from isolab.service.api.app import create_app
 from isolab.service.settings import Settings
-from isolab.studies import schema
-from isolab.studies.definitions import DefinitionError, check_definition
+from isolab.studies.inputs import schema
+from isolab.studies.inputs.definitions import DefinitionError, check_definition
 
 REFUSED_WITHIN_S = 1.0
 

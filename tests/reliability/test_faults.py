@@ -21,10 +21,10 @@ from fastapi.testclient import TestClient
 from live_service import ServiceProcess, quick_scene, wait_finished
 
 from isolab.engine import simulate
-from isolab.service.app import create_app
+from isolab.service.api.app import create_app
 from isolab.service.settings import Settings
-from isolab.studies.store import Store, write_netcdf
-from isolab.studies.study import Study
+from isolab.studies.inputs.study import Study
+from isolab.studies.results.store import Store, write_netcdf
 
 pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
 
@@ -273,7 +273,7 @@ WRITER = textwrap.dedent(
     import sys
     import numpy as np
     import xarray as xr
-    from isolab.studies.store import write_netcdf
+    from isolab.studies.results.store import write_netcdf
 
     target, rows = sys.argv[1], int(sys.argv[2])
     rng = np.random.default_rng(7)
@@ -361,7 +361,7 @@ def test_a_chunk_write_killed_half_way_is_not_taken_for_a_saved_chunk(tmp_path: 
     script = textwrap.dedent(
         f"""
         import numpy as np
-        from isolab.studies.store import Store
+        from isolab.studies.results.store import Store
         store = Store({str(tmp_path)!r})
         store.save_chunk({sid!r}, 0, {{"status": np.zeros(10, dtype=np.int8)}})
         print("saved", flush=True)
@@ -394,8 +394,8 @@ HAMMER = textwrap.dedent(
     """
     import sys, threading, time
     import numpy as np, xarray as xr
-    from isolab.studies.history import netcdf_bytes
-    from isolab.studies.store import Store
+    from isolab.studies.answers.history import netcdf_bytes
+    from isolab.studies.results.store import Store
 
     store = Store(sys.argv[1])
     ids = [store.create({"n": i}, name=f"s{i}", n_cases=2000) for i in range(3)]

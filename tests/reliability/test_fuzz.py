@@ -29,7 +29,7 @@ from live_service import quick_scene
 from schemathesis.config import SchemathesisConfig
 from starlette.types import Receive, Scope, Send
 
-from isolab.service.app import create_app
+from isolab.service.api.app import create_app
 from isolab.service.settings import Settings
 
 pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them

@@ -14,8 +14,8 @@ import httpx
 import pytest
 from live_service import quick_scene, thread_server
 
-from isolab.service.app import create_app
-from isolab.service.schemas import EXAMPLE_CALIBRATION, EXAMPLE_COMPARISON, EXAMPLE_STUDY_TEXT
+from isolab.service.api.app import create_app
+from isolab.service.api.schemas import EXAMPLE_CALIBRATION, EXAMPLE_COMPARISON, EXAMPLE_STUDY_TEXT
 from isolab.service.settings import Settings
 
 pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them

@@ -16,14 +16,14 @@ import pytest
 from fastapi.testclient import TestClient
 from live_service import ISOLAB, ServiceProcess, free_port
 
-from isolab.service.app import create_app
+from isolab.service.api.app import create_app
 from isolab.service.settings import Settings
-from isolab.studies.store import StoreInUse, StoreLock
+from isolab.studies.results.store import StoreInUse, StoreLock
 
 HOLDER = textwrap.dedent(
     """
     import sys, time
-    from isolab.studies.store import StoreLock
+    from isolab.studies.results.store import StoreLock
     StoreLock(sys.argv[1]).acquire()
     print("held", flush=True)
     time.sleep(60)

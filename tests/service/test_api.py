@@ -21,17 +21,17 @@ import xarray as xr
 from fastapi.testclient import TestClient
 
 from isolab.engine import simulate
-from isolab.service.app import create_app
-from isolab.service.schemas import EXAMPLE_SCENE
+from isolab.service.api.app import create_app
+from isolab.service.api.schemas import EXAMPLE_SCENE
 from isolab.service.settings import Settings
-from isolab.studies.cases import (
+from isolab.studies.inputs.study import Study
+from isolab.studies.results.cases import (
     CaseColumns,
     CaseQueryError,
     filter_mask,
     parse_filter,
     select_cases,
 )
-from isolab.studies.study import Study
 
 pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
 

@@ -17,13 +17,13 @@ import yaml
 from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
-from isolab.service.app import create_app
+from isolab.service.api.app import create_app
+from isolab.service.api.schemas import EXAMPLE_CALIBRATION
 from isolab.service.cli import app as cli_app
 from isolab.service.client import Client, ClientError
-from isolab.service.schemas import EXAMPLE_CALIBRATION
 from isolab.service.settings import Settings
-from isolab.studies.calibration import measurement_csv, measurement_from_columns
-from isolab.studies.study import load_scene
+from isolab.studies.answers.calibration import measurement_csv, measurement_from_columns
+from isolab.studies.inputs.study import load_scene
 
 TRUE_F_HORIZONTAL = 3.6  # Hz, what the example's measurement was made with
 TRUE_OFFSET = 0.1  # s

@@ -20,13 +20,13 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from isolab.service import local_commands
 from isolab.service.cli import app as cli_app
+from isolab.service.cli import local as local_commands
 from isolab.service.client import Client, read_study_file
-from isolab.studies.definitions import DefinitionError, check_definition
-from isolab.studies.file_checks import in_user_words
-from isolab.studies.kernel_cache import kernels_cached
-from isolab.studies.store import copy_atomic, new_file_mode
+from isolab.studies.inputs.definitions import DefinitionError, check_definition
+from isolab.studies.inputs.file_checks import in_user_words
+from isolab.studies.results.store import copy_atomic, new_file_mode
+from isolab.studies.run.kernel_cache import kernels_cached
 
 BAR = "━"  # what rich draws a progress bar with
 
@@ -176,11 +176,11 @@ def test_messages_name_stages_and_keys_as_the_file_writes_them() -> None:
 # ----------------------------------------------------------------------------------- the compile notice
 def test_simulate_says_when_it_compiles(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     path = write(tmp_path / "scene.yaml", scene())
-    monkeypatch.setattr("isolab.studies.kernel_cache.kernels_cached", lambda integrators: False)
+    monkeypatch.setattr("isolab.studies.run.kernel_cache.kernels_cached", lambda integrators: False)
     r = invoke("simulate", str(path))
     assert r.exit_code == 0, r.output
     assert r.stderr.splitlines() == [local_commands.COMPILING] and "ok" in r.stdout
-    monkeypatch.setattr("isolab.studies.kernel_cache.kernels_cached", lambda integrators: True)
+    monkeypatch.setattr("isolab.studies.run.kernel_cache.kernels_cached", lambda integrators: True)
     r = invoke("simulate", str(path))
     assert r.exit_code == 0 and r.stderr == ""
 
@@ -211,7 +211,9 @@ def test_kernels_cached_reads_the_numba_index(tmp_path: Path) -> None:
 
 
 def test_the_engine_kernels_are_not_cached_in_an_empty_cache(tmp_path: Path) -> None:
-    code = "from isolab.studies.kernel_cache import kernels_cached as k; print(k(['rk4']), k(['reference']))"
+    code = (
+        "from isolab.studies.run.kernel_cache import kernels_cached as k; print(k(['rk4']), k(['reference']))"
+    )
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
@@ -263,7 +265,8 @@ def test_run_writes_the_dataset_with_the_umask_mode(
 ) -> None:
     asked = []
     monkeypatch.setattr(
-        "isolab.studies.kernel_cache.kernels_cached", lambda integrators: asked.append(integrators) or False
+        "isolab.studies.run.kernel_cache.kernels_cached",
+        lambda integrators: asked.append(integrators) or False,
     )
     path = study(tmp_path)
     out = tmp_path / "out.nc"

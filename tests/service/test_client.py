@@ -19,12 +19,12 @@ import yaml
 from typer.testing import CliRunner
 
 from isolab.engine import simulate
-from isolab.service.app import create_app
+from isolab.service.api.app import create_app
+from isolab.service.api.schemas import EXAMPLE_SCENE
 from isolab.service.cli import app as cli_app
 from isolab.service.client import Client, ClientError, read_study_file
-from isolab.service.schemas import EXAMPLE_SCENE
 from isolab.service.settings import Settings
-from isolab.studies.study import load_study
+from isolab.studies.inputs.study import load_study
 
 pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
 

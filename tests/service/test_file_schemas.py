@@ -11,7 +11,7 @@ import jsonschema
 import yaml
 from fastapi.testclient import TestClient
 
-from isolab.service.app import create_app
+from isolab.service.api.app import create_app
 from isolab.service.settings import Settings
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -17,10 +17,10 @@ import xarray as xr
 import yaml
 
 from isolab.engine import simulate
-from isolab.service import plots
-from isolab.studies.cases import CaseColumns, case_table, cases_csv, csv_header
-from isolab.studies.dataset import to_dataset
-from isolab.studies.study import Study, isolator_names
+from isolab.service.plots import studies as plots
+from isolab.studies.inputs.study import Study, isolator_names
+from isolab.studies.results.cases import CaseColumns, case_table, cases_csv, csv_header
+from isolab.studies.results.dataset import to_dataset
 from isolab.studies.units import readable_unit, shown_in, unit_value, written_unit
 
 G = 9.80665

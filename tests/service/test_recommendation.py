@@ -10,8 +10,8 @@ import pytest
 import xarray as xr
 from fastapi.testclient import TestClient
 
-from isolab.service.app import create_app
-from isolab.service.schemas import EXAMPLE_SCENE
+from isolab.service.api.app import create_app
+from isolab.service.api.schemas import EXAMPLE_SCENE
 from isolab.service.settings import Settings
 
 

@@ -12,11 +12,11 @@ import pytest
 from fastapi.testclient import TestClient
 
 from isolab.engine import simulate
-from isolab.service.app import create_app
-from isolab.service.schemas import EXAMPLE_SCENE
+from isolab.service.api.app import create_app
+from isolab.service.api.schemas import EXAMPLE_SCENE
 from isolab.service.settings import Settings
-from isolab.studies.store import Store
-from isolab.studies.study import Study
+from isolab.studies.inputs.study import Study
+from isolab.studies.results.store import Store
 
 pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
 
@@ -106,7 +106,7 @@ def test_restart_mid_study_resumes_and_loses_nothing(tmp_path: Path) -> None:
 
 def test_job_queue_order_cancel_and_stop(tmp_path: Path) -> None:
     """The queue's own bookkeeping, with a runner that works until it is cancelled (no cluster)."""
-    from isolab.service.jobs import JobQueue
+    from isolab.service.api.jobs import JobQueue
 
     started: list[str] = []
 

@@ -14,12 +14,12 @@ import pytest
 from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
-from isolab.service.app import create_app
+from isolab.service.api.app import create_app
+from isolab.service.api.schemas import EXAMPLE_SCENE
 from isolab.service.cli import app as cli_app
 from isolab.service.client import Client, sensitivity_frame
-from isolab.service.schemas import EXAMPLE_SCENE
 from isolab.service.settings import Settings
-from isolab.studies import sensitivity as sensitivity_module
+from isolab.studies.answers import sensitivity as sensitivity_module
 from tests.reliability.live_service import wait_finished
 
 pytestmark = pytest.mark.slow  # a cluster of its own
@@ -155,7 +155,7 @@ def test_client_frame_and_cli_table(http: TestClient, study_id: str, tmp_path, m
 
 
 def test_cli_on_a_local_dataset_file(tmp_path) -> None:
-    from isolab.studies.store import write_netcdf
+    from isolab.studies.results.store import write_netcdf
     from tests.studies.test_sensitivity import S1_EXACT, ishigami_study
 
     path = write_netcdf(ishigami_study("saltelli", 1024), tmp_path / "ishigami.nc")

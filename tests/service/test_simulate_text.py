@@ -12,7 +12,7 @@ import pytest
 from typer.testing import CliRunner
 
 from isolab.service.cli import app as cli_app
-from isolab.service.local_commands import heave_mode, mode_label
+from isolab.service.cli.local import heave_mode, mode_label
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "studies" / "examples" / "article-scriber.yaml"
 

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 from fastapi.testclient import TestClient
 
-from isolab.service.app import create_app
-from isolab.service.schemas import EXAMPLE_STUDY_TEXT
+from isolab.service.api.app import create_app
+from isolab.service.api.schemas import EXAMPLE_STUDY_TEXT
 from isolab.service.settings import Settings
 
 TOKEN = "s3cret"

@@ -15,8 +15,12 @@ from pydantic import ValidationError
 
 from isolab.engine import simulate
 from isolab.engine.results import OK
-from isolab.studies import accuracy
-from isolab.studies.accuracy import (
+from isolab.studies.inputs.schema import Simulation, error_messages, parse_tolerance
+from isolab.studies.inputs.study import Study, load_scene, load_study, scene_batch
+from isolab.studies.results.dataset import error_estimate
+from isolab.studies.results.store import Store
+from isolab.studies.run import accuracy
+from isolab.studies.run.accuracy import (
     ESTIMATED_OUTPUTS,
     choose,
     choose_for_batch,
@@ -26,11 +30,7 @@ from isolab.studies.accuracy import (
     resolved_simulation,
     sizing_error,
 )
-from isolab.studies.costs import STEP_COST
-from isolab.studies.dataset import error_estimate
-from isolab.studies.schema import Simulation, error_messages, parse_tolerance
-from isolab.studies.store import Store
-from isolab.studies.study import Study, load_scene, load_study, scene_batch
+from isolab.studies.run.costs import STEP_COST
 
 STEPS = (5e-4, 1e-3, 2e-3, 5e-3)  # a short ladder: the truth at 0.5 ms keeps the tests fast
 
@@ -318,7 +318,7 @@ def _open(store: Store, sid: str) -> xr.Dataset:
 
 
 def test_a_requested_study_records_its_choice_and_its_measured_error(client: Client, tmp_path: Path) -> None:
-    from isolab.studies.runner import run_study
+    from isolab.studies.run.runner import run_study
 
     study = load_study(_with_simulation({"accuracy": "balanced", "dt": "5 ms"}))
     store = Store(tmp_path)
@@ -345,7 +345,7 @@ def test_a_requested_study_records_its_choice_and_its_measured_error(client: Cli
 
 
 def test_every_stored_study_carries_its_measured_error(client: Client, tmp_path: Path) -> None:
-    from isolab.studies.runner import run_study
+    from isolab.studies.run.runner import run_study
 
     study = load_study(_with_simulation({"fidelity": "lti", "integrator": "exact", "dt": "2 ms"}))
     store = Store(tmp_path)

@@ -10,15 +10,15 @@ import pytest
 from pydantic import ValidationError
 
 from isolab.engine import simulate
-from isolab.studies.accuracy import (
+from isolab.studies.inputs.schema import Simulation
+from isolab.studies.inputs.study import load_scene, scene_batch
+from isolab.studies.results.dataset import result_arrays
+from isolab.studies.run.accuracy import (
     choose_for_batch,
     component_errors,
     estimate_errors,
     request_output_tolerances,
 )
-from isolab.studies.dataset import result_arrays
-from isolab.studies.schema import Simulation
-from isolab.studies.study import load_scene, scene_batch
 
 PEAKS = (
     "peak_displacement",

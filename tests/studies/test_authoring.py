@@ -1,4 +1,5 @@
-"""Studies as text (isolab.studies.authoring) and modes named by their motion (isolab.studies.history):
+"""Studies as text (isolab.studies.authoring.authoring) and modes named by their motion
+(isolab.studies.answers.history):
 what the web page's editor, study and case views stand on."""
 
 from __future__ import annotations
@@ -7,7 +8,8 @@ import numpy as np
 import pytest
 import yaml
 
-from isolab.studies.authoring import (
+from isolab.studies.answers.history import mode_name
+from isolab.studies.authoring.authoring import (
     MAX_DEPTH,
     ExampleNotFound,
     check_text,
@@ -16,8 +18,7 @@ from isolab.studies.authoring import (
     example_names,
     example_text,
 )
-from isolab.studies.definitions import DefinitionError, check_definition, stored_definition
-from isolab.studies.history import mode_name
+from isolab.studies.inputs.definitions import DefinitionError, check_definition, stored_definition
 
 
 def problems(text: str) -> list[dict]:

@@ -1,4 +1,4 @@
-"""Calibration against measured motion (:mod:`isolab.studies.calibration`).
+"""Calibration against measured motion (:mod:`isolab.studies.answers.calibration`).
 
 A measurement is synthesised from a known scene (the article's scriber cut to under 3 s, with
 isolators different from the scene it calibrates), with sensor noise, an unknown time offset, a sample
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import yaml
 
-from isolab.studies.calibration import (
+from isolab.studies.answers.calibration import (
     FitSpec,
     calibrate,
     measurement_csv,
@@ -26,8 +26,8 @@ from isolab.studies.calibration import (
     read_measurement,
     synthetic_measurement,
 )
-from isolab.studies.definitions import DefinitionError
-from isolab.studies.study import load_scene
+from isolab.studies.inputs.definitions import DefinitionError
+from isolab.studies.inputs.study import load_scene
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "studies" / "examples"
 G = 9.80665

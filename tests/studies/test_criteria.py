@@ -10,14 +10,14 @@ import pytest
 from pydantic import ValidationError
 
 from isolab.engine import simulate
-from isolab.service.schemas import EXAMPLE_SCENE
-from isolab.studies.cases import case_table, filter_mask, parse_filter
-from isolab.studies.comparisons import COST_ORDER, compare, comparison_frame, recommend
-from isolab.studies.criteria import Criteria, add_criteria, criterion_margin, margins
-from isolab.studies.dataset import to_dataset
-from isolab.studies.runner import study_labels
-from isolab.studies.schema import error_messages
-from isolab.studies.study import load_scene, scene_batch, validate_study
+from isolab.service.api.schemas import EXAMPLE_SCENE
+from isolab.studies.answers.comparisons import COST_ORDER, compare, comparison_frame, recommend
+from isolab.studies.inputs.schema import error_messages
+from isolab.studies.inputs.study import load_scene, scene_batch, validate_study
+from isolab.studies.questions.criteria import Criteria, add_criteria, criterion_margin, margins
+from isolab.studies.results.cases import case_table, filter_mask, parse_filter
+from isolab.studies.results.dataset import to_dataset
+from isolab.studies.run.runner import study_labels
 
 
 def scene(**criteria) -> dict:
@@ -186,7 +186,7 @@ def test_meets_criteria_is_a_case_table_column_to_filter_on(grid_dataset) -> Non
 def test_criteria_round_trip_through_netcdf(grid_dataset, tmp_path) -> None:
     import xarray as xr
 
-    from isolab.studies.dataset import netcdf_encoding
+    from isolab.studies.results.dataset import netcdf_encoding
 
     ds, _ = grid_dataset
     path = tmp_path / "c.nc"
@@ -247,7 +247,7 @@ def test_compare_answers_margins_and_one_recommendation() -> None:
 
 # ------------------------------------------------------------------------------------------------ tuning
 def test_tuning_stiffens_air_mounts_to_limit_their_deflection() -> None:
-    from isolab.studies.tuning import TUNING_RANGES, tune, worst_margins
+    from isolab.studies.answers.tuning import TUNING_RANGES, tune, worst_margins
 
     s = scene(isolators={"max_deflection": "4 mm"})
     found = tune(s, "air", generations=6, population=8)
@@ -271,7 +271,7 @@ def test_compare_with_tuning_reports_the_values_and_judges_the_tuned_types() -> 
         assert answer["rows"][t]["margin_isolators_max_deflection"] == pytest.approx(
             found["worst_margin"], rel=1e-6
         )
-    from isolab.studies.definitions import DefinitionError
+    from isolab.studies.inputs.definitions import DefinitionError
 
     with pytest.raises(DefinitionError) as err:
         compare(scene(), ["air"], tune=True)
@@ -279,7 +279,7 @@ def test_compare_with_tuning_reports_the_values_and_judges_the_tuned_types() -> 
 
 
 def test_velocity_criterion_judges_the_floor_induced_velocity_against_the_vc_level() -> None:
-    from isolab.studies.floor import VC_LEVELS
+    from isolab.studies.questions.floor import VC_LEVELS
 
     s = scene(tool={"velocity": "vc-c"})
     s["floor"] = {"spectrum": {"x": "VC-D", "y": "VC-D", "z": "VC-D"}}

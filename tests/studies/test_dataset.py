@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from isolab.engine.results import DOF_NAMES, FAILED, OK, TIPPING, UNSTABLE, SimulationResult
-from isolab.studies.dataset import failed_arrays, from_chunks, result_arrays, to_dataset
-from isolab.studies.designs import Design
+from isolab.studies.questions.designs import Design
+from isolab.studies.results.dataset import failed_arrays, from_chunks, result_arrays, to_dataset
 
 FN = {"active": 1.0, "air": 3.0, "passive": 10.0}
 ISOLATORS = ["front_left", "front_right", "rear_left", "rear_right"]
@@ -157,7 +157,7 @@ def test_every_variable_and_coordinate_has_units_and_long_name() -> None:
 
 
 def test_settling_per_point_mount_deflection_and_largest_load_are_stored_and_tabled() -> None:
-    from isolab.studies.cases import case_table
+    from isolab.studies.results.cases import case_table
 
     design, t, m = grid_design()
     res = fake_result(t, m, np.array([OK, UNSTABLE, OK, OK, OK, OK], dtype=np.int8))

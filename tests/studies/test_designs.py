@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import yaml
 
-from isolab.studies import designs
-from isolab.studies.designs import Factor
-from isolab.studies.study import Study
+from isolab.studies.inputs.study import Study
+from isolab.studies.questions import designs
+from isolab.studies.questions.designs import Factor
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "studies" / "examples"
 G = 9.80665

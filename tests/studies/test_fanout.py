@@ -19,9 +19,11 @@ from distributed import Client, LocalCluster
 from isolab.engine import __version__ as engine_version
 from isolab.engine import simulate
 from isolab.engine.results import FAILED, OK, UNSTABLE
-from isolab.studies import fanout, runner
-from isolab.studies.dataset import to_dataset
-from isolab.studies.fanout import (
+from isolab.studies.run import fanout, runner
+from isolab.studies.inputs.study import load_study
+from isolab.studies.results.dataset import to_dataset
+from isolab.studies.results.store import Store
+from isolab.studies.run.fanout import (
     CHUNKS_PER_WORKER,
     FanoutError,
     FanoutReport,
@@ -33,9 +35,7 @@ from isolab.studies.fanout import (
     run_chunk,
     run_chunks,
 )
-from isolab.studies.runner import finish_study, make_client, run_local, run_study, study_labels
-from isolab.studies.store import Store
-from isolab.studies.study import load_study
+from isolab.studies.run.runner import finish_study, make_client, run_local, run_study, study_labels
 
 pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
 

@@ -10,9 +10,9 @@ import pytest
 import yaml
 from pydantic import ValidationError
 
-from isolab.studies.isolators import PRESETS
-from isolab.studies.scenes import build_batch
-from isolab.studies.schema import Scene, Simulation
+from isolab.studies.inputs.isolators import PRESETS
+from isolab.studies.inputs.scenes import build_batch
+from isolab.studies.inputs.schema import Scene, Simulation
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "studies" / "examples"
 

@@ -18,15 +18,15 @@ import pytest
 import yaml
 from pydantic import ValidationError
 
-from isolab.studies import file_reference as ref
-from isolab.studies.schema import (
+from isolab.studies.authoring import file_reference as ref
+from isolab.studies.inputs.schema import (
     MAX_SPAN,
     MAX_STAGE_MASS,
     MIN_SPAN,
     MIN_STAGE_MASS,
     Scene,
 )
-from isolab.studies.study import Study
+from isolab.studies.inputs.study import Study
 
 ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "study-files.md"
@@ -74,7 +74,7 @@ def test_the_document_is_what_the_models_give() -> None:
         )
         pytest.fail(
             "docs/study-files.md is out of date with the models: regenerate it with `make docs` "
-            f"(python -m isolab.studies.file_reference > docs/study-files.md)\n{diff}"
+            f"(python -m isolab.studies.authoring.file_reference > docs/study-files.md)\n{diff}"
         )
 
 
@@ -170,7 +170,9 @@ EXPECTED_CASES = {"grid": 12, "lhs": 200, "sobol": 256, "random": 100, "saltelli
 
 @pytest.mark.parametrize("kind", ref.design_types())
 def test_every_design_type_has_an_example_that_is_a_valid_study(kind: str, study_schema: dict) -> None:
-    assert kind in ref.DESIGN_EXAMPLES, f"design type {kind!r} has no example in studies/file_reference.py"
+    assert kind in ref.DESIGN_EXAMPLES, (
+        f"design type {kind!r} has no example in studies/authoring/file_reference.py"
+    )
     data = ref.design_example(kind)
     assert errors(study_schema, data) == []
     study = Study.model_validate(data)

@@ -14,16 +14,16 @@ from pydantic import ValidationError
 from typer.testing import CliRunner
 
 from isolab.engine import frequency
-from isolab.studies import floor
-from isolab.studies.comparisons import comparison_study, run_comparison
-from isolab.studies.definitions import DefinitionError
-from isolab.studies.floor_response import velocity_spectra
-from isolab.studies.parameters import scene_dict
-from isolab.studies.scenes import build_batch
-from isolab.studies.schema import Scene, error_messages
-from isolab.studies.study import load_scene
+from isolab.studies.answers.comparisons import comparison_study, run_comparison
+from isolab.studies.answers.floor_response import velocity_spectra
+from isolab.studies.inputs.definitions import DefinitionError
+from isolab.studies.inputs.parameters import scene_dict
+from isolab.studies.inputs.scenes import build_batch
+from isolab.studies.inputs.schema import Scene, error_messages
+from isolab.studies.inputs.study import load_scene
+from isolab.studies.questions import floor
 
-EXAMPLES = Path(floor.__file__).parent / "examples"
+EXAMPLES = Path(floor.__file__).parents[1] / "examples"
 
 
 def scriber(spectrum: dict | None = None) -> dict:
@@ -176,7 +176,7 @@ def test_velocity_spectra_errors_name_the_field():
 # ------------------------------------------------------------------------------------------ route, CLI
 @pytest.fixture(scope="module")
 def http(tmp_path_factory: pytest.TempPathFactory):
-    from isolab.service.app import create_app
+    from isolab.service.api.app import create_app
     from isolab.service.settings import Settings
 
     return TestClient(create_app(Settings(data_dir=tmp_path_factory.mktemp("data"))))  # no cluster needed

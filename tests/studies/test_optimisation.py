@@ -15,19 +15,26 @@ import xarray as xr
 from distributed import Client, LocalCluster
 from fastapi.testclient import TestClient
 
-from isolab.service.app import create_app
-from isolab.service.jobs import JobQueue
+from isolab.service.api.app import create_app
+from isolab.service.api.jobs import JobQueue
 from isolab.service.settings import Settings
-from isolab.studies.cases import case_table, filter_mask, parse_filter
-from isolab.studies.definitions import DefinitionError, check_definition, stored_definition
-from isolab.studies.designs import Factor
-from isolab.studies.goals import PENALTY, Constraint, Goals, Objective, goal_values, template_dataset
-from isolab.studies.optimisation import GENERATION_FILE, Journal, non_dominated, optimise
+from isolab.studies.answers.tuning import TUNING_RANGES
+from isolab.studies.inputs.definitions import DefinitionError, check_definition, stored_definition
+from isolab.studies.inputs.study import load_study, validate_study
 from isolab.studies.quantities import output_values
-from isolab.studies.runner import run_study
-from isolab.studies.store import Store
-from isolab.studies.study import load_study, validate_study
-from isolab.studies.tuning import TUNING_RANGES
+from isolab.studies.questions.designs import Factor
+from isolab.studies.questions.goals import (
+    PENALTY,
+    Constraint,
+    Goals,
+    Objective,
+    goal_values,
+    template_dataset,
+)
+from isolab.studies.results.cases import case_table, filter_mask, parse_filter
+from isolab.studies.results.store import Store
+from isolab.studies.run.optimisation import GENERATION_FILE, Journal, non_dominated, optimise
+from isolab.studies.run.runner import run_study
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_fanout import small_study  # noqa: E402  (the fan-out tests' cut-down scriber)

@@ -14,9 +14,9 @@ import yaml
 from isolab.engine import profiles
 from isolab.engine.model import preload
 from isolab.engine.scene import SceneError
-from isolab.studies.scenes import build_batch, slowest_decay_time
-from isolab.studies.schema import Scene, Simulation
-from isolab.studies.study import Study, load_study, study_from_json, validate_study
+from isolab.studies.inputs.scenes import build_batch, slowest_decay_time
+from isolab.studies.inputs.schema import Scene, Simulation
+from isolab.studies.inputs.study import Study, load_study, study_from_json, validate_study
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "studies" / "examples"
 G = 9.80665
@@ -86,7 +86,7 @@ def test_preset_gives_the_vertical_and_horizontal_natural_frequency(preset):
         m_total = b.mass[0] + b.stage_mass[0].sum()
         fz = math.sqrt(b.iso_k[0, :, 2].sum() / m_total) / (2 * math.pi)
         fx = math.sqrt(b.iso_k[0, :, 0].sum() / m_total) / (2 * math.pi)
-        from isolab.studies.isolators import PRESETS
+        from isolab.studies.inputs.isolators import PRESETS
 
         assert fz == pytest.approx(PRESETS[preset].f_vertical, rel=1e-12)
         assert fx == pytest.approx(PRESETS[preset].f_horizontal, rel=1e-12)
@@ -385,7 +385,7 @@ def test_a_stored_definition_is_rebuilt_by_parsing_alone_and_the_build_still_ref
 
 
 def test_scene_batch_labels():
-    from isolab.studies.study import scene_batch
+    from isolab.studies.inputs.study import scene_batch
 
     b, names = scene_batch(Scene.model_validate(scriber()))
     assert names == {

@@ -12,10 +12,10 @@ import pytest
 import yaml
 from pydantic import ValidationError
 
-from isolab.studies.isolators import PRESETS, damping_from_ratio, load_share, stiffness_from_frequency
-from isolab.studies.parameters import resolve
-from isolab.studies.schema import Scene, error_messages
-from isolab.studies.study import Study, load_scene, load_study, validate_scene, validate_study
+from isolab.studies.inputs.isolators import PRESETS, damping_from_ratio, load_share, stiffness_from_frequency
+from isolab.studies.inputs.parameters import resolve
+from isolab.studies.inputs.schema import Scene, error_messages
+from isolab.studies.inputs.study import Study, load_scene, load_study, validate_scene, validate_study
 from isolab.studies.units import to_si
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "studies" / "examples"

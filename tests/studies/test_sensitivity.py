@@ -13,15 +13,15 @@ import xarray as xr
 import yaml
 
 from isolab.engine.results import FAILED, FLAG_FIELDS, OK, OUTPUT_FIELDS, SimulationResult, output_shape
-from isolab.studies import designs
-from isolab.studies import sensitivity as sensitivity_module
-from isolab.studies.dataset import to_dataset
-from isolab.studies.definitions import DefinitionError, case_count_bound, check_definition
-from isolab.studies.designs import Factor
-from isolab.studies.runner import _design_extra
-from isolab.studies.sensitivity import SensitivityResult, sensitivity, stored_sensitivity
-from isolab.studies.store import Store
-from isolab.studies.study import Study
+from isolab.studies.answers import sensitivity as sensitivity_module
+from isolab.studies.answers.sensitivity import SensitivityResult, sensitivity, stored_sensitivity
+from isolab.studies.inputs.definitions import DefinitionError, case_count_bound, check_definition
+from isolab.studies.inputs.study import Study
+from isolab.studies.questions import designs
+from isolab.studies.questions.designs import Factor
+from isolab.studies.results.dataset import to_dataset
+from isolab.studies.results.store import Store
+from isolab.studies.run.runner import _design_extra
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "studies" / "examples"
 

@@ -15,9 +15,9 @@ import pytest
 import xarray as xr
 
 from isolab.engine.results import OK, UNSTABLE, SimulationResult
-from isolab.studies.dataset import to_dataset
-from isolab.studies.designs import Design
-from isolab.studies.store import Store, StudyNotFound, check_id, write_netcdf
+from isolab.studies.questions.designs import Design
+from isolab.studies.results.dataset import to_dataset
+from isolab.studies.results.store import Store, StudyNotFound, check_id, write_netcdf
 
 ISOLATORS = ["a", "b", "c", "d"]
 POINTS = ["tool"]
@@ -423,7 +423,7 @@ def test_chunks_persist_and_reload(store: Store) -> None:
 
 def test_a_catalog_from_before_the_step_column_is_migrated(tmp_path: Path) -> None:
     # a catalog written before `dt` was recorded: opening it adds the column, old rows read None
-    from isolab.studies import catalog as catalog_module
+    from isolab.studies.results import catalog as catalog_module
 
     old_schema = catalog_module._SCHEMA.replace("    dt REAL,\n", "")
     assert "dt REAL" not in old_schema

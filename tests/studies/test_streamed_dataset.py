@@ -14,8 +14,9 @@ import pytest
 import xarray as xr
 
 from isolab.engine.results import FAILED, OK, TIPPING, UNSTABLE
-from isolab.studies.criteria import Criteria, add_criteria
-from isolab.studies.dataset import (
+from isolab.studies.questions.criteria import Criteria, add_criteria
+from isolab.studies.questions.designs import Design
+from isolab.studies.results.dataset import (
     add_error_estimate,
     failed_arrays,
     failures,
@@ -24,8 +25,7 @@ from isolab.studies.dataset import (
     streamed_dataset,
     to_dataset,
 )
-from isolab.studies.designs import Design
-from isolab.studies.store import Store, write_netcdf
+from isolab.studies.results.store import Store, write_netcdf
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_dataset import ISOLATORS, POINTS, fake_result, grid_design  # noqa: E402
@@ -220,8 +220,8 @@ _ASSEMBLE = textwrap.dedent(
     import numpy as np
     sys.path.insert(0, {tests!r})
     from test_streamed_dataset import CRITERIA, ATTRS, ESTIMATE, ISOLATORS, POINTS, sampled_design
-    from isolab.studies.dataset import add_error_estimate, streamed_dataset
-    from isolab.studies.store import Store, write_netcdf
+    from isolab.studies.results.dataset import add_error_estimate, streamed_dataset
+    from isolab.studies.results.store import Store, write_netcdf
 
     def rss():
         with open("/proc/self/statm") as f:

@@ -1,0 +1,283 @@
+"""``/studies``: submit, list, inspect, cancel and delete studies; fetch their datasets.
+
+Handlers only translate: the definition is checked by :mod:`isolab.studies.inputs.definitions`, the
+catalog and files are :class:`isolab.studies.results.store.Store`, running is
+:class:`isolab.service.api.jobs.JobQueue`. The case table, time histories and plots are
+:mod:`isolab.service.api.routes.cases`.
+"""
+
+from __future__ import annotations
+
+import re
+from datetime import UTC, datetime
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Body, Depends, HTTPException, Query, Request, Response
+from fastapi import Path as PathParam
+from fastapi.responses import FileResponse
+
+from isolab.service.api.jobs import JobQueue
+from isolab.service.api.routes import (
+    INVALID,
+    NOT_DONE,
+    NOT_FOUND,
+    app_settings,
+    invalid,
+    job_queue,
+    require_done,
+    run_heavy,
+    study_row,
+    study_store,
+    unprocessable,
+)
+from isolab.service.api.schemas import (
+    EXAMPLE_LHS_STUDY,
+    EXAMPLE_STUDY,
+    MessageBody,
+    StudyAccepted,
+    StudyDetail,
+    StudyLinks,
+    StudyList,
+    StudyProgress,
+    StudyStatusName,
+    StudySummary,
+)
+from isolab.service.settings import Settings
+from isolab.studies.inputs.definitions import DefinitionError, check_definition, stored_definition
+from isolab.studies.results.store import Store, utc_now
+from isolab.studies.run.runner import isolator_types
+
+router = APIRouter(prefix="/studies", tags=["studies"])
+
+MAX_OFFSET = 1_000_000_000
+"""Largest ``offset`` of a listing (SQLite integers stop at 2**63)."""
+StudyId = Annotated[str, PathParam(description="study id (32 hex digits)")]
+TimeQuery = Query(
+    description="RFC 3339 date-time (ISO 8601; UTC if no zone), inclusive",
+    json_schema_extra={"format": "date-time"},
+)
+_RFC3339 = re.compile(
+    r"(\d{4}-\d{2}-\d{2})[Tt ](\d{2}:\d{2}):(\d{2})(\.\d+)?([Zz]|[+-]\d{2}:\d{2})?", re.ASCII
+)
+
+
+def query_time(text: str | None, field_name: str) -> datetime | str | None:
+    """A time filter of a listing as the catalog takes it: an RFC 3339 date-time (what the API description
+    says, ``t``/``z`` in either case, a leap second read as the second before, any number of fractional
+    digits) becomes a datetime; other text is left to the catalog (plain ISO 8601, or its ValueError)."""
+    if text is None:
+        return None
+    m = _RFC3339.fullmatch(text)
+    if m is None:
+        return text
+    day, minutes, seconds, fraction, zone = m.groups()
+    micro = (fraction or ".")[1:7].ljust(6, "0")
+    zone = "+00:00" if zone in (None, "Z", "z") else zone
+    year_zero = day.startswith("0000-")  # RFC 3339 has a year 0; Python's datetime starts at year 1
+    iso = f"{'0001' + day[4:] if year_zero else day}T{minutes}:{min(int(seconds), 59):02d}.{micro}{zone}"
+    try:
+        moment = datetime.fromisoformat(iso)
+    except ValueError:
+        raise ValueError(f"{field_name}: {text!r} is not an ISO 8601 time") from None
+    try:
+        return datetime.min.replace(tzinfo=UTC) if year_zero else moment.astimezone(UTC)
+    except OverflowError:  # within a day of year 1 or year 9999: as far as a datetime goes
+        return (datetime.min if moment.year == 1 else datetime.max).replace(tzinfo=UTC)
+
+
+def links(study_id: str) -> StudyLinks:
+    base = f"/studies/{study_id}"
+    return StudyLinks(self=base, dataset=f"{base}/dataset", cases=f"{base}/cases")
+
+
+def summary(row: dict[str, Any]) -> dict[str, Any]:
+    """The catalog row as the fields of :class:`StudySummary`."""
+    return {
+        "id": row["id"],
+        "name": row["name"],
+        "status": row["status"],
+        "progress": StudyProgress(done=row["n_done"], total=row["n_cases"], failed=row["n_failed"]),
+        "created": row["created"],
+        "started": row["started"],
+        "finished": row["finished"],
+        "error": row["error"],
+        "failures": failure_note(row),
+        "parameters": row["parameters"] or [],
+        "isolator_types": row["isolator_types"] or [],
+        "fidelity": row["fidelity"],
+        "integrator": row["integrator"],
+        "dt": row["dt"],
+        "generation": row.get("generation"),
+        "generations": row.get("generations"),
+        "links": links(row["id"]),
+    }
+
+
+def failure_note(row: dict[str, Any]) -> str | None:
+    """``"3 of 12 cases failed ..."`` when cases have failed so far, else None."""
+    n_failed = int(row["n_failed"] or 0)
+    if not n_failed:
+        return None
+    return (
+        f"{n_failed} of {row['n_cases']} cases failed (status not ok); each one's status and message are "
+        f"in its row of /studies/{row['id']}/cases and in the dataset"
+    )
+
+
+@router.post(
+    "",
+    status_code=202,
+    response_model=StudyAccepted,
+    responses={
+        **INVALID,
+        413: {"model": MessageBody, "description": "request body too large"},
+        503: {"model": MessageBody, "description": "the service is shutting down; submit again later"},
+    },
+    summary="Submit a study",
+    # the definition is checked by studies.definitions (its errors name the field); the description
+    # says at least what every definition has
+    openapi_extra={
+        "requestBody": {
+            "content": {
+                "application/json": {
+                    "schema": {
+                        "required": ["name", "scene"],
+                        "properties": {
+                            "name": {"type": "string", "minLength": 1, "maxLength": 200},
+                            "scene": {"type": "object", "description": "inline scene"},
+                        },
+                    }
+                }
+            }
+        }
+    },
+)
+async def submit_study(
+    request: Request,
+    response: Response,
+    definition: Annotated[
+        dict[str, Any],
+        Body(
+            description="study definition with an inline scene (scene_file is not read over the API); "
+            "quantities in SI or as strings with units ('2 g', '800 mm')",
+            openapi_examples={
+                "grid": {"summary": "3 isolator types x 2 Y accelerations (6 cases)", "value": EXAMPLE_STUDY},
+                "lhs": {
+                    "summary": "64-case Latin hypercube over f_vertical and zeta",
+                    "value": EXAMPLE_LHS_STUDY,
+                },
+            },
+        ),
+    ],
+    settings: Settings = Depends(app_settings),
+    store: Store = Depends(study_store),
+    jobs: JobQueue = Depends(job_queue),
+) -> StudyAccepted:
+    """Validate the study, store it in the catalog (status queued) and queue it. 202 with its links."""
+    accepted = await run_heavy(request, accept_study, definition, settings, store, jobs)
+    response.headers["Location"] = accepted.links.self
+    return accepted
+
+
+def accept_study(
+    definition: dict[str, Any], settings: Settings, store: Store, jobs: JobQueue
+) -> StudyAccepted:
+    """Check a study, store it in the catalog (status queued) and queue it (runs in a worker thread)."""
+    try:
+        study = check_definition(definition, settings.max_cases)
+    except DefinitionError as err:
+        raise unprocessable(err.details) from None
+    n_cases = int(study.planned_cases)  # an optimize design: its budget
+    sim = study.simulation
+    study_id = store.create(
+        stored_definition(study),
+        name=study.name,
+        n_cases=n_cases,
+        parameters=list(study.design().names),
+        isolator_types=isolator_types(study),
+        fidelity=sim.fidelity,
+        integrator=sim.integrator,
+        dt=sim.dt,
+    )
+    try:
+        jobs.submit(study_id)
+    except RuntimeError as err:  # shutting down: the study stays queued and runs at the next start
+        raise HTTPException(status_code=503, detail=str(err)) from None
+    return StudyAccepted(id=study_id, status="queued", n_cases=n_cases, links=links(study_id))
+
+
+@router.get("", response_model=StudyList, responses=INVALID, summary="List studies")
+def list_studies(
+    name: Annotated[str | None, Query(description="exact study name")] = None,
+    status: Annotated[StudyStatusName | None, Query(description="study status")] = None,
+    isolator_type: Annotated[str | None, Query(description="studies involving this isolator type")] = None,
+    created_after: Annotated[str | None, TimeQuery] = None,
+    created_before: Annotated[str | None, TimeQuery] = None,
+    limit: Annotated[int, Query(ge=1, le=500)] = 50,
+    offset: Annotated[int, Query(ge=0, le=MAX_OFFSET)] = 0,
+    store: Store = Depends(study_store),
+) -> StudyList:
+    """Studies in the catalog, newest first, filtered (all filters must hold)."""
+    try:
+        filters = dict(
+            name=name,
+            status=status,
+            isolator_type=isolator_type,
+            created_after=query_time(created_after, "created_after"),
+            created_before=query_time(created_before, "created_before"),
+        )
+        rows = store.list(**filters, limit=limit, offset=offset)
+        total = store.count(**filters)
+    except ValueError as err:
+        field_name = str(err).split(":", 1)[0]
+        raise invalid(["query", field_name], str(err)) from None
+    return StudyList(
+        items=[StudySummary(**summary(r)) for r in rows], total=total, limit=limit, offset=offset
+    )
+
+
+@router.get("/{study_id}", response_model=StudyDetail, responses=NOT_FOUND, summary="A study's status")
+def get_study(study_id: StudyId, store: Store = Depends(study_store)) -> StudyDetail:
+    """Status, progress, times, error and the definition of one study."""
+    row = study_row(store, study_id)
+    return StudyDetail(**summary(row), definition=row["definition"])
+
+
+@router.delete("/{study_id}", status_code=204, responses=NOT_FOUND, summary="Cancel or delete a study")
+def delete_study(
+    study_id: StudyId, store: Store = Depends(study_store), jobs: JobQueue = Depends(job_queue)
+) -> Response:
+    """A queued or running study is cancelled (status cancelled, kept in the catalog); a finished,
+    failed or cancelled one is removed with its files."""
+    row = study_row(store, study_id)
+    if row["status"] in ("queued", "running"):
+        if not jobs.cancel(study_id):
+            store.update(study_id, status="cancelled", finished=utc_now())
+    else:
+        store.delete(study_id)
+    return Response(status_code=204)
+
+
+@router.get(
+    "/{study_id}/dataset",
+    response_class=FileResponse,
+    responses={
+        **NOT_FOUND,
+        **NOT_DONE,
+        200: {"content": {"application/x-netcdf": {}}, "description": "the study's netCDF4 file"},
+    },
+    summary="A study's dataset (netCDF)",
+)
+def get_dataset(study_id: StudyId, store: Store = Depends(study_store)) -> FileResponse:
+    """The study's labelled dataset as a netCDF4 file (streamed); 409 until the study is done."""
+    row = study_row(store, study_id)
+    require_done(row)
+    path = store.path(study_id)
+    if not path.is_file():
+        raise HTTPException(
+            status_code=404, detail=f"study {study_id} is done but its dataset file is missing"
+        )
+    # the study's name is user text: only letters, digits, _ and - reach the suggested file name
+    stem = re.sub(r"[^A-Za-z0-9_-]+", "_", row["name"]).strip("_-")[:100] or "study"
+    filename = f"{stem}-{study_id}.nc"
+    return FileResponse(path, media_type="application/x-netcdf", filename=filename)

@@ -1,0 +1,135 @@
+"""``isolab compare``: one scene under each isolator type on this machine, with the recommended type."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+
+#: Columns shown besides the criteria margins: (column, label, scale, unit shown).
+_SHOWN = (
+    ("natural_frequency_1", "lowest natural frequency", 1.0, "Hz"),
+    ("peak_displacement_y", "peak c.g. displacement y", 1e3, "mm"),
+    ("peak_isolator_force_z", "peak isolator force z", 1e-3, "kN"),
+    ("min_isolator_load_min", "smallest isolator load", 1e-3, "kN"),
+    ("settling_time", "settling time", 1.0, "s"),
+)
+
+
+def _cell(value: Any, scale: float = 1.0, unit: str = "") -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "-"
+    if isinstance(value, bool | np.bool_):
+        return "yes" if value else "no"
+    return f"{float(value) * scale:.4g} {unit}".rstrip()
+
+
+def compare_command(
+    scene: Annotated[
+        Path,
+        typer.Argument(
+            help="Scene file, YAML or JSON; or a study file (its scene, floor and criteria are used).",
+            exists=True,
+            dir_okay=False,
+        ),
+    ],
+    types: Annotated[
+        str, typer.Option(help="Isolator types to compare, comma-separated.")
+    ] = "active,air,elastomer",
+    cost_order: Annotated[
+        str | None,
+        typer.Option(help="Types from the cheapest to the dearest (default elastomer,air,active)."),
+    ] = None,
+    duration: Annotated[
+        str | None, typer.Option(help="Simulated time, e.g. 3 s (default: the scene's).")
+    ] = None,
+    tune: Annotated[
+        bool,
+        typer.Option(
+            help="First tune each type's frequencies and damping to the criteria, within its range."
+        ),
+    ] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the answer as JSON (SI units).")] = False,
+    csv: Annotated[
+        Path | None, typer.Option(help="Write the table (one row per type, units in the header) here.")
+    ] = None,
+) -> None:
+    """Run SCENE on each isolator type and print the side-by-side table: the scene's design criteria
+    with each type's margin, the main outputs, and the recommended type (the cheapest that meets every
+    criterion)."""
+    from pydantic import ValidationError
+
+    from isolab.studies.answers.comparisons import compare, comparison_frame
+    from isolab.studies.inputs.definitions import DefinitionError
+    from isolab.studies.inputs.schema import error_messages
+    from isolab.studies.inputs.study import _read, load_study
+    from isolab.studies.units import readable_unit
+
+    try:
+        data, _ = _read(scene)
+        if "scene" in data or "scene_file" in data:  # a study file: its scene on its floor, with its criteria
+            study_scene = load_study(scene).scene
+            assert study_scene is not None  # a validated study always has its scene
+            data = study_scene.model_dump(mode="json", by_alias=True, exclude_none=True)
+        answer = compare(
+            data,
+            [t.strip() for t in types.split(",") if t.strip()],
+            {"duration": duration} if duration else None,
+            [t.strip() for t in cost_order.split(",") if t.strip()] if cost_order else None,
+            tune=tune,
+        )
+    except DefinitionError as err:
+        for d in err.details:
+            loc = ".".join(str(x) for x in d["loc"][1:])
+            typer.echo(f"error: {loc}: {d['msg']}" if loc else f"error: {d['msg']}", err=True)
+        raise typer.Exit(code=2) from None
+    except ValidationError as err:
+        for line in error_messages(err):
+            typer.echo(f"error: {line}", err=True)
+        raise typer.Exit(code=2) from None
+    except (OSError, ValueError) as err:
+        typer.echo(f"error: {err}", err=True)
+        raise typer.Exit(code=2) from None
+    if as_json:
+        typer.echo(json.dumps(answer, indent=2))
+        return
+    df = comparison_frame(answer)
+    if csv is not None:
+        units = answer["units"]
+        df.rename(columns={c: f"{c} [{units.get(c) or '1'}]" for c in df.columns}).to_csv(csv)
+    from rich.console import Console
+    from rich.table import Table
+
+    names = list(df.index)
+    table = Table(title=f"{scene.name}: isolator types compared")
+    table.add_column("")
+    for t in names:
+        table.add_column(t, justify="right")
+    for req in answer.get("requirements", []):
+        col = f"margin_{req['name']}"
+        unit, one = readable_unit(req["unit"], [req["limit"]])
+        limit = _cell(req["limit"], 1.0 / one, unit)
+        label = req["name"] if req["name"] == "isolators_no_liftoff" else f"{req['name']} (limit {limit})"
+        table.add_row(
+            f"margin: {label}",
+            *(_cell(None if df.at[t, col] is None else df.at[t, col] * 100, unit="%") for t in names),
+        )
+    if "meets_criteria" in df.columns:
+        table.add_row("meets every criterion", *(_cell(df.at[t, "meets_criteria"]) for t in names))
+    for col, label, scale, unit in _SHOWN:
+        if col in df.columns:
+            table.add_row(label, *(_cell(df.at[t, col], scale, unit) for t in names))
+    Console().print(table)
+    for t, found in (answer.get("tuning") or {}).items():
+        v = found["values"]
+        typer.echo(
+            f"tuned {t}: f_vertical {v['f_vertical']:.2f} Hz, f_horizontal {v['f_horizontal']:.2f} Hz, "
+            f"zeta {v['zeta']:.3f} ({found['evaluations']} cases)"
+        )
+    rec = answer["recommendation"]
+    head = f"recommended: {rec['isolator_type']}" if rec["isolator_type"] else "no recommendation"
+    typer.echo(f"{head}. {rec['reason']}")

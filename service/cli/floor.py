@@ -1,0 +1,74 @@
+"""``isolab floor``: draw a point's floor-induced velocity spectrum per isolator type against the VC curves
+(no service needed; nothing is integrated)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+ISOLATOR_TYPES = ("active", "air", "elastomer")
+
+
+def floor_command(
+    scene: Annotated[
+        Path,
+        typer.Argument(
+            help="Scene file, YAML or JSON, with a floor spectrum (or a study file with its floor).",
+            exists=True,
+            dir_okay=False,
+        ),
+    ],
+    point: Annotated[
+        str | None, typer.Option(help="Point of interest to draw (default: the scene's first).")
+    ] = None,
+    types: Annotated[
+        str, typer.Option("--types", help="Isolator types to compare, comma-separated.")
+    ] = ",".join(ISOLATOR_TYPES),
+    out: Annotated[Path, typer.Option("-o", "--out", help="Write the PNG here.", dir_okay=False)] = Path(
+        "floor.png"
+    ),
+) -> None:
+    """One-third-octave RMS velocity of a point per floor axis under the scene's floor.spectrum, one line
+    per isolator type, against the VC-A .. VC-G curves; prints the worst band of each type."""
+    from pydantic import ValidationError
+
+    from isolab.service.plots.studies import floor_velocity_png
+    from isolab.studies.answers.floor_response import velocity_spectra
+    from isolab.studies.inputs.definitions import DefinitionError, dotted
+    from isolab.studies.inputs.schema import error_messages
+    from isolab.studies.inputs.study import _read, load_scene, load_study
+
+    chosen = [t.strip() for t in types.split(",") if t.strip()]
+    unknown = [t for t in chosen if t not in ISOLATOR_TYPES]
+    if unknown or not chosen:
+        typer.echo(
+            f"error: --types: unknown isolator type(s) {unknown}; choose from {', '.join(ISOLATOR_TYPES)}"
+        )
+        raise typer.Exit(code=2)
+    try:
+        data, _ = _read(scene)
+        if "scene" in data or "scene_file" in data:  # a study file: its scene on its own floor
+            spectra = velocity_spectra(load_study(scene).scene, chosen, point)
+        else:
+            spectra = velocity_spectra(load_scene(scene), chosen, point)
+    except ValidationError as err:
+        for line in error_messages(err):
+            typer.echo(f"error: {line}", err=True)
+        raise typer.Exit(code=2) from None
+    except DefinitionError as err:
+        for d in err.details:
+            where = dotted([x for x in d["loc"] if x != "body"])
+            typer.echo(f"error: {where}: {d['msg']}", err=True)
+        raise typer.Exit(code=2) from None
+    except (ValueError, OSError) as err:
+        typer.echo(f"error: {err}", err=True)
+        raise typer.Exit(code=2) from None
+    out.write_bytes(floor_velocity_png(spectra, f"{scene.name}: {spectra['point']} under the floor spectrum"))
+    for t, (v, f, axis) in spectra["worst"].items():
+        if v == v:
+            typer.echo(f"{t}: worst band {v * 1e6:.3g} um/s RMS at {f:.3g} Hz along {axis}")
+        else:
+            typer.echo(f"{t}: no steady state (the base tips over or is a mechanism)")
+    typer.echo(f"plot -> {out}")

@@ -1,0 +1,1 @@
+"""Figures of studies, cases, comparisons, floor spectra, sensitivity indices and calibrations."""

@@ -1,0 +1,327 @@
+"""Time histories of one case, recomputed from its stored definition.
+
+A study stores peaks, not traces: :func:`case_history` reruns one case through the engine with its
+histories recorded (c.g. displacement, base rotation, dynamic isolator forces about the preload, point
+displacements), with the model the study's cases ran with, and with the case's stage motion profiles on
+the same time axis, its natural modes (each named by its dominant motion, :func:`mode_name`) and its
+settling. :func:`history_json` and :func:`history_dataset` give them as JSON-able data and as a
+CF-described xarray dataset.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from isolab.engine import STATUS_NAMES, simulate
+from isolab.engine.profiles import Pieces, evaluate
+from isolab.engine.results import AXES, DOF_NAMES, ROTATIONS
+from isolab.studies.inputs.definitions import definition_json, study_of
+from isolab.studies.inputs.study import Study, study_from_json
+from isolab.studies.results.cases import CaseQueryError
+from isolab.studies.results.store import NETCDF_LOCK
+from isolab.studies.run.accuracy import recorded_choice, resolved_study
+from isolab.studies.run.runner import study_labels
+
+MAX_RECORDED_SAMPLES = 2_000_000
+"""Longest time history (samples) a case is recomputed with: about 200 bytes a sample in memory."""
+MAX_RETURNED_SAMPLES = 200_000
+"""Most samples per series one answer holds (``every`` thins them)."""
+
+
+MOTION_NAMES = {
+    "x": "surge",
+    "y": "sway",
+    "z": "heave",
+    "rx": "pitch",
+    "ry": "roll",
+    "rz": "yaw",
+}
+"""The motion of the base along or about each degree of freedom (rotation about X is pitch, about Y roll)."""
+COUPLED_SHARE = 0.25
+"""A second degree of freedom with at least this kinetic-energy share is named too (``pitch + sway``)."""
+
+
+def mode_name(energy: np.ndarray) -> str:
+    """A mode named by its dominant motion from its kinetic-energy shares per degree of freedom (x, y, z,
+    rx, ry, rz): ``heave``, or ``pitch + sway`` when a second motion holds at least
+    :data:`COUPLED_SHARE` of the energy; ``""`` when the shares are not numbers."""
+    e = np.asarray(energy, dtype=np.float64).reshape(-1)
+    if e.size != len(DOF_NAMES) or not np.all(np.isfinite(e)) or e.sum() <= 0:
+        return ""
+    order = np.argsort(-e)
+    name = MOTION_NAMES[DOF_NAMES[order[0]]]
+    if e[order[1]] >= COUPLED_SHARE * e.sum():
+        name += " + " + MOTION_NAMES[DOF_NAMES[order[1]]]
+    return name
+
+
+class CaseNotFound(LookupError):
+    """A study has no case of that number."""
+
+
+@dataclass
+class CaseHistory:
+    """Time histories of one case (SI): arrays trimmed to the samples the run produced."""
+
+    parameters: dict[str, Any]
+    status: str
+    message: str
+    time: np.ndarray  # (T,) s
+    displacement: np.ndarray  # (T, 3) m
+    rotation: np.ndarray  # (T, 3) rad
+    isolator_force: np.ndarray  # (T, n, 3) N
+    point_displacement: np.ndarray  # (T, p, 3) m
+    isolator_names: list[str]
+    point_names: list[str]
+    stage_names: list[str] | None = None
+    stage_position: np.ndarray | None = None  # (m, T) m, along each stage's axis
+    stage_velocity: np.ndarray | None = None  # (m, T) m/s
+    stage_acceleration: np.ndarray | None = None  # (m, T) m/s^2
+    natural_frequency: np.ndarray | None = None  # (6,) Hz, ascending
+    damping_ratio: np.ndarray | None = None  # (6,) 1
+    mode_energy: np.ndarray | None = None  # (6, 6) share of each DOF in each mode
+    settling_time: float = math.nan  # s after the last stage move
+    settled: bool = False
+    last_move_end: float = math.nan  # s
+
+
+def case_history(study: Any, case: int, every: int = 1) -> CaseHistory:
+    """Recompute one case with its time histories recorded (runs the engine: call it off the event loop).
+
+    Refused (:class:`~isolab.studies.results.cases.CaseQueryError`) when the case would record more than
+    :data:`MAX_RECORDED_SAMPLES` samples, or return more than :data:`MAX_RETURNED_SAMPLES` with every
+    ``every``-th kept."""
+    sim = study.simulation
+    try:
+        batch = study.batch([case])
+    except ValueError as err:  # a combination of values no scene can have
+        raise CaseQueryError("case", f"case {case} cannot be simulated: {err}", where="path") from None
+    if sim.dt is not None:
+        samples = int(math.ceil(float(batch.duration[0]) / float(sim.dt))) + 1
+        if samples > MAX_RECORDED_SAMPLES:
+            raise CaseQueryError(
+                "case",
+                f"case {case} runs {samples} time steps; time histories are recomputed only for cases of "
+                f"at most {MAX_RECORDED_SAMPLES} (a shorter duration or a longer step)",
+                where="path",
+            )
+        if math.ceil(samples / every) > MAX_RETURNED_SAMPLES:
+            raise CaseQueryError(
+                "every",
+                f"case {case} has {samples} samples; keep at most {MAX_RETURNED_SAMPLES} "
+                f"(every >= {math.ceil(samples / MAX_RETURNED_SAMPLES)})",
+            )
+    result = simulate(
+        batch,
+        fidelity=sim.fidelity,
+        integrator=sim.integrator,
+        dt=sim.dt,
+        auto_step=sim.auto_step,
+        record=[0],
+    )
+    h = result.history
+    assert h is not None  # asked for with record=[0]
+    n = int(h["n_samples"][0])
+    iso, pts = study_labels(study)
+    time = np.asarray(h["time"][0, :n])
+    pieces = Pieces(batch.prof_t[0], batch.prof_s[0], batch.prof_v[0], batch.prof_a[0], batch.prof_j[0])
+    stage_s, stage_v, stage_a = evaluate(pieces, time) if time.size else (np.zeros((0, 0)),) * 3
+    return CaseHistory(
+        parameters=study.case_values(case),
+        status=STATUS_NAMES[int(result.status[0])],
+        message=str(result.message[0]),
+        time=time,
+        displacement=np.asarray(h["displacement"][0, :n]),
+        rotation=np.asarray(h["rotation"][0, :n]),
+        isolator_force=np.asarray(h["isolator_force"][0, :n]),
+        point_displacement=np.asarray(h["point_displacement"][0, :n]),
+        isolator_names=iso,
+        point_names=pts,
+        stage_names=[str(st.name) for st in study.scene.stages],
+        stage_position=stage_s,
+        stage_velocity=stage_v,
+        stage_acceleration=stage_a,
+        natural_frequency=np.asarray(result.natural_frequency[0]),
+        damping_ratio=np.asarray(result.damping_ratio[0]),
+        mode_energy=np.asarray(result.mode_energy[0]),
+        settling_time=float(result.settling_time[0]),
+        settled=bool(result.settled[0]),
+        last_move_end=float(batch.last_move_end()[0]),
+    )
+
+
+def case_study(row: dict[str, Any], case: int) -> Study:
+    """The study of a catalog ``row`` as its case ``case`` runs: an accuracy request resolved to the model
+    the runner chose and recorded.
+
+    Raises:
+        CaseNotFound: the study has no such case.
+    """
+    if not 0 <= case < row["n_cases"]:
+        raise CaseNotFound(f"study {row['id']} has no case {case} (cases 0..{row['n_cases'] - 1})")
+    study = study_of(row)
+    if study.simulation.request is None:
+        return study
+    choice = recorded_choice(study, row["fidelity"], row["integrator"], row["dt"])
+    return _resolved(definition_json(row), choice)
+
+
+@functools.lru_cache(maxsize=16)
+def _resolved(definition: str, choice: Any) -> Study:
+    return resolved_study(study_from_json(definition), choice)
+
+
+def _series(a: np.ndarray) -> list[float | None]:
+    return [v if math.isfinite(v) else None for v in np.asarray(a, dtype=np.float64).tolist()]
+
+
+def history_json(study_id: str, case: int, h: CaseHistory, every: int) -> dict[str, Any]:
+    """The histories as JSON-able data, every ``every``-th sample, SI units named under ``units``."""
+    s = slice(None, None, every)
+    axes, rots = AXES, ROTATIONS
+    return {
+        "study_id": study_id,
+        "case": case,
+        "parameters": h.parameters,
+        "status": h.status,
+        "message": h.message,
+        "units": {
+            "time": "s",
+            "displacement": "m",
+            "rotation": "rad",
+            "isolator_force": "N",
+            "point_displacement": "m",
+            "stage_position": "m",
+            "stage_velocity": "m/s",
+            "stage_acceleration": "m/s^2",
+            "natural_frequency": "Hz",
+            "settling_time": "s",
+        },
+        "time": _series(h.time[s]),
+        "displacement": {a: _series(h.displacement[s, k]) for k, a in enumerate(axes)},
+        "rotation": {r: _series(h.rotation[s, k]) for k, r in enumerate(rots)},
+        "isolator_force": {
+            iso: {a: _series(h.isolator_force[s, j, k]) for k, a in enumerate(axes)}
+            for j, iso in enumerate(h.isolator_names)
+        },
+        "point_displacement": {
+            p: {a: _series(h.point_displacement[s, j, k]) for k, a in enumerate(axes)}
+            for j, p in enumerate(h.point_names)
+        },
+        "stages": {
+            name: {
+                "position": _series(h.stage_position[j, s]),
+                "velocity": _series(h.stage_velocity[j, s]),
+                "acceleration": _series(h.stage_acceleration[j, s]),
+            }
+            for j, name in enumerate(h.stage_names or [])
+            if h.stage_position is not None
+            and h.stage_velocity is not None
+            and h.stage_acceleration is not None
+        },
+        "modes": _modes(h),
+        "settling_time": _number(h.settling_time),
+        "settled": h.settled,
+        "last_move_end": _number(h.last_move_end),
+    }
+
+
+def _number(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def _modes(h: CaseHistory) -> list[dict[str, Any]]:
+    """Each natural mode: frequency (Hz), damping ratio, energy shares per DOF and its name."""
+    if h.natural_frequency is None or h.mode_energy is None or h.damping_ratio is None:
+        return []
+    out = []
+    for k in range(h.natural_frequency.shape[0]):
+        energy = h.mode_energy[k]
+        out.append(
+            {
+                "mode": k + 1,
+                "frequency": _number(float(h.natural_frequency[k])),
+                "damping_ratio": _number(float(h.damping_ratio[k])),
+                "energy": dict(zip(DOF_NAMES, _series(energy), strict=True)),
+                "name": mode_name(energy),
+            }
+        )
+    return out
+
+
+def history_dataset(study_id: str, case: int, h: CaseHistory, every: int) -> xr.Dataset:
+    """The histories as a CF-described dataset: ``displacement`` (time, axis), ``base_rotation``
+    (time, rotation), ``isolator_force`` (time, isolator, axis), ``point_displacement``
+    (time, point, axis)."""
+    s = slice(None, None, every)
+    ds = xr.Dataset(
+        {
+            "displacement": (
+                ("time", "axis"),
+                h.displacement[s],
+                {"units": "m", "long_name": "displacement of the machine c.g."},
+            ),
+            "base_rotation": (
+                ("time", "rotation"),
+                h.rotation[s],
+                {"units": "rad", "long_name": "rotation of the machine base"},
+            ),
+            "isolator_force": (
+                ("time", "isolator", "axis"),
+                h.isolator_force[s],
+                {"units": "N", "long_name": "dynamic isolator force"},
+            ),
+            "point_displacement": (
+                ("time", "point", "axis"),
+                h.point_displacement[s],
+                {"units": "m", "long_name": "displacement of a point of interest"},
+            ),
+        },
+        coords={
+            "time": ("time", h.time[s], {"units": "s", "long_name": "time"}),
+            "axis": ("axis", np.array(AXES), {"units": "1", "long_name": "floor axis (Z up)"}),
+            "rotation": (
+                "rotation",
+                np.array(ROTATIONS),
+                {"units": "1", "long_name": "rotation axis"},
+            ),
+            "isolator": (
+                "isolator",
+                np.array(h.isolator_names, dtype=str).reshape(-1),
+                {"units": "1", "long_name": "isolator"},
+            ),
+            "point": (
+                "point",
+                np.array(h.point_names, dtype=str).reshape(-1),
+                {"units": "1", "long_name": "point of interest"},
+            ),
+        },
+    )
+    ds.attrs = {
+        "Conventions": "CF-1.10",
+        "title": f"isolab study {study_id} case {case}",
+        "study_id": study_id,
+        "case": case,
+        "status": h.status,
+        "message": h.message,
+        "parameters": json.dumps(h.parameters, sort_keys=True),
+    }
+    return ds
+
+
+def netcdf_bytes(ds: xr.Dataset) -> bytes:
+    """``ds`` as the bytes of a netCDF4 file."""
+    with tempfile.TemporaryDirectory(prefix="isolab-") as tmp:
+        path = Path(tmp) / "case.nc"
+        with NETCDF_LOCK:
+            ds.to_netcdf(path, format="NETCDF4", engine="netcdf4")
+        return path.read_bytes()

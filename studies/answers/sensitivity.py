@@ -1,0 +1,442 @@
+"""Global sensitivity of a study's output to its varied parameters, by SALib's estimators.
+
+Which estimator runs follows from how the study's cases were drawn (the design summary in the dataset's
+attributes):
+
+* ``saltelli``: Sobol' variance-based indices, ``SALib.analyze.sobol`` (Saltelli 2010 / Jansen
+  estimators): first order S1 (the share of the output's variance a parameter explains alone) and total
+  order ST (its share with all its interactions), and with ``second_order`` the pairwise S2; 95 %
+  bootstrap confidence intervals.
+* ``lhs``, ``sobol``, ``random`` (any sample of independent inputs) and ``grid`` (a full factorial):
+  ``SALib.analyze.delta`` from the given data (Plischke, Borgonovo and Smith 2013): Borgonovo's
+  moment-independent delta (how far the output's distribution moves, on average, when a parameter is
+  fixed; 0 none, 1 at most) and the first-order Sobol' index S1 from the same data, 95 % bootstrap
+  confidence intervals. Each input enters as its rank (its empirical distribution): the estimator
+  conditions on rank classes, so the indices do not change, and SALib's balanced resampling bins then
+  hold equal counts whatever the parameter's scale (log ranges). A grid's categorical parameter (an
+  isolator preset) enters by its level number: delta and S1 need classes, not an order. The rows are
+  shuffled (fixed seed) first, so that a class cut inside a grid level is a random part of it.
+
+Cases whose ``status`` is not ok, and ok cases with no value of the output, are left out and counted.
+A Saltelli design is blocks of D + 2 cases (2D + 2 with second order) built from one base point each:
+a block with any case left out is dropped whole (the estimator needs every case of a block), and the
+answer says how many ok cases went with their block.
+
+:func:`sensitivity` analyses a dataset; :func:`stored_sensitivity` answers for a study in a
+:class:`~isolab.studies.results.store.Store`, cached as JSON beside the study's dataset, keyed by the output
+and
+the dataset file's modification time and size.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import math
+import threading
+import warnings
+from collections.abc import Iterator
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+from scipy.stats import rankdata
+
+from isolab.engine.results import OK
+from isolab.studies.quantities import case_dims, output_values
+
+CONF_LEVEL = 0.95
+"""Confidence level of every interval."""
+NUM_RESAMPLES = 100
+"""Bootstrap resamples behind each confidence interval of the Sobol' estimator."""
+DELTA_NUM_RESAMPLES = 50
+"""Bootstrap resamples behind each confidence interval of the delta estimator (each one costs a kernel
+density per class: the delta estimator's time is proportional to this)."""
+SEED = 20260101
+"""Seed of the bootstrap resampling and the row shuffle: the same study gives the same answer."""
+DELTA_RESAMPLE_CAP = 2000
+"""Most cases each of the delta estimator's resamples draws (SALib's ``y_resamples``): its kernel densities
+cost about the square of it; at 2,000 a 10,000-case study of 4 parameters is analysed in seconds, not
+minutes, and the confidence intervals are those of 2,000-case estimates."""
+MIN_SALTELLI_BLOCKS = 2
+"""Fewest complete Saltelli blocks the Sobol' estimator is run on."""
+CACHE_VERSION = 1
+"""Part of the cache key: a change of the analysis invalidates what is cached."""
+
+_SALIB_LOCK = threading.Lock()
+
+METHODS = {
+    "sobol": "Sobol' indices from Saltelli's scheme (SALib.analyze.sobol): first order S1, total order ST",
+    "delta": "Borgonovo's delta and first-order Sobol' index from the given data (SALib.analyze.delta)",
+}
+INDEX_MEANINGS = {
+    "S1": "first-order Sobol' index: share of the output variance the parameter explains alone",
+    "ST": "total-order Sobol' index: share of the output variance the parameter explains with all its "
+    "interactions",
+    "delta": "Borgonovo's moment-independent delta: mean shift of the output's distribution when the "
+    "parameter is fixed (0 none, 1 at most)",
+}
+
+
+@dataclass
+class SensitivityResult:
+    """Sensitivity indices of one output of a study.
+
+    Attributes:
+        method: ``"sobol"`` (Saltelli design) or ``"delta"`` (any other sample or a grid).
+        method_name: what the method is, in words (:data:`METHODS`).
+        design: the study's design type (``saltelli``, ``lhs``, ``grid``...).
+        output: the quantity analysed (:func:`isolab.studies.quantities.output_values` spec).
+        long_name, unit: the output's long name and SI unit.
+        parameters: parameter names, in design order.
+        parameter_long_names, parameter_units: per parameter, its long name and SI unit.
+        indices: index name (``S1``, ``ST``, ``delta``) -> one value per parameter (None: not estimable).
+        conf: index name -> half-width of its 95 % confidence interval, per parameter.
+        second_order: ``{"pairs": [[a, b]...], "S2": [...], "S2_conf": [...]}`` for a saltelli design with
+            second order, else None.
+        n_cases: cases the indices were estimated from.
+        n_total: cases of the study.
+        n_excluded: cases left out because their status is not ok or they have no value of the output.
+        n_dropped: ok cases left out with a Saltelli block that lost a case (0 for other methods).
+        notes: remarks (cases left out, estimator warnings).
+    """
+
+    method: str
+    method_name: str
+    design: str
+    output: str
+    long_name: str
+    unit: str
+    parameters: list[str]
+    parameter_long_names: list[str]
+    parameter_units: list[str]
+    indices: dict[str, list[float | None]]
+    conf: dict[str, list[float | None]]
+    n_cases: int
+    n_total: int
+    n_excluded: int
+    n_dropped: int = 0
+    second_order: dict[str, Any] | None = None
+    notes: list[str] = field(default_factory=list)
+    conf_level: float = CONF_LEVEL
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able dict (missing values as None, never NaN), with ``index_meanings``."""
+        out = asdict(self)
+        out["index_meanings"] = {k: INDEX_MEANINGS[k] for k in self.indices if k in INDEX_MEANINGS}
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> SensitivityResult:
+        """The result :meth:`to_dict` wrote."""
+        fields = {k: v for k, v in data.items() if k in cls.__dataclass_fields__}
+        return cls(**fields)
+
+    def ranking(self, index: str | None = None) -> list[str]:
+        """Parameter names from the most to the least influential by ``index`` (default: ST for Sobol',
+        delta otherwise); parameters without a value last."""
+        key = index or ("ST" if "ST" in self.indices else "delta")
+        values = self.indices[key]
+
+        def strength(i: int) -> float:
+            v = values[i]
+            return -math.inf if v is None else v
+
+        return [self.parameters[i] for i in sorted(range(len(values)), key=strength, reverse=True)]
+
+
+def _plain(values: Any) -> list[float | None]:
+    """Floats with NaN/inf as None (JSON has no NaN)."""
+    return [float(v) if np.isfinite(v) else None for v in np.asarray(values, dtype=np.float64).reshape(-1)]
+
+
+def design_info(ds: xr.Dataset) -> dict[str, Any]:
+    """The design summary of a study dataset (its ``design`` attribute, JSON in a netCDF file)."""
+    raw = ds.attrs.get("design")
+    if isinstance(raw, str):
+        try:
+            raw = json.loads(raw)
+        except json.JSONDecodeError:
+            raw = None
+    if not isinstance(raw, dict):
+        raise ValueError("the dataset has no design summary (attribute 'design'); it is not a study dataset")
+    return raw
+
+
+@contextlib.contextmanager
+def _quiet_salib(seed: int) -> Iterator[None]:
+    """Run SALib code with its warnings caught and numpy's global random state restored afterwards
+    (SALib's delta seeds and draws from it and changes the warnings' format). One analysis at a time
+    per process: the global state is shared by threads."""
+    with _SALIB_LOCK:
+        state = np.random.get_state()  # noqa: NPY002 (SALib's delta draws from the legacy global state)
+        fmt = warnings.formatwarning
+        try:
+            with warnings.catch_warnings(record=True):
+                warnings.simplefilter("ignore")
+                np.random.seed(seed)  # noqa: NPY002
+                yield
+        finally:
+            warnings.formatwarning = fmt
+            np.random.set_state(state)  # noqa: NPY002
+
+
+def _parameter_meta(ds: xr.Dataset, names: list[str]) -> tuple[list[str], list[str]]:
+    long_names, units = [], []
+    for n in names:
+        attrs = ds[n].attrs if n in ds.variables else {}
+        long_names.append(str(attrs.get("long_name", n)))
+        unit = str(attrs.get("units", ""))
+        units.append("" if unit == "1" else unit)
+    return long_names, units
+
+
+def sensitivity(ds: xr.Dataset, output: str) -> SensitivityResult:
+    """Sensitivity indices of ``output`` over a study dataset's varied parameters (see the module
+    docstring for which method each design gets).
+
+    Args:
+        ds: a study dataset (:func:`isolab.studies.results.dataset.to_dataset`), loaded.
+        output: a quantity of :func:`isolab.studies.quantities.output_values`, e.g.
+            ``peak_point_displacement.tool.z`` or ``settling_time``.
+
+    Raises:
+        ValueError: an unknown output (naming it and the choices), a study without varied parameters or a
+            list design, too few usable cases, or an output that does not vary.
+    """
+    info = design_info(ds)
+    names = [str(n) for n in info.get("names", [])]
+    kind = str(info.get("kind", ""))
+    design = str(info.get("type", kind))
+    y_da = output_values(ds, output)
+    if not names:
+        raise ValueError("the study varies no parameter: there is nothing to rank")
+    if design == "list":
+        raise ValueError(
+            "a list design's cases are chosen by hand: no sensitivity estimator applies to them; "
+            "run an lhs, sobol, saltelli or grid design"
+        )
+    dims = case_dims(ds)
+    y = np.asarray(y_da.transpose(*dims).values, dtype=np.float64).reshape(-1)
+    status = np.asarray(ds["status"].transpose(*dims).values).reshape(-1)
+    bad = (status != OK) | ~np.isfinite(y)
+    notes = _excluded_note(bad, int(((status == OK) & ~np.isfinite(y)).sum()))
+    long_name = str(y_da.attrs.get("long_name", output))
+    unit = str(y_da.attrs.get("units", ""))
+    unit = "" if unit == "1" else unit
+    p_long, p_units = _parameter_meta(ds, names)
+    common = dict(
+        design=design,
+        output=str(output),
+        long_name=long_name,
+        unit=unit,
+        parameters=names,
+        parameter_long_names=p_long,
+        parameter_units=p_units,
+        n_total=int(y.size),
+    )
+    if design == "saltelli":
+        return _sobol(y, bad, names, bool(info.get("second_order", False)), output, notes, common)
+    return _delta(ds, dims, y, bad, names, kind, output, notes, common)
+
+
+def _excluded_note(bad: np.ndarray, n_nan_ok: int) -> list[str]:
+    n_bad = int(bad.sum())
+    if not n_bad:
+        return []
+    note = f"{n_bad} of {bad.size} cases left out"
+    if n_nan_ok:
+        note += f" ({n_bad - n_nan_ok} not ok, {n_nan_ok} ok without a value of the output)"
+    else:
+        note += " (status not ok)"
+    return [note]
+
+
+def _check_varies(y: np.ndarray, output: str) -> None:
+    if y.size and float(np.ptp(y)) == 0.0:
+        raise ValueError(
+            f"{output!r}: the output is {y[0]:.6g} in every usable case; it depends on none of the "
+            "varied parameters, so there is nothing to rank"
+        )
+
+
+def _sobol(
+    y: np.ndarray,
+    bad: np.ndarray,
+    names: list[str],
+    second_order: bool,
+    output: str,
+    notes: list[str],
+    common: dict,
+) -> SensitivityResult:
+    from SALib.analyze import sobol as salib_sobol
+
+    d = len(names)
+    block = (2 * d + 2) if second_order else (d + 2)
+    if y.size % block:
+        raise ValueError(
+            f"the dataset has {y.size} cases, not a whole number of Saltelli blocks of {block} "
+            f"({d} parameters{', second order' if second_order else ''}): "
+            "it is not a complete saltelli design"
+        )
+    n_blocks = y.size // block
+    keep = ~bad.reshape(n_blocks, block).any(axis=1)
+    n_keep = int(keep.sum())
+    n_excluded = int(bad.sum())
+    n_dropped = (n_blocks - n_keep) * block - n_excluded
+    if n_excluded:
+        notes.append(
+            f"{n_blocks - n_keep} of {n_blocks} Saltelli blocks dropped whole with them "
+            f"({n_dropped} ok cases); indices from the {n_keep} complete blocks"
+        )
+    if n_keep < MIN_SALTELLI_BLOCKS:
+        raise ValueError(
+            f"{output!r}: only {n_keep} of {n_blocks} Saltelli blocks have every case ok with a value of the "
+            f"output ({n_excluded} cases left out); Sobol' indices need at least {MIN_SALTELLI_BLOCKS}"
+        )
+    yk = y.reshape(n_blocks, block)[keep].reshape(-1)
+    _check_varies(yk, output)
+    problem = {"num_vars": d, "names": names, "bounds": [[0.0, 1.0]] * d}
+    with _quiet_salib(SEED):
+        si = salib_sobol.analyze(
+            problem,
+            yk,
+            calc_second_order=second_order,
+            num_resamples=NUM_RESAMPLES,
+            conf_level=CONF_LEVEL,
+            seed=SEED,
+        )
+    s2 = None
+    if second_order:
+        pairs = [(j, k) for j in range(d) for k in range(j + 1, d)]
+        s2 = {
+            "pairs": [[names[j], names[k]] for j, k in pairs],
+            "S2": _plain([si["S2"][j, k] for j, k in pairs]),
+            "S2_conf": _plain([si["S2_conf"][j, k] for j, k in pairs]),
+        }
+    if n_keep < 64:
+        notes.append(f"only {n_keep} base samples: the confidence intervals are wide; raise design.samples")
+    return SensitivityResult(
+        method="sobol",
+        method_name=METHODS["sobol"],
+        indices={"S1": _plain(si["S1"]), "ST": _plain(si["ST"])},
+        conf={"S1": _plain(si["S1_conf"]), "ST": _plain(si["ST_conf"])},
+        n_cases=int(yk.size),
+        n_excluded=n_excluded,
+        n_dropped=int(n_dropped),
+        second_order=s2,
+        notes=notes,
+        **common,
+    )
+
+
+def _encoded(values: np.ndarray) -> np.ndarray:
+    """A parameter's values as numbers: numeric as they are, categorical as level numbers."""
+    values = np.asarray(values).reshape(-1)
+    if values.dtype.kind in "USO":
+        _, codes = np.unique(values.astype(str), return_inverse=True)
+        return codes.astype(np.float64)
+    return values.astype(np.float64)
+
+
+def _delta(
+    ds: xr.Dataset,
+    dims: tuple[str, ...],
+    y: np.ndarray,
+    bad: np.ndarray,
+    names: list[str],
+    kind: str,
+    output: str,
+    notes: list[str],
+    common: dict,
+) -> SensitivityResult:
+    from SALib.analyze import delta as salib_delta
+
+    columns = []
+    for n in names:
+        coord = ds[n]
+        if kind == "grid":  # a grid dimension: broadcast its levels over the case dims
+            coord = coord.broadcast_like(ds["status"]).transpose(*dims)
+        columns.append(_encoded(coord.values))
+    x = np.column_stack(columns)
+    keep = ~bad
+    n_keep = int(keep.sum())
+    if n_keep < 20:
+        raise ValueError(
+            f"{output!r}: {n_keep} usable cases ({int(bad.sum())} left out); the delta estimator needs at "
+            "least 20 (a few hundred for tight confidence intervals)"
+        )
+    xk, yk = x[keep], y[keep]
+    _check_varies(yk, output)
+    order = np.random.default_rng(SEED).permutation(n_keep)
+    xk, yk = xk[order], yk[order]
+    ranks = np.column_stack([rankdata(xk[:, i], method="average") / n_keep for i in range(len(names))])
+    problem = {"num_vars": len(names), "names": [f"p{i}" for i in range(len(names))]}
+    with _quiet_salib(SEED):
+        si = salib_delta.analyze(
+            problem,
+            ranks,
+            yk,
+            num_resamples=DELTA_NUM_RESAMPLES,
+            conf_level=CONF_LEVEL,
+            seed=SEED,
+            y_resamples=min(n_keep, DELTA_RESAMPLE_CAP),
+        )
+    for n, note in zip(names, si.get("notes", []) or [], strict=False):
+        text = str(note).strip()
+        if text and not text.startswith("Step:"):  # the 'step' mode is for inputs around 0: not ours
+            notes.append(f"{n}: {text}")
+    if kind == "grid":
+        notes.append(
+            "full factorial: delta and S1 from the grid points as given data (each level one sample of "
+            "the parameter, levels equally likely)"
+        )
+    return SensitivityResult(
+        method="delta",
+        method_name=METHODS["delta"],
+        indices={"delta": _plain(si["delta_raw"]), "S1": _plain(si["S1"])},
+        conf={"delta": _plain(si["delta_raw_conf"]), "S1": _plain(si["S1_conf"])},
+        n_cases=n_keep,
+        n_excluded=int(bad.sum()),
+        notes=notes,
+        **common,
+    )
+
+
+# ----------------------------------------------------------------------------------------------- cache
+def cache_path(results_dir: Path, dataset_path: Path, output: str) -> Path:
+    """Where the analysis of ``output`` of the dataset file ``dataset_path`` is cached under
+    ``results_dir``: keyed by the output, the file's modification time and size, and
+    :data:`CACHE_VERSION`, so a rewritten dataset is analysed anew."""
+    st = dataset_path.stat()
+    key = json.dumps([CACHE_VERSION, str(output), st.st_mtime_ns, st.st_size])
+    digest = hashlib.sha256(key.encode()).hexdigest()[:24]
+    return results_dir / f"sensitivity-{digest}.json"
+
+
+def stored_sensitivity(store: Any, study_id: str, output: str) -> SensitivityResult:
+    """The sensitivity of ``output`` of a stored study: read from the cache beside its dataset, else
+    computed (:func:`sensitivity`) and cached.
+
+    Raises:
+        FileNotFoundError: the study has no dataset file.
+        ValueError: as :func:`sensitivity`.
+    """
+    from isolab.studies.results.store import NETCDF_LOCK, atomic_path
+
+    path = Path(store.path(study_id))
+    if not path.is_file():
+        raise FileNotFoundError(f"study {study_id} has no dataset file")
+    cached = cache_path(Path(store.results_dir(study_id)), path, output)
+    if cached.is_file():
+        with contextlib.suppress(OSError, ValueError, TypeError):
+            return SensitivityResult.from_dict(json.loads(cached.read_text(encoding="utf-8")))
+    with NETCDF_LOCK, xr.open_dataset(path) as opened:
+        ds = opened.load()
+    result = sensitivity(ds, output)
+    with atomic_path(cached) as tmp:
+        tmp.write_text(json.dumps(result.to_dict(), allow_nan=False), encoding="utf-8")
+    return result

@@ -1,0 +1,327 @@
+"""Parameter paths: which input of a scene a study varies, and how to set it.
+
+A path is dotted, with stage and point names and list indices as segments, following the scene's own
+structure (see :mod:`studies.schema`)::
+
+    machine.mass                    machine.block.density        machine.block.size.y
+    isolators.preset                isolators.f_vertical         isolators.zeta
+    isolators.layout.span_x         isolators.list.2.position.0  isolators.list.2.preset
+    isolators.k.z                   isolators.c.horizontal       (explicit values on every mount)
+    stages.y.mass                   stages.y.home.z              stages.y.profile.acceleration
+    stages.y.profile.segments.1.velocity                         points.tool.z
+    floor.sine.amplitude.z          simulation.duration          simulation.settle_tolerance
+
+Vector components may be written 0/1/2 or x/y/z. ``isolators.k.horizontal`` sets ``k.x`` and ``k.y``,
+``isolators.k.vertical`` sets ``k.z`` (same for ``c``). A path exists only where the scene has that input
+(``machine.mass`` for a machine given by mass, ``isolators.layout.*`` for a layout, a profile's ``jerk``
+for an S-curve or a scan).
+
+Categorical parameters (isolator types) are applied to the scene and validated by pydantic; continuous
+ones become per-case arrays that :func:`studies.scenes.build_batch` reads as overrides (``writes``).
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from isolab.engine.results import AXES
+from isolab.studies.inputs.isolators import PRESETS
+from isolab.studies.inputs.schema import (
+    MoveSegment,
+    ScanProfile,
+    Scene,
+    SCurveProfile,
+    SequenceProfile,
+)
+from isolab.studies.units import si_unit
+
+CATEGORICAL = "categorical"
+
+# last key -> (dimension, lower bound: "gt0" | "ge0" | None)
+_LEAVES: dict[str, tuple[str, str | None]] = {
+    "mass": ("mass", "gt0"),
+    "density": ("density", "gt0"),
+    "size": ("length", "gt0"),
+    "corner": ("length", None),
+    "cg": ("length", None),
+    "inertia_diagonal": ("inertia", "gt0"),
+    "f_vertical": ("frequency", "gt0"),
+    "f_horizontal": ("frequency", "gt0"),
+    "zeta": ("dimensionless", "ge0"),
+    "k": ("stiffness", "ge0"),
+    "c": ("damping", "ge0"),
+    "span_x": ("length", "gt0"),
+    "span_y": ("length", "gt0"),
+    "height": ("length", None),
+    "position": ("length", None),
+    "home": ("length", None),
+    "travel": ("length", None),
+    "move": ("length", None),
+    "velocity": ("velocity", "gt0"),
+    "acceleration": ("acceleration", "gt0"),
+    "jerk": ("jerk", "gt0"),
+    "start": ("time", "ge0"),
+    "dwell": ("time", "ge0"),
+    "point": ("length", None),
+    "amplitude": ("length", None),
+    "frequency": ("frequency", "ge0"),
+    "phase": ("angle", None),
+    "duration": ("time", "gt0"),
+    "settle_tolerance": ("length", "gt0"),
+}
+
+
+@dataclass(frozen=True)
+class Target:
+    """Where a parameter goes in the scene.
+
+    Attributes:
+        path: canonical path (vector components as 0/1/2, except the x/y/z keys of isolators.k/c).
+        name: default parameter name (e.g. ``stage_y_acceleration``, ``isolator_type``).
+        dimension: a :mod:`studies.units` dimension, or "categorical".
+        unit: SI unit ("" for categorical and dimensionless).
+        levels: allowed values of a categorical parameter.
+        writes: canonical leaf paths it sets (two for ``isolators.k.horizontal``).
+        bound: "gt0", "ge0" or None: what every value must satisfy besides being finite.
+    """
+
+    path: str
+    name: str
+    dimension: str
+    unit: str
+    levels: tuple[str, ...] | None
+    writes: tuple[str, ...]
+    bound: str | None
+
+    @property
+    def categorical(self) -> bool:
+        return self.dimension == CATEGORICAL
+
+
+def _leaf_key(path: str) -> str:
+    """The key of ``_LEAVES`` a canonical continuous path falls under."""
+    parts = path.split(".")
+    if parts[0] == "points":
+        return "point"
+    if parts[-1].isdigit() or (parts[0] == "isolators" and parts[-2] in ("k", "c")):
+        return parts[-2]
+    return parts[-1]
+
+
+def leaf_rule(path: str) -> tuple[str, str | None]:
+    """(dimension, bound) of a canonical continuous leaf path."""
+    return _LEAVES[_leaf_key(path)]
+
+
+def check_leaf_values(path: str, values: np.ndarray) -> None:
+    """Raise ValueError naming ``path`` if a value is not finite or breaks the leaf's bound."""
+    _, bound = leaf_rule(path)
+    x = np.asarray(values, dtype=np.float64)
+    bad = ~np.isfinite(x)
+    reason = "must be finite"
+    if bound == "gt0":
+        bad |= ~(x > 0.0)
+        reason = "must be positive and finite"
+    elif bound == "ge0":
+        bad |= ~(x >= 0.0)
+        reason = "must be non-negative and finite"
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(
+            f"{path}: {reason}, got {x.reshape(-1)[i]:g}" + (f" (case {i})" if x.size > 1 else "")
+        )
+
+
+# ---------------------------------------------------------------------------------------------------------
+# what exists
+
+
+def _vector(prefix: str) -> list[str]:
+    return [f"{prefix}.{i}" for i in range(3)]
+
+
+def available_paths(scene: Scene) -> list[str]:
+    """Every canonical parameter path of ``scene``, in scene order."""
+    out: list[str] = []
+    m = scene.machine
+    if m.block is not None:
+        out += _vector("machine.block.size") + ["machine.block.density"] + _vector("machine.block.corner")
+    else:
+        out += ["machine.mass"] + _vector("machine.cg")
+        if m.inertia_diagonal is not None:
+            out += _vector("machine.inertia_diagonal")
+    iso = scene.isolators
+    out += ["isolators.preset", "isolators.f_vertical", "isolators.f_horizontal", "isolators.zeta"]
+    for kc in ("k", "c"):
+        out += [f"isolators.{kc}.{a}" for a in (*AXES, "horizontal", "vertical")]
+    if iso.layout is not None:
+        out += ["isolators.layout.span_x", "isolators.layout.span_y", "isolators.layout.height"]
+    else:
+        for j, mount in enumerate(iso.mounts):
+            p = f"isolators.list.{j}"
+            out += _vector(f"{p}.position")
+            out += [f"{p}.preset", f"{p}.f_vertical", f"{p}.f_horizontal", f"{p}.zeta"]
+            if mount.k is not None:
+                out += _vector(f"{p}.k")
+            if mount.c is not None:
+                out += _vector(f"{p}.c")
+    for s in scene.stages:
+        p = f"stages.{s.name}"
+        out += [f"{p}.mass"] + _vector(f"{p}.home")
+        prof = s.profile
+        if isinstance(prof, SequenceProfile):
+            for k, seg in enumerate(prof.segments):
+                keys = (
+                    ("move", "velocity", "acceleration", "jerk")
+                    if isinstance(seg, MoveSegment)
+                    else ("dwell",)
+                )
+                out += [f"{p}.profile.segments.{k}.{key}" for key in keys]
+            out.append(f"{p}.profile.start")
+            continue
+        keys = ["travel", "velocity", "acceleration"]
+        if isinstance(prof, SCurveProfile | ScanProfile):
+            keys.append("jerk")
+        if isinstance(prof, ScanProfile):
+            keys.append("dwell")
+        keys.append("start")
+        out += [f"{p}.profile.{key}" for key in keys]
+    for name in scene.points:
+        out += _vector(f"points.{name}")
+    if scene.floor is not None and scene.floor.sine is not None:
+        for key in ("amplitude", "frequency", "phase"):
+            out += _vector(f"floor.sine.{key}")
+    out += ["simulation.duration", "simulation.settle_tolerance"]
+    return out
+
+
+def _canonical(path: str, known: set[str]) -> str:
+    """``path`` with x/y/z vector components written as 0/1/2 where the scene's path uses indices."""
+    if path in known:
+        return path
+    parts = path.strip().split(".")
+    for i, part in enumerate(parts):
+        if part in AXES:
+            trial = ".".join([*parts[:i], str(AXES.index(part)), *parts[i + 1 :]])
+            if trial in known:
+                return trial
+    return path.strip()
+
+
+def _summary(paths: list[str]) -> str:
+    """Compact listing: vector components folded into ``.{0,1,2}``."""
+    out: list[str] = []
+    for p in paths:
+        head, _, last = p.rpartition(".")
+        if last in ("1", "2") and out and out[-1] == f"{head}.0":
+            continue
+        out.append(p)
+    return ", ".join(p[:-2] + ".{0,1,2}" if p.endswith(".0") else p for p in out)
+
+
+def _default_name(path: str) -> str:
+    parts = path.split(".")
+
+    def comp(s: str) -> str:
+        return AXES[int(s)] if s.isdigit() and int(s) < 3 else s
+
+    head = parts[0]
+    if head == "machine":
+        rest = [p for p in parts[1:] if p != "block"]
+        if rest[0] == "inertia_diagonal":
+            return f"machine_i{comp(rest[1]) * 2}"
+        return "_".join(["machine", *map(comp, rest)])
+    if head == "isolators":
+        if parts[1] == "preset":
+            return "isolator_type"
+        if parts[1] == "layout":
+            return "isolator_" + parts[2]
+        if parts[1] == "list":
+            j, key = parts[2], parts[3]
+            if key == "preset":
+                return f"isolator_{j}_type"
+            if key == "position":
+                return f"isolator_{j}_{comp(parts[4])}"
+            return "_".join(["isolator", j, key, *map(comp, parts[4:])])
+        return "_".join(["isolator", *parts[1:]])
+    if head == "stages":
+        name, rest = parts[1], parts[2:]
+        if rest[0] == "profile":
+            rest = rest[1:]
+            if rest[0] == "segments":
+                rest = ["segment", *rest[1:]]
+        return "_".join(["stage", name, *map(comp, rest)])
+    if head == "points":
+        return f"point_{parts[1]}_{comp(parts[2])}"
+    if head == "floor":
+        return "_".join(["floor", parts[2], comp(parts[3])])
+    return parts[-1]
+
+
+def resolve(path: str, scene: Scene) -> Target:
+    """The :class:`Target` of ``path`` in ``scene``.
+
+    Raises:
+        ValueError: the path does not exist in this scene; the message lists what exists.
+    """
+    paths = available_paths(scene)
+    known = set(paths)
+    canon = _canonical(path, known)
+    if canon not in known:
+        raise ValueError(f"{path!r} does not exist in this scene; paths that exist: {_summary(paths)}")
+    parts = canon.split(".")
+    name = _default_name(canon)
+    if parts[-1] == "preset":
+        return Target(canon, name, CATEGORICAL, "", tuple(PRESETS), (canon,), None)
+    writes: tuple[str, ...] = (canon,)
+    if parts[0] == "isolators" and parts[1] in ("k", "c"):
+        if parts[2] == "horizontal":
+            writes = (f"isolators.{parts[1]}.x", f"isolators.{parts[1]}.y")
+        elif parts[2] == "vertical":
+            writes = (f"isolators.{parts[1]}.z",)
+    dimension, bound = leaf_rule(writes[0])
+    return Target(canon, name, dimension, si_unit(dimension), None, writes, bound)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# setting values in a scene dict
+
+
+def scene_dict(scene: Scene) -> dict[str, Any]:
+    """A fresh, mutable plain-dict copy of a validated scene (SI numbers, lists, aliases as in YAML)."""
+    return scene.model_dump(mode="json", by_alias=True, exclude_none=True)
+
+
+def _set(d: dict[str, Any], leaf: str, value: Any) -> None:
+    parts = leaf.split(".")
+    node: Any = d
+    for i, part in enumerate(parts[:-1]):
+        nxt = parts[i + 1]
+        if isinstance(node, list):
+            if parts[i - 1] == "stages":
+                node = next(s for s in node if s["name"] == part)
+            else:
+                node = node[int(part)]
+            continue
+        if node.get(part) is None:
+            node[part] = [0.0, 0.0, 0.0] if nxt.isdigit() else {}
+        node = node[part]
+    last = parts[-1]
+    if isinstance(node, list):
+        node[int(last)] = value
+    else:
+        node[last] = value
+
+
+def apply(scene_data: dict[str, Any], targets: list[Target], values: list[Any]) -> dict[str, Any]:
+    """A deep copy of ``scene_data`` with each target set to its value (SI floats or level names)."""
+    d = copy.deepcopy(scene_data)
+    for target, value in zip(targets, values, strict=True):
+        v = value.item() if isinstance(value, np.generic) else value
+        for leaf in target.writes:
+            _set(d, leaf, v)
+    return d

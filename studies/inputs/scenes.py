@@ -1,0 +1,592 @@
+"""From validated scenes to the engine's input: :class:`engine.scene.SceneBatch`.
+
+:func:`build_batch` turns ``C`` scenes of one shape (same isolator count and placement, same stages and
+profile kinds, same points and floor kind) into one batch, vectorised over the cases. A study passes a
+single scene plus per-case ``overrides``: arrays of the continuous values its parameters set, keyed by
+canonical leaf path (see :mod:`studies.parameters`), so thousands of cases need no per-case validation.
+
+What the builder works out:
+- machine mass, inertia and c.g. (from a block: :func:`studies.block.block_properties`);
+- mount positions (a layout puts four mounts at ``cg_x +- span_x/2, cg_y +- span_y/2, cg_z - height``
+  around the machine's c.g., order :data:`studies.schema.LAYOUT_ORDER`);
+- the static load of each mount under the total weight of machine and stages at home
+  (:func:`studies.isolators.load_share`, about the composite c.g.), and from it preset stiffness per floor
+  axis (X, Y from ``f_horizontal``, Z from ``f_vertical``) and damping from ``zeta``; explicit values win;
+- stage motion profiles (:mod:`engine.profiles`), points, floor motion, duration and settling tolerance.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+
+import numpy as np
+
+from isolab.engine import profiles
+from isolab.engine.results import AXES
+from isolab.engine.scene import GRAVITY, SceneBatch, SceneError
+from isolab.studies.inputs.block import MAX_TRAVEL, beyond_travel, block_properties, travel_bound
+from isolab.studies.inputs.isolators import (
+    CollinearIsolatorsError,
+    damping_from_ratio,
+    load_share,
+    stiffness_from_frequency,
+)
+from isolab.studies.inputs.parameters import check_leaf_values
+from isolab.studies.inputs.schema import (
+    AUTO_DURATION_CAP,
+    AUTO_DURATION_DECAYS,
+    AUTO_DURATION_MARGIN,
+    MoveSegment,
+    ScanProfile,
+    Scene,
+    SCurveProfile,
+    SequenceProfile,
+    Simulation,
+    TrapezoidProfile,
+)
+from isolab.studies.questions.floor import scene_band_velocity
+
+_LAYOUT_SX = np.array([-1.0, 1.0, 1.0, -1.0])
+_LAYOUT_SY = np.array([-1.0, -1.0, 1.0, 1.0])
+
+
+def shape_signature(scene: Scene) -> tuple:
+    """What all scenes of one batch must share (array shapes and which inputs exist)."""
+    iso = scene.isolators
+    m = scene.machine
+    machine = ("block",) if m.block is not None else ("direct", m.inertia is not None)
+    mounts = (
+        ("layout",)
+        if iso.layout is not None
+        else ("list", len(iso.mounts), tuple((mt.k is not None, mt.c is not None) for mt in iso.mounts))
+    )
+    stages = []
+    for s in scene.stages:
+        p = s.profile
+        if isinstance(p, SequenceProfile):
+            kind = (
+                "sequence",
+                tuple(
+                    ("move", g.jerk is not None) if isinstance(g, MoveSegment) else ("dwell",)
+                    for g in p.segments
+                ),
+            )
+        elif isinstance(p, ScanProfile):
+            kind = ("scan", p.jerk is not None, p.repeats)
+        else:
+            kind = (p.type,)
+        stages.append((s.name, s.parent, kind))
+    floor = None  # the time-domain floor motion (a floor spectrum is per case and shapes nothing)
+    if scene.floor is not None and scene.floor.sine is not None:
+        floor = ("sine",)
+    elif scene.floor is not None and scene.floor.recorded is not None:
+        rec = scene.floor.recorded
+        floor = ("recorded", rec.dt, len(rec.displacement.samples()[0]))
+    return machine, mounts, tuple(stages), tuple(scene.points), floor
+
+
+class _Cases:
+    """Reads a leaf of ``C`` cases: the override array if there is one, else the scenes' own values."""
+
+    def __init__(self, scenes: Sequence[Scene], overrides: Mapping[str, np.ndarray], n_cases: int):
+        self.scenes = scenes
+        self.overrides = overrides
+        self.c = n_cases
+
+    def get(self, path: str, read: Callable[[Scene], float | None]) -> np.ndarray:
+        """(C,) values; NaN where a scene leaves an optional input unset."""
+        if path in self.overrides:
+            return self.overrides[path]
+        vals = [read(s) for s in self.scenes]
+        arr = np.array([np.nan if v is None else float(v) for v in vals])
+        return np.broadcast_to(arr, (self.c,)) if arr.size == 1 else arr
+
+    def vec(self, path: str, read: Callable[[Scene], Sequence[float] | None]) -> np.ndarray:
+        """(C, 3) vector leaf, components ``path.0 .. path.2``."""
+        return np.stack(
+            [
+                self.get(f"{path}.{i}", lambda s, i=i: None if read(s) is None else read(s)[i])
+                for i in range(3)
+            ],
+            axis=-1,
+        )
+
+    def each(self, read: Callable[[Scene], object]) -> list:
+        """A non-numeric input of each case (no overrides)."""
+        vals = [read(s) for s in self.scenes]
+        return vals * self.c if len(vals) == 1 else vals
+
+
+def _first_set(*arrays: np.ndarray) -> np.ndarray:
+    """Element-wise the first non-NaN of ``arrays`` (NaN where all are NaN)."""
+    out = np.array(arrays[-1], dtype=np.float64, copy=True)
+    for a in reversed(arrays[:-1]):
+        out = np.where(np.isnan(a), out, a)
+    return out
+
+
+def _fail(field: str, reason: str, bad: np.ndarray, c: int) -> None:
+    if np.any(bad):
+        where = f" (case {int(np.flatnonzero(np.reshape(bad, (c, -1)).any(axis=1))[0])})" if c > 1 else ""
+        raise SceneError(field, reason + where)
+
+
+def _machine(cases: _Cases) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """Mass (C,), inertia (C, 3, 3), c.g. (C, 3) and the block size (C, 3) or None."""
+    m0 = cases.scenes[0].machine
+    c = cases.c
+    if m0.block is not None:
+        size = cases.vec("machine.block.size", lambda s: s.machine.block.size)
+        rho = cases.get("machine.block.density", lambda s: s.machine.block.density)
+        corner = cases.vec("machine.block.corner", lambda s: s.machine.block.corner)
+        mass, inertia, cg = block_properties(size, rho, corner)
+        return mass, inertia, cg, size
+    mass = cases.get("machine.mass", lambda s: s.machine.mass)
+    cg = cases.vec("machine.cg", lambda s: s.machine.cg)
+    if m0.inertia is not None:
+        inertia = np.array(cases.each(lambda s: s.machine.inertia), dtype=np.float64).reshape(c, 3, 3)
+    else:
+        diag = cases.vec("machine.inertia_diagonal", lambda s: s.machine.inertia_diagonal)
+        srt = np.sort(diag, axis=-1)
+        _fail(
+            "machine.inertia_diagonal",
+            "principal moments break the triangle inequality (no rigid body has them)",
+            srt[:, 2] > (srt[:, 0] + srt[:, 1]) * (1.0 + 1e-9),
+            c,
+        )
+        inertia = np.zeros((c, 3, 3))
+        inertia[:, [0, 1, 2], [0, 1, 2]] = diag
+    return np.asarray(mass, dtype=np.float64), inertia, cg, None
+
+
+def _mount_values(cases: _Cases, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per case and mount: f_vertical, f_horizontal (Hz), zeta and sky-hook flag, from overrides, the
+    mount's own preset, the group's overrides and the group's preset, in that order."""
+    c = cases.c
+    group_preset = cases.each(lambda s: s.isolators.preset_of(s.isolators.preset))
+    listed = cases.scenes[0].isolators.mounts is not None
+    out = {}
+    for key in ("f_vertical", "f_horizontal", "zeta"):
+        group = cases.get(f"isolators.{key}", lambda s, key=key: getattr(s.isolators, key))
+        base = np.array([getattr(p, key) for p in group_preset])
+        cols = []
+        for j in range(n):
+            if listed:
+                own = cases.get(
+                    f"isolators.list.{j}.{key}", lambda s, j=j, key=key: getattr(s.isolators.mounts[j], key)
+                )
+                own_preset = np.array(
+                    cases.each(
+                        lambda s, j=j, key=key: (
+                            np.nan
+                            if s.isolators.mounts[j].preset is None
+                            else getattr(s.isolators.preset_of(s.isolators.mounts[j].preset), key)
+                        )
+                    ),
+                    dtype=np.float64,
+                )
+                cols.append(_first_set(own, own_preset, group, base))
+            else:
+                cols.append(_first_set(group, base))
+        out[key] = np.stack(cols, axis=-1).reshape(c, n)
+    sky = np.zeros((c, n), dtype=bool)
+    for j in range(n):
+
+        def flag(s: Scene, j: int = j) -> bool:
+            iso = s.isolators
+            if listed:
+                mt = iso.mounts[j]
+                if mt.skyhook is not None:
+                    return mt.skyhook
+                if mt.preset is not None:
+                    return iso.preset_of(mt.preset).skyhook
+            return iso.skyhook if iso.skyhook is not None else iso.preset_of(iso.preset).skyhook
+
+        sky[:, j] = cases.each(flag)
+    return out["f_vertical"], out["f_horizontal"], out["zeta"], sky
+
+
+def _mount_feedforward(cases: _Cases, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per case and mount: feedforward gain (1), bandwidth (Hz), actuator force limit (N, inf: none) and
+    whether the weight shift is fed forward too (bool).
+
+    The feedforward comes as a whole from the mount's own, its own preset's, the group's or the group
+    preset's, in that order; none gives gain 0. (Not a design parameter: a study varies it through
+    ``isolators.preset``.)
+    """
+    listed = cases.scenes[0].isolators.mounts is not None
+
+    def resolved(s: Scene, j: int):
+        iso = s.isolators
+        if listed:
+            mt = iso.mounts[j]
+            if mt.feedforward is not None:
+                return mt.feedforward.figures()
+            if mt.preset is not None:
+                return iso.preset_of(mt.preset).feedforward
+        if iso.feedforward is not None:
+            return iso.feedforward.figures()
+        return iso.preset_of(iso.preset).feedforward
+
+    keys = ("gain", "bandwidth", "force_limit")
+    off = {"gain": 0.0, "bandwidth": 0.0, "force_limit": np.inf}
+    out = {k: np.zeros((cases.c, n)) for k in keys}
+    for j in range(n):
+        ff = cases.each(lambda s, j=j: resolved(s, j))
+        for key in keys:
+            out[key][:, j] = [off[key] if f is None else getattr(f, key) for f in ff]
+    weight = np.zeros((cases.c, n), dtype=bool)
+    for j in range(n):
+        weight[:, j] = [f is not None and f.weight for f in cases.each(lambda s, j=j: resolved(s, j))]
+    return out["gain"], out["bandwidth"], out["force_limit"], weight
+
+
+def _profiles(cases: _Cases) -> profiles.Pieces:
+    c = cases.c
+    stages = cases.scenes[0].stages
+    pieces = []
+    for i, st in enumerate(stages):
+        p = f"stages.{st.name}.profile"
+        prof = st.profile
+
+        def get(key: str, p: str = p, i: int = i) -> np.ndarray:
+            return cases.get(f"{p}.{key}", lambda s: getattr(s.stages[i].profile, key))
+
+        try:
+            if isinstance(prof, TrapezoidProfile):
+                pc = profiles.trapezoid(
+                    get("travel"), get("velocity"), get("acceleration"), start=get("start")
+                )
+            elif isinstance(prof, SCurveProfile):
+                pc = profiles.scurve(
+                    get("travel"), get("velocity"), get("acceleration"), get("jerk"), start=get("start")
+                )
+            elif isinstance(prof, ScanProfile):
+                jerk = get("jerk") if prof.jerk is not None or f"{p}.jerk" in cases.overrides else None
+                pc = profiles.scan(
+                    get("travel"),
+                    get("velocity"),
+                    get("acceleration"),
+                    jerk,
+                    dwell=get("dwell"),
+                    repeats=prof.repeats,
+                    start=get("start"),
+                )
+            else:
+                segs = []
+                for k, seg in enumerate(prof.segments):
+                    q = f"{p}.segments.{k}"
+
+                    def sget(key: str, q: str = q, k: int = k, i: int = i) -> np.ndarray:
+                        return cases.get(
+                            f"{q}.{key}", lambda s: getattr(s.stages[i].profile.segments[k], key)
+                        )
+
+                    if isinstance(seg, MoveSegment):
+                        d = {"move": sget("move"), "v_max": sget("velocity"), "a_max": sget("acceleration")}
+                        if seg.jerk is not None or f"{q}.jerk" in cases.overrides:
+                            d["j_max"] = sget("jerk")
+                        segs.append(d)
+                    else:
+                        segs.append({"dwell": sget("dwell")})
+                pc = profiles.sequence(segs, start=get("start"))
+        except SceneError as err:
+            names = {"v_max": "velocity", "a_max": "acceleration", "j_max": "jerk", "distance": "travel"}
+            field = err.field
+            for old, new in names.items():
+                field = field.replace(old, new)
+            raise SceneError(f"stages[{i}].profile.{field}", err.reason) from None
+        if pc.t.shape[0] != c:
+            pc = profiles.Pieces(*(np.broadcast_to(x, (c, x.shape[1])) for x in pc))
+        pieces.append(pc)
+    if not pieces:
+        z = np.zeros((c, 0, 1))
+        return profiles.Pieces(z, z, z, z, z)
+    return profiles.stack(pieces)
+
+
+def build_batch(
+    scenes: Sequence[Scene],
+    overrides: Mapping[str, np.ndarray] | None = None,
+    simulation: Simulation | None = None,
+    n_cases: int | None = None,
+    g: float = GRAVITY,
+) -> SceneBatch:
+    """The engine batch of ``scenes``, one case per scene, or ``n_cases`` cases of one scene.
+
+    Args:
+        scenes: validated scenes of one shape (see :func:`shape_signature`); a single scene is repeated
+            over the cases of ``overrides``.
+        overrides: per-case values (SI) of continuous inputs, by canonical leaf path (``stages.y.mass``,
+            ``isolators.k.x``, ``machine.block.size.1`` ...), each of shape (C,) or scalar.
+        simulation: the simulation block to use for every case (duration, settling tolerance, gravity
+            stiffness); default: each scene's own.
+        n_cases: number of cases ``C`` (default: from the scenes and overrides).
+        g: gravitational acceleration, m/s^2.
+
+    Raises:
+        SceneError (a ValueError): naming the input and, for several cases, the first case that is not a
+            physical scene (collinear mounts, a mount that would carry no load, a travel off the base ...).
+    """
+    scenes = list(scenes)
+    if not scenes:
+        raise ValueError("build_batch: no scenes")
+    sig = shape_signature(scenes[0])
+    for i, s in enumerate(scenes[1:], start=1):
+        if shape_signature(s) != sig:
+            raise ValueError(
+                f"build_batch: scene {i} differs in shape from scene 0 (isolators, stages, points or "
+                "floor); build such scenes in separate batches"
+            )
+    ov = {}
+    for path, v in (overrides or {}).items():
+        arr = np.asarray(v, dtype=np.float64).reshape(-1)
+        check_leaf_values(path, arr)
+        ov[path] = arr
+    sizes = {len(scenes)} | {a.size for a in ov.values()}
+    c = n_cases if n_cases is not None else max(sizes)
+    if not sizes <= {1, c}:
+        raise ValueError(
+            f"build_batch: scenes and overrides disagree on the number of cases: {sorted(sizes)}"
+        )
+    ov = {k: np.broadcast_to(a, (c,)) for k, a in ov.items()}
+    cases = _Cases(scenes, ov, c)
+    s0 = scenes[0]
+
+    mass, inertia, cg, block_size = _machine(cases)
+
+    # stages
+    m = len(s0.stages)
+    names = [st.name for st in s0.stages]
+    stage_mass = np.zeros((c, m))
+    stage_home = np.zeros((c, m, 3))
+    for i, name in enumerate(names):
+        stage_mass[:, i] = cases.get(f"stages.{name}.mass", lambda s, i=i: s.stages[i].mass)
+        stage_home[:, i] = cases.vec(f"stages.{name}.home", lambda s, i=i: s.stages[i].home)
+    stage_axis = np.array(cases.each(lambda s: [st.axis for st in s.stages]), dtype=np.float64).reshape(
+        c, m, 3
+    )
+    stage_parent = np.array(
+        [-1 if st.parent is None else names.index(st.parent) for st in s0.stages], dtype=np.int64
+    )
+
+    # isolators
+    iso0 = s0.isolators
+    if iso0.layout is not None:
+        n = 4
+        sx = cases.get("isolators.layout.span_x", lambda s: s.isolators.layout.span_x)
+        sy = cases.get("isolators.layout.span_y", lambda s: s.isolators.layout.span_y)
+        h = cases.get("isolators.layout.height", lambda s: s.isolators.layout.height)
+        iso_pos = np.stack(
+            [
+                cg[:, None, 0] + _LAYOUT_SX * sx[:, None] / 2.0,
+                cg[:, None, 1] + _LAYOUT_SY * sy[:, None] / 2.0,
+                np.broadcast_to((cg[:, 2] - h)[:, None], (c, 4)),
+            ],
+            axis=-1,
+        )
+    else:
+        n = len(iso0.mounts)
+        iso_pos = np.stack(
+            [
+                cases.vec(f"isolators.list.{j}.position", lambda s, j=j: s.isolators.mounts[j].position)
+                for j in range(n)
+            ],
+            axis=1,
+        )
+    total_mass = mass + stage_mass.sum(axis=1)
+    weight_xy = mass[:, None] * cg[:, :2] + np.einsum("cm,cmi->ci", stage_mass, stage_home[..., :2])
+    weight_xy = weight_xy / total_mass[:, None]
+    try:
+        load = load_share(iso_pos[..., :2], weight_xy, total_mass * g)
+    except CollinearIsolatorsError as err:
+        raise SceneError("isolators", str(err).removeprefix("isolators: ")) from None
+
+    f_v, f_h, zeta, skyhook = _mount_values(cases, n)
+    ff_gain, ff_bandwidth, ff_limit, ff_weight = _mount_feedforward(cases, n)
+    k_explicit = np.full((c, n, 3), np.nan)
+    c_explicit = np.full((c, n, 3), np.nan)
+    for a, axis in enumerate(AXES):
+        k_explicit[:, :, a] = cases.get(
+            f"isolators.k.{axis}", lambda s, axis=axis: _axis(s.isolators.k, axis)
+        )[:, None]
+        c_explicit[:, :, a] = cases.get(
+            f"isolators.c.{axis}", lambda s, axis=axis: _axis(s.isolators.c, axis)
+        )[:, None]
+    if iso0.mounts is not None:
+        for j in range(n):
+            for kc, arr in (("k", k_explicit), ("c", c_explicit)):
+                if getattr(iso0.mounts[j], kc) is not None:
+                    own = cases.vec(
+                        f"isolators.list.{j}.{kc}", lambda s, j=j, kc=kc: getattr(s.isolators.mounts[j], kc)
+                    )
+                    arr[:, j, :] = own
+    freq = np.stack([f_h, f_h, f_v], axis=-1)
+    needs_load = np.isnan(k_explicit) | np.isnan(c_explicit)
+    bad_load = needs_load.any(axis=-1) & ~(load > 0.0)
+    if bad_load.any():
+        case, j = (int(x[0]) for x in np.nonzero(bad_load))
+        raise SceneError(
+            "isolators",
+            f"isolator {j} would carry a static load of {load[case, j]:.6g} N (not positive): the weight of "
+            "machine "
+            "and stages lies too far from the mounts' centre for preset (load-based) stiffness; move the "
+            "mounts or give explicit k" + (f" (case {case})" if c > 1 else ""),
+        )
+    safe_load = np.where(load > 0.0, load, 0.0)[..., None]
+    iso_k = _first_set(k_explicit, stiffness_from_frequency(safe_load, freq, g))
+    iso_c = _first_set(c_explicit, damping_from_ratio(iso_k, safe_load, zeta[..., None], g))
+    _fail(
+        "isolators",
+        "stiffness and damping must be finite and non-negative",
+        ~(np.isfinite(iso_k) & np.isfinite(iso_c) & (iso_k >= 0) & (iso_c >= 0)),
+        c,
+    )
+
+    # motion
+    pieces = _profiles(cases)
+    if m:
+        reach = np.abs(pieces.s).max(axis=-1)  # (C, m): farthest from home (moves are monotonic in a piece)
+        bound = travel_bound(stage_axis, block_size[:, None, :] if block_size is not None else None)
+        over = beyond_travel(reach, bound)
+        if over.any():
+            i = int(np.flatnonzero(over.any(axis=0))[0])
+            _fail(
+                f"stages[{i}].profile.travel",
+                "the stage would travel farther than the base's extent along its axis"
+                if block_size is not None
+                else f"the stage would travel more than {MAX_TRAVEL:g} m",
+                over[:, i],
+                c,
+            )
+
+    # points and floor
+    point_names = list(s0.points)
+    points = np.zeros((c, len(point_names), 3))
+    for i, name in enumerate(point_names):
+        points[:, i] = cases.vec(f"points.{name}", lambda s, name=name: s.points[name])
+    floor_amp = np.zeros((c, 3))
+    floor_freq = np.zeros((c, 3))
+    floor_phase = np.zeros((c, 3))
+    floor_t = np.zeros(0)
+    floor_disp = None
+    if s0.floor is not None and s0.floor.sine is not None:
+        floor_amp = cases.vec("floor.sine.amplitude", lambda s: s.floor.sine.amplitude)
+        floor_freq = cases.vec("floor.sine.frequency", lambda s: s.floor.sine.frequency)
+        floor_phase = cases.vec("floor.sine.phase", lambda s: s.floor.sine.phase)
+    elif s0.floor is not None and s0.floor.recorded is not None:
+        rec = s0.floor.recorded
+        samples = np.array(cases.each(lambda s: s.floor.recorded.displacement.samples()), dtype=np.float64)
+        floor_t = np.arange(samples.shape[-1]) * rec.dt
+        floor_disp = samples.reshape(c, 3, -1)
+    # the floor spectrum: one-third-octave band velocity per axis (studies.floor)
+    floor_bands = np.array(cases.each(scene_band_velocity), dtype=np.float64).reshape(c, 3, -1)
+
+    # simulation
+    def sim(s: Scene) -> Simulation:
+        return simulation if simulation is not None else s.simulation
+
+    gravity_stiffness = {sim(s).gravity_stiffness for s in scenes}
+    if len(gravity_stiffness) != 1:
+        raise ValueError("build_batch: scenes of one batch must agree on simulation.gravity_stiffness")
+    preload = {sim(s).preload for s in scenes}
+    if len(preload) != 1:
+        raise ValueError("build_batch: scenes of one batch must agree on simulation.preload")
+    duration = cases.get(
+        "simulation.duration", lambda s: None if sim(s).duration == "auto" else sim(s).duration
+    )
+    last_move = profiles.end_time(pieces).max(axis=-1) if m else np.zeros(c)
+    settle = cases.get("simulation.settle_tolerance", lambda s: sim(s).settle_tolerance)
+    # each point settles to its own criterion's ``within`` (studies.criteria), else to settle_tolerance
+    point_tol = np.repeat(np.asarray(settle, dtype=np.float64).reshape(-1, 1), len(point_names), axis=1)
+    within = [s.criteria.settle_tolerances() if s.criteria is not None else {} for s in scenes]
+    for j, name in enumerate(point_names):
+        for i, w in enumerate(within):
+            if name in w:
+                point_tol[slice(None) if len(scenes) == 1 else i, j] = w[name]
+
+    batch = SceneBatch(
+        mass=np.array(mass, dtype=np.float64),
+        inertia=inertia,
+        cg=np.array(cg, dtype=np.float64),
+        iso_pos=np.array(iso_pos, dtype=np.float64),
+        iso_k=iso_k,
+        iso_c=iso_c,
+        iso_skyhook=skyhook,
+        stage_mass=stage_mass,
+        stage_home=stage_home,
+        stage_axis=stage_axis,
+        stage_parent=stage_parent,
+        prof_t=np.ascontiguousarray(pieces.t),
+        prof_s=np.ascontiguousarray(pieces.s),
+        prof_v=np.ascontiguousarray(pieces.v),
+        prof_a=np.ascontiguousarray(pieces.a),
+        prof_j=np.ascontiguousarray(pieces.j),
+        points=points,
+        floor_amp=np.array(floor_amp, dtype=np.float64),
+        floor_freq=np.array(floor_freq, dtype=np.float64),
+        floor_phase=np.array(floor_phase, dtype=np.float64),
+        floor_t=floor_t,
+        floor_disp=floor_disp,
+        floor_band_velocity=floor_bands,
+        duration=np.array(duration, dtype=np.float64),
+        settle_tol=np.array(settle, dtype=np.float64),
+        point_settle_tol=point_tol,
+        gravity_stiffness=gravity_stiffness.pop(),
+        g=g,
+        iso_ff_gain=ff_gain,
+        iso_ff_bandwidth=ff_bandwidth,
+        iso_ff_limit=ff_limit,
+        iso_ff_weight=ff_weight,
+        preload_with_base=preload.pop() == "base",
+    )
+    auto = np.isnan(duration)
+    if auto.any():
+        decay = slowest_decay_time(batch.take(np.flatnonzero(auto)))
+        margin = np.maximum(AUTO_DURATION_MARGIN, AUTO_DURATION_DECAYS * decay)
+        batch.duration[auto] = np.minimum(last_move[auto] + margin, AUTO_DURATION_CAP)
+    return batch
+
+
+def check_scene(scene: Scene) -> Scene:
+    """The check step for one parsed scene: build its batch once, so that what only the assembled scene
+    shows (collinear mounts, a mount that would carry no load, a travel off the base, a scene that tips)
+    is reported before anything runs. Returns ``scene``.
+
+    Raises:
+        SceneError (a ValueError): naming the input and the reason.
+    """
+    build_batch([scene])
+    return scene
+
+
+def slowest_decay_time(batch: SceneBatch) -> np.ndarray:
+    """(C,) largest time constant ``1 / (zeta w)`` over the modes that have stiffness and damping, s
+    (0 where none has both; a mode without damping never decays and is left to the cap)."""
+    from isolab.engine import modal
+    from isolab.engine import model as engine_model
+
+    try:
+        md = modal.modes(
+            engine_model.mass_matrix(batch),
+            engine_model.stiffness_matrix(batch),
+            engine_model.damping_matrix(batch),
+        )
+    except np.linalg.LinAlgError:
+        return np.zeros(batch.n_cases)
+    w = 2 * np.pi * md.frequency
+    rate = md.damping_ratio * w
+    tau = np.where((w > 0) & (rate > 0), 1.0 / np.where(rate > 0, rate, 1.0), 0.0)
+    return tau.max(axis=1)
+
+
+def _axis(values: object, axis: str) -> float | None:
+    return None if values is None else getattr(values, axis)
+
+
+def isolator_loads(scene: Scene, g: float = GRAVITY) -> np.ndarray:
+    """(n,) static vertical load of each mount of ``scene``, N (machine and stages at home)."""
+    b = build_batch([scene], g=g)
+    total = b.mass + b.stage_mass.sum(axis=1)
+    wp = b.mass[:, None] * b.cg[:, :2] + np.einsum("cm,cmi->ci", b.stage_mass, b.stage_home[..., :2])
+    return load_share(b.iso_pos[..., :2], wp / total[:, None], total * g)[0]

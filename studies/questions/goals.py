@@ -1,0 +1,282 @@
+"""What an optimisation study seeks: its objectives and constraints, read from the ``design:`` block.
+
+An ``optimize`` design names its goals as text::
+
+    design:
+      type: optimize
+      objective: minimize settling_time.tool          # or a list: several objectives (Pareto front)
+      constraints: [criteria, "peak_isolator_force.z <= 5 kN"]
+
+An objective is ``minimize <quantity>`` or ``maximize <quantity>``, a quantity as
+:func:`isolab.studies.quantities.output_values` reads it (``settling_time.tool``,
+``peak_point_displacement.tool.z``, ``natural_frequency.1``). A constraint is the word ``criteria`` (every
+criterion of the study's ``criteria:`` block is met: one constraint per criterion, its margin >= 0) or
+``<quantity> <= <value>`` / ``<quantity> >= <value>`` with the value in the quantity's units (SI when
+bare).
+
+:func:`plan_goals` checks the names against the outputs a study's dataset will hold, without running
+anything: it reads them from a one-case dataset of the study's layout whose case is missing
+(:func:`template_dataset`). :func:`goal_values` turns a dataset of evaluated cases into the objective
+values ``F`` (to minimise) and constraint values ``G`` (met when <= 0) an optimiser takes: always finite,
+with :data:`PENALTY` where a case failed or a value is missing.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from isolab.engine.results import OK
+from isolab.studies.quantities import output_values
+from isolab.studies.questions.criteria import add_criteria, judged_criteria
+from isolab.studies.questions.designs import Design, Factor
+from isolab.studies.results.dataset import failed_arrays, from_chunks, to_dataset
+from isolab.studies.units import dimension_of, to_si
+
+CRITERIA = "criteria"
+"""The constraint that every criterion of the study's ``criteria:`` block is met."""
+PENALTY = 1e9
+"""Objective and constraint value given to a case that failed (or whose value is missing): far worse than
+any real case, and finite (an optimiser never sees NaN). Such a case is infeasible."""
+
+SINGLE_OBJECTIVE = ("ga", "de", "pso", "nelder-mead", "pattern")
+MULTI_OBJECTIVE = ("nsga2",)
+ALGORITHMS = SINGLE_OBJECTIVE + MULTI_OBJECTIVE
+"""The pymoo algorithms an optimize design may name (see :mod:`studies.optimisation`)."""
+DEFAULT_POPULATION = 40
+"""Cases per generation when the design does not say."""
+
+_OBJECTIVE = re.compile(r"^\s*(minimi[sz]e|maximi[sz]e)\s+(\S+)\s*$", re.IGNORECASE)
+_CONSTRAINT = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_.]*)\s*(<=|>=)\s*(.+?)\s*$")
+
+
+@dataclass(frozen=True)
+class Objective:
+    """One objective: ``quantity`` to ``sense`` ("minimize" or "maximize")."""
+
+    quantity: str
+    sense: str
+
+    @property
+    def text(self) -> str:
+        return f"{self.sense} {self.quantity}"
+
+
+@dataclass(frozen=True)
+class Constraint:
+    """One constraint: ``quantity`` ``op`` ``bound`` (SI, in ``unit``), or the criteria block (``quantity``
+    :data:`CRITERIA`, one constraint per criterion)."""
+
+    quantity: str
+    op: str = ""
+    bound: float = 0.0
+    unit: str = ""
+
+    @property
+    def text(self) -> str:
+        if self.quantity == CRITERIA:
+            return CRITERIA
+        return f"{self.quantity} {self.op} {self.bound:g} {self.unit}".strip()
+
+
+@dataclass(frozen=True)
+class Goals:
+    """An optimize design's objectives, constraints and settings, checked."""
+
+    objectives: tuple[Objective, ...]
+    constraints: tuple[Constraint, ...]
+    algorithm: str
+    budget: int
+    population: int
+    seed: int
+    constraint_names: tuple[str, ...]
+    """One name per column of ``G``: ``case_ok``, then each constraint (each criterion for ``criteria``)."""
+    factors: tuple[Factor, ...]
+    """The varied parameters, each a continuous range (the optimiser's variables, log-scaled ones in log
+    space: :meth:`studies.designs.Factor.from_unit`)."""
+
+
+def template_dataset(
+    factors: list[Factor], isolator_names: list[str], point_names: list[str], criteria: Any = None
+) -> xr.Dataset:
+    """A one-case dataset with the layout a study's cases will have (the case itself missing): what the
+    quantity names are checked against."""
+    names = [f.name for f in factors]
+    values = {f.name: np.array([f.low if f.low is not None else 0.0]) for f in factors}
+    design = Design(
+        "sampled", names, values, {}, {f.name: f.path for f in factors}, {f.name: f.unit for f in factors}
+    )
+    result = from_chunks(
+        {0: failed_arrays(1, "template")},
+        [np.arange(1)],
+        n_isolators=len(isolator_names),
+        n_points=len(point_names),
+    )
+    ds = to_dataset(result, design, isolator_names=isolator_names, point_names=point_names, attrs={})
+    return add_criteria(ds, criteria)
+
+
+def _objectives(spec: Any, template: xr.Dataset) -> tuple[Objective, ...]:
+    given = spec.objective
+    if given is None:
+        raise ValueError(
+            "design.objective: an optimize design needs an objective, e.g. 'minimize settling_time.tool'"
+        )
+    texts = [given] if isinstance(given, str) else list(given)
+    if not texts:
+        raise ValueError("design.objective: give at least one objective")
+    out = []
+    for i, text in enumerate(texts):
+        where = "design.objective" if isinstance(given, str) else f"design.objective[{i}]"
+        m = _OBJECTIVE.match(str(text))
+        if m is None:
+            raise ValueError(
+                f"{where}: {text!r} is not 'minimize <quantity>' or 'maximize <quantity>' "
+                "(e.g. 'minimize settling_time.tool')"
+            )
+        sense = "minimize" if m.group(1).lower().startswith("min") else "maximize"
+        try:
+            output_values(template, m.group(2))
+        except ValueError as err:
+            raise ValueError(f"{where}: {err}") from None
+        out.append(Objective(m.group(2), sense))
+    return tuple(out)
+
+
+def _constraints(spec: Any, template: xr.Dataset, criteria: Any) -> tuple[Constraint, ...]:
+    out = []
+    for i, text in enumerate(spec.constraints or []):
+        where = f"design.constraints[{i}]"
+        if str(text).strip() == CRITERIA:
+            if criteria is None or not judged_criteria(criteria):
+                raise ValueError(
+                    f"{where}: 'criteria' constrains the cases to meet the study's criteria, but neither "
+                    "the study nor its scene has a criteria block (e.g. criteria: {isolators: "
+                    "{no_liftoff: true}})"
+                )
+            out.append(Constraint(CRITERIA))
+            continue
+        m = _CONSTRAINT.match(str(text))
+        if m is None:
+            raise ValueError(
+                f"{where}: {text!r} is not 'criteria', '<quantity> <= <value>' or '<quantity> >= <value>' "
+                "(e.g. 'min_isolator_load >= 0 N')"
+            )
+        quantity, op, value = m.groups()
+        try:
+            da = output_values(template, quantity)
+        except ValueError as err:
+            raise ValueError(f"{where}: {err}") from None
+        unit = str(da.attrs.get("units", "1"))
+        dimension = dimension_of(unit)
+        if dimension is None:
+            try:
+                bound = float(value)
+            except ValueError:
+                raise ValueError(
+                    f"{where}: give the bound of {quantity} in SI ({unit}), got {value!r}"
+                ) from None
+        else:
+            bound = to_si(value.strip(), dimension, where)
+        out.append(Constraint(quantity, op, bound, "" if unit == "1" else unit))
+    return tuple(out)
+
+
+def plan_goals(
+    spec: Any,
+    factors: list[Factor],
+    isolator_names: list[str],
+    point_names: list[str],
+    criteria: Any = None,
+) -> Goals:
+    """Check an optimize design block (``spec``, a :class:`studies.schema.DesignSpec`) against the study's
+    parameters (``factors``), its scene's labels and its criteria; nothing runs.
+
+    Raises:
+        ValueError: ``design.<field>: reason`` (``design.objective``, ``design.constraints[1]``,
+            ``design.algorithm``, ``design.budget``, ``design.population``) or ``parameters[i]...: reason``
+            for a parameter an optimiser cannot vary, listing the valid choices.
+    """
+    for i, f in enumerate(factors):
+        if f.levels is not None:
+            kind = "categorical" if f.categorical else "a list of values"
+            raise ValueError(
+                f"parameters[{i}].values: {f.name} ({f.path}) is {kind}; an optimize design varies "
+                "continuous ranges only: give it a range (start, stop), or fix it in the scene"
+            )
+        if f.low == f.high:
+            raise ValueError(f"parameters[{i}].range: {f.name}'s range is empty (start == stop)")
+    if not factors:
+        raise ValueError("parameters: an optimize design needs at least one parameter with a range")
+    template = template_dataset(factors, isolator_names, point_names, criteria)
+    objectives = _objectives(spec, template)
+    constraints = _constraints(spec, template, criteria)
+    algorithm = (spec.algorithm or ("ga" if len(objectives) == 1 else "nsga2")).strip().lower()
+    if algorithm not in ALGORITHMS:
+        raise ValueError(f"design.algorithm: {spec.algorithm!r} is not one of {', '.join(ALGORITHMS)}")
+    if len(objectives) > 1 and algorithm not in MULTI_OBJECTIVE:
+        raise ValueError(
+            f"design.algorithm: {algorithm} optimises one objective, the design has {len(objectives)}; "
+            f"use {' or '.join(MULTI_OBJECTIVE)}"
+        )
+    if spec.budget is None:
+        raise ValueError("design.budget: an optimize design needs its budget (the total number of cases)")
+    population = int(spec.population or min(DEFAULT_POPULATION, spec.budget))
+    if population > spec.budget:
+        raise ValueError(
+            f"design.population: {population} cases per generation exceed the budget of {spec.budget} cases"
+        )
+    names = ["case_ok"]
+    for c in constraints:
+        if c.quantity == CRITERIA:
+            names += [f"criterion {n}" for n in criteria.names()]
+        else:
+            names.append(c.text)
+    return Goals(
+        objectives,
+        constraints,
+        algorithm,
+        int(spec.budget),
+        population,
+        int(spec.seed),
+        tuple(names),
+        tuple(factors),
+    )
+
+
+def goal_values(ds: xr.Dataset, goals: Goals) -> tuple[np.ndarray, np.ndarray]:
+    """``(F, G)`` of the cases of a sampled dataset (``case`` dimension) that carries the criteria when
+    the goals constrain them (:func:`studies.criteria.add_criteria`).
+
+    ``F`` is (n, objectives): the objective values, negated for ``maximize``, in their SI units. ``G`` is
+    (n, constraints): met where <= 0: first 0 for a case that ended ``ok`` (else :data:`PENALTY`), then
+    per constraint ``-margin`` for each criterion and ``(value - bound) / scale`` (``<=``) or
+    ``(bound - value) / scale`` (``>=``) with ``scale = |bound|`` (1 SI unit for a zero bound). A failed case
+    or a missing value gets :data:`PENALTY` in every column: finite, and infeasible.
+    """
+    ok = np.asarray(ds["status"].values).reshape(-1) == OK
+    n = ok.size
+    cols_f = []
+    for obj in goals.objectives:
+        v = np.asarray(output_values(ds, obj.quantity).values, dtype=np.float64).reshape(n)
+        cols_f.append(v if obj.sense == "minimize" else -v)
+    cols_g = [np.where(ok, 0.0, PENALTY)]
+    for c in goals.constraints:
+        if c.quantity == CRITERIA:
+            margin = ds["criterion_margin"].transpose("case", "criterion").values
+            margin = np.asarray(margin, dtype=np.float64)
+            cols_g += [-margin[:, j] for j in range(margin.shape[1])]
+            continue
+        v = np.asarray(output_values(ds, c.quantity).values, dtype=np.float64).reshape(n)
+        scale = abs(c.bound) if c.bound != 0.0 else 1.0
+        cols_g.append((v - c.bound) / scale if c.op == "<=" else (c.bound - v) / scale)
+    F = np.stack(cols_f, axis=1)
+    G = np.stack(cols_g, axis=1)
+    bad = ~ok | ~np.isfinite(F).all(axis=1) | ~np.isfinite(G).all(axis=1)
+    F[bad] = PENALTY
+    G[bad] = PENALTY
+    return F, G

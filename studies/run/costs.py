@@ -1,0 +1,62 @@
+"""The engine cost model: how long the engine takes per step of one case, by fidelity and integrator.
+
+Two things are sized with it: the accuracy chooser ranks its candidate models by estimated cost
+(:func:`studies.accuracy.choose_for_batch`), and the runner sizes chunks, and authoring estimates a study's
+run time, from :func:`estimate_seconds_per_case`. Only rankings and rough sizes depend on it: a factor of a
+few changes no result. ``python -m benchmarks accuracy`` prints measured figures beside :data:`STEP_COST`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from isolab.studies.inputs.schema import DEFAULT_DT
+
+STEP_COST: dict[tuple[str, str], float] = {
+    ("lti", "euler"): 0.65e-6,
+    ("lti", "exact"): 0.47e-6,
+    ("lti", "rk4"): 2.24e-6,
+    ("ltv", "euler"): 1.05e-6,
+    ("ltv", "rk4"): 3.28e-6,
+    ("nonlinear", "euler"): 1.10e-6,
+    ("nonlinear", "rk4"): 3.19e-6,
+    ("lti", "reference"): 25e-6,
+    ("ltv", "reference"): 25e-6,
+    ("nonlinear", "reference"): 30e-6,
+}
+"""Engine time per step of one case, s, batched, on one core, on the article scene (fixed-step pairs
+measured by ``python -m benchmarks accuracy``; the adaptive reference integrator's per output step,
+roughly)."""
+UNKNOWN_STEP_COST = 30e-6
+"""Time per step assumed for a pair the table lacks, s (the dearest)."""
+CASE_OVERHEAD = 1e-3
+"""Fixed engine time per case, s (building its batch row; the exact integrator's step maps)."""
+UNKNOWN_DURATION = 10.0
+"""Simulated time assumed for a study whose first case cannot be built, s."""
+
+
+def step_cost(fidelity: str, integrator: str) -> float:
+    """Engine time per step of one case, s (:data:`STEP_COST`)."""
+    return STEP_COST.get((fidelity, integrator), UNKNOWN_STEP_COST)
+
+
+def estimate_seconds_per_case(study: Any) -> float:
+    """Rough engine time per case of ``study``, s: :data:`CASE_OVERHEAD` plus ``duration / dt`` steps at
+    :func:`step_cost` of its fidelity and integrator (the duration of its first case; a study that leaves the
+    step to the accuracy chooser is taken at :data:`studies.schema.DEFAULT_DT`)."""
+    sim = study.simulation
+    steps = max(1.0, _duration(study) / float(sim.dt if sim.dt is not None else DEFAULT_DT))
+    return CASE_OVERHEAD + steps * step_cost(sim.fidelity, sim.integrator)
+
+
+def _duration(study: Any) -> float:
+    """Simulated time of the study's first case, s (``duration: auto`` depends on the motion)."""
+    d = study.simulation.duration
+    if isinstance(d, int | float):
+        return float(d)
+    try:
+        return float(np.max(study.batch(np.array([0])).duration))
+    except Exception:  # sizing only: a case that cannot be built fails in its own chunk
+        return UNKNOWN_DURATION

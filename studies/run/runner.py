@@ -1,0 +1,498 @@
+"""Running a study end to end: plan the chunks, fan them out over Dask, build the dataset, store it.
+
+Where the work runs: this process plans and follows the Dask tasks and keeps the catalog. A worker that sees
+the store saves each chunk it computes and, at the end, assembles and writes the dataset
+(:func:`finish_study`); a worker that does not (another machine, no shared volume) hands its results back
+and this process does both.
+
+:func:`run_study` is what the service calls for each submitted study; :func:`run_local` runs a study
+file on a private LocalCluster (the CLI and notebooks); :func:`make_client` is the default Dask client.
+
+A run saves every chunk as it arrives (``<id>.chunks/<k>.npz``, see :class:`studies.store.Store`), so
+calling :func:`run_study` again with the same ``study_id`` after an interruption (cancel, crash, restart)
+computes only the chunks that are not saved yet. The chunk split itself is saved with the first chunk, so a
+resumed run splits the cases the same way even on a cluster of another size.
+
+Around the fan-out (see :mod:`studies.accuracy`): a study that asks for an accuracy instead of naming its
+model gets the cheapest fidelity, integrator and step that meets it, measured on pilot cases on a worker
+before the chunks run (the chunks then run the resolved definition); and every dataset carries its
+measured error, from a seeded sample of cases rerun at the reference level on the same client.
+
+An ``optimize`` design does not plan its cases: once its model is resolved, :func:`run_study` hands it to
+:func:`studies.optimisation.run_optimisation`, which runs it a generation at a time through the same
+fan-out and keeps its own journal in the study's chunk directory.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import tempfile
+import threading
+import time
+import uuid
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from isolab.studies.inputs.study import isolator_names, study_from_json
+from isolab.studies.questions.criteria import add_criteria
+from isolab.studies.results.dataset import (
+    add_error_estimate,
+    failures,
+    from_chunks,
+    streamed_dataset,
+    to_dataset,
+)
+from isolab.studies.results.store import Store, StoreFull, copy_atomic, is_no_space, utc_now
+from isolab.studies.run.accuracy import (
+    ESTIMATED_OUTPUTS,
+    OUTPUT_MEANING,
+    OUTPUT_UNITS,
+    REFERENCE_PAIR,
+    Choice,
+    ErrorEstimate,
+    cached_choice,
+    choose,
+    choose_from_json,
+    error_sample,
+    estimate_errors,
+    exact_estimate,
+    remember_choice,
+    resolved_definition,
+    sample_arrays,
+)
+from isolab.studies.run.costs import estimate_seconds_per_case
+from isolab.studies.run.fanout import TASK_RETRIES, choose_chunk_size, plan_chunks, run_chunks, worker_threads
+from isolab.studies.run.optimisation import run_optimisation
+
+log = logging.getLogger(__name__)
+
+Progress = Callable[[int, int], None]
+
+
+def study_labels(study: Any) -> tuple[list[str], list[str]]:
+    """(isolator names, point names) of a study's scene: :func:`studies.study.isolator_names` and the
+    points' own names."""
+    scene = study.scene
+    return isolator_names(scene), [str(p) for p in scene.points]
+
+
+def isolator_types(study: Any) -> list[str]:
+    """Isolator types (presets) a study involves: the values of every varied preset, plus the scene's
+    own group and per-mount presets where no parameter replaces them."""
+    design = study.design()
+    iso = study.scene.isolators
+    varied = {t.path: name for t, name in zip(study.targets, design.names, strict=True)}
+    types = {
+        str(v)
+        for path, name in varied.items()
+        if path.endswith("preset")
+        for v in np.unique(design.values[name])
+    }
+    group_used = iso.mounts is None or any(m.preset is None for m in iso.mounts)
+    if group_used and "isolators.preset" not in varied:
+        types.add(str(iso.preset))
+    for j, mount in enumerate(iso.mounts or []):
+        if mount.preset is not None and f"isolators.list.{j}.preset" not in varied:
+            types.add(str(mount.preset))
+    return sorted(types)
+
+
+def run_study(
+    study: Any,
+    store: Store,
+    client: Any,
+    study_id: str | None = None,
+    progress: Progress | None = None,
+    cancel: threading.Event | None = None,
+    *,
+    chunk_size: int | None = None,
+) -> str:
+    """Run every case of ``study`` on ``client`` and store the dataset; returns the study id.
+
+    Args:
+        study: a :class:`studies.study.Study`.
+        store: where the catalog row, chunks and dataset go.
+        client: a ``dask.distributed.Client``.
+        study_id: an existing catalog row to run (or resume); None creates one.
+        progress: called as ``progress(done_cases, total_cases)``.
+        cancel: set it to stop: outstanding chunks are cancelled, finished ones stay saved, the study is
+            marked ``cancelled`` and can be resumed by calling again with its id.
+        chunk_size: cases per chunk (default: :func:`studies.fanout.choose_chunk_size`); ignored when
+            resuming a run whose split is saved.
+
+    The catalog row goes ``running`` (``started`` is the first start, kept on resume), then
+    ``done``/``cancelled``/``failed`` (with ``finished``; ``error`` says why it failed); ``n_done`` and
+    ``n_failed`` follow the chunks as they arrive.
+
+    Raises:
+        Whatever stopped the run (the row is marked ``failed`` first), e.g. FanoutError when every chunk
+        failed.
+    """
+    from isolab.engine import __version__ as engine_version
+
+    definition = study.model_dump(mode="json")
+    # keys keep their order: the order of points in the definition is the order of the point labels
+    definition_json = json.dumps(definition)
+    design = study.design()
+    n_cases = int(study.planned_cases)  # an optimize design: its budget
+    sim = study.simulation
+    if study_id is None:
+        study_id = store.create(
+            definition,
+            name=study.name,
+            n_cases=n_cases,
+            parameters=list(design.names),
+            isolator_types=isolator_types(study),
+            fidelity=sim.fidelity,
+            integrator=sim.integrator,
+            dt=sim.dt,
+        )
+    row = store.get(study_id)  # exists, and the id is valid
+    store.restore_reserve()  # room to record a failure should the disk fill (see Store.release_reserve)
+    store.update(study_id, status="running", started=row["started"] or utc_now(), finished=None, error=None)
+    try:
+        # an accuracy request is resolved before the fan-out: the chunks run the chosen model
+        choice = _choice(client, study, definition_json, cancel, f"isolab-{study_id}")
+        if choice is None:
+            store.update(study_id, status="cancelled", finished=utc_now())
+            return study_id
+        if choice.request is None:
+            run_json, run = definition_json, study
+        else:
+            run_json = json.dumps(resolved_definition(study, choice))
+            run = study_from_json(run_json)
+            store.update(study_id, fidelity=choice.fidelity, integrator=choice.integrator, dt=choice.dt)
+        if study.goals is not None:  # optimize: the optimiser picks the cases, a generation at a time
+            model = {"engine_version": engine_version, **choice.attrs(), "auto_step": bool(sim.auto_step)}
+            return run_optimisation(
+                study, run_json, store, client, study_id, model, worker_threads(client), progress, cancel
+            )
+        chunks = store.load_chunk_plan(study_id)
+        if chunks is None or int(sum(len(c) for c in chunks)) != n_cases:
+            store.clear_chunks(study_id)
+            size = chunk_size or choose_chunk_size(
+                n_cases, worker_threads(client), estimate_seconds_per_case(run)
+            )
+            chunks = plan_chunks(n_cases, size)
+            store.save_chunk_plan(study_id, chunks)
+        saved = store.load_chunks(study_id, fields=("indices", "status"))  # not the outputs
+        skip = {
+            k
+            for k, arrays in saved.items()
+            if k < len(chunks) and np.array_equal(arrays.get("indices", chunks[k]), chunks[k])
+        }
+        counts = {k: _counts(saved[k]) for k in skip}
+
+        def on_chunk(k: int, arrays: dict[str, np.ndarray]) -> None:
+            if "saved" not in arrays:  # a worker that does not see the store, or a failed chunk
+                store.save_chunk(study_id, k, arrays)
+            counts[k] = _counts(arrays)
+            store.update(
+                study_id,
+                n_done=sum(c[0] for c in counts.values()),
+                n_failed=sum(c[1] for c in counts.values()),
+            )
+
+        store.update(
+            study_id, n_done=sum(c[0] for c in counts.values()), n_failed=sum(c[1] for c in counts.values())
+        )
+        if skip:
+            log.info("study %s: resuming, %d of %d chunks already done", study_id, len(skip), len(chunks))
+        # the error estimate's sampled cases run beside the chunks (a few engine calls each)
+        samples = _submit_samples(client, run, run_json, f"isolab-{study_id}")
+        report = run_chunks(
+            client,
+            run_json,
+            chunks,
+            skip=skip,
+            on_chunk=on_chunk,
+            progress=progress,
+            cancel=cancel,
+            key_prefix=f"isolab-{study_id}",
+            store_target=(str(store.root), study_id),
+        )
+        if report.cancelled:
+            client.cancel(samples[1])
+            store.update(study_id, status="cancelled", finished=utc_now())
+            return study_id
+        estimate = _error_estimate(client, run, samples, cancel)
+        if estimate is None:
+            store.update(study_id, status="cancelled", finished=utc_now())
+            return study_id
+
+        attrs = {
+            "title": f"isolab study {study.name}",
+            "study": definition_json,
+            "study_id": study_id,
+            "design": _design_extra(study),
+            "engine_version": engine_version,
+            **choice.attrs(),
+            "auto_step": bool(sim.auto_step),
+        }
+        # the dataset is assembled and written on a worker that sees the store (the results, the error
+        # estimate's bookkeeping and the netCDF compression stay out of this process, which serves
+        # requests: the load benchmark's p99 went from 70-146 ms to 46-67 ms), else here
+        future = client.submit(
+            finish_study,
+            str(store.root),
+            study_id,
+            run_json,
+            json.dumps(attrs),
+            estimate,
+            pure=False,
+            retries=TASK_RETRIES,
+            priority=1,
+            key=f"isolab-{study_id}-finish-{uuid.uuid4().hex[:8]}",
+        )
+        n_failed = _wait(client, future, cancel)
+        if cancel is not None and cancel.is_set():
+            store.update(study_id, status="cancelled", finished=utc_now())
+            return study_id
+        if n_failed is None:
+            n_failed = assemble_dataset(store, study_id, run_json, attrs, estimate)
+        store.clear_chunks(study_id)
+        if n_cases and int(n_failed) >= n_cases:  # not one case has a result: the study failed, saying why
+            reason = f"every case failed ({failures(store.path(study_id))})"
+            store.update(
+                study_id, status="failed", finished=utc_now(), n_done=n_cases, n_failed=n_cases, error=reason
+            )
+            return study_id
+        store.update(study_id, status="done", finished=utc_now(), n_done=n_cases, n_failed=int(n_failed))
+        return study_id
+    except BaseException as err:
+        text = f"{type(err).__name__}: {err}"
+        if is_no_space(err):  # "no space left on device: writing <id>.nc needs about N MB, ..."
+            text = str(err) if isinstance(err, StoreFull) else f"no space left on device: {text}"
+            store.release_reserve()  # room for the catalog to record it
+        try:
+            store.update(study_id, status="failed", finished=utc_now(), error=text)
+        except Exception:  # the catalog itself failed: report the original error
+            log.exception("study %s: could not mark the study failed", study_id)
+        raise
+
+
+IN_MEMORY_CASES = 200_000
+"""Largest study whose dataset is assembled whole in memory (about 1.2 GB in the worker at this size);
+larger ones are streamed chunk by chunk. ``ISOLAB_IN_MEMORY_CASES`` in the environment overrides it."""
+
+
+def assemble_dataset(
+    store: Store, study_id: str, run_json: str, attrs: dict[str, Any], estimate: ErrorEstimate
+) -> int:
+    """Build a study's dataset from its saved chunks, add the error ``estimate`` and write it atomically;
+    the number of cases that did not end OK.
+
+    Up to ``IN_MEMORY_CASES`` cases the dataset is built whole in memory and written at once (fastest:
+    1.8 s for 100,000 cases). Beyond, it is streamed (:func:`studies.dataset.streamed_dataset`): each chunk
+    is read when its slice is written and let go after, so the memory this takes does not grow with the
+    number of cases (only the statuses, 1 byte a case, and the parameter values, 8 bytes a case per
+    parameter, are held), at about 7x the writing time."""
+
+    run = study_from_json(run_json)
+    iso_names, point_names = study_labels(run)
+    chunks = store.load_chunk_plan(study_id)
+    if chunks is None:
+        raise RuntimeError(f"study {study_id}: its chunk plan is missing from the store")
+    n_cases = sum(len(c) for c in chunks)
+    if n_cases <= int(os.environ.get("ISOLAB_IN_MEMORY_CASES", IN_MEMORY_CASES)):
+        result = from_chunks(
+            store.load_chunks(study_id), chunks, n_isolators=len(iso_names), n_points=len(point_names)
+        )
+        n_failed = int(np.count_nonzero(result.status != 0))
+        ds = to_dataset(result, run.design(), isolator_names=iso_names, point_names=point_names, attrs=attrs)
+        ds = add_criteria(ds, run.criteria)
+    else:
+        statuses = store.load_chunks(study_id, fields=("status",))
+        missing = [k for k in range(len(chunks)) if k not in statuses]
+        if missing:
+            raise ValueError(f"study {study_id}: chunks {missing} have no results")
+        n_failed = sum(int(np.count_nonzero(statuses[k]["status"] != 0)) for k in range(len(chunks)))
+        del statuses
+        ds = streamed_dataset(
+            lambda k: store.load_chunk(study_id, k),
+            chunks,
+            run.design(),
+            isolator_names=iso_names,
+            point_names=point_names,
+            attrs=attrs,
+            criteria=run.criteria,
+        )
+    ds = add_error_estimate(
+        ds,
+        estimate.values,
+        worst_case=estimate.worst_case,
+        cases=estimate.cases,
+        excluded=estimate.excluded,
+        method=estimate.method,
+        meaning=OUTPUT_MEANING,
+        units=OUTPUT_UNITS,
+    )
+    store.write_dataset(study_id, ds)  # each chunk's slice is read and written in turn
+    return n_failed
+
+
+def finish_study(
+    store_root: str, study_id: str, run_json: str, attrs_json: str, estimate: ErrorEstimate
+) -> int | None:
+    """The Dask task that finishes a study on a worker (:func:`assemble_dataset`); None when this worker
+    does not see the store, so the runner finishes."""
+    store = Store(store_root, catalog=False)
+    if not store.has_chunk_plan(study_id):
+        return None
+    return assemble_dataset(store, study_id, run_json, json.loads(attrs_json), estimate)
+
+
+def _wait(client: Any, future: Any, cancel: threading.Event | None) -> Any:
+    """The result of a Dask future; None (and the future cancelled) when ``cancel`` is set first."""
+    while not future.done():
+        if cancel is not None and cancel.is_set():
+            client.cancel([future])
+            return None
+        if cancel is not None:
+            cancel.wait(0.05)
+        else:
+            time.sleep(0.05)
+    return future.result()
+
+
+def _choice(
+    client: Any, study: Any, definition_json: str, cancel: threading.Event | None, key_prefix: str
+) -> Choice | None:
+    """The fidelity, integrator and step to run with: the study's own, or measured for its accuracy
+    request on a worker (:func:`studies.accuracy.choose`); None when cancelled meanwhile."""
+    if study.simulation.request is None or study.simulation.accuracy == "reference":
+        return choose(study)
+    known = cached_choice(study)
+    if known is not None:
+        return known
+    future = client.submit(
+        choose_from_json, definition_json, pure=False, key=f"{key_prefix}-accuracy-{uuid.uuid4().hex[:8]}"
+    )
+    choice = _wait(client, future, cancel)
+    if choice is not None:
+        remember_choice(study, choice)
+    return choice
+
+
+def _submit_samples(client: Any, study: Any, run_json: str, key_prefix: str) -> tuple[list[int], list[Any]]:
+    """The error estimate's seeded sample of cases and the Dask futures of their
+    :func:`studies.accuracy.sample_arrays` (none for a study that runs at the reference level itself)."""
+    cases = error_sample(study)
+    if (study.simulation.fidelity, study.simulation.integrator) == REFERENCE_PAIR:
+        return cases, []
+    token = uuid.uuid4().hex[:8]
+    futures = [
+        client.submit(
+            sample_arrays, run_json, c, pure=False, priority=1, key=f"{key_prefix}-sample-{c}-{token}"
+        )
+        for c in cases
+    ]
+    return cases, futures
+
+
+def _error_estimate(
+    client: Any, study: Any, samples: tuple[list[int], list[Any]], cancel: threading.Event | None
+) -> ErrorEstimate | None:
+    """The largest error per output over the sampled cases (see :func:`_submit_samples`); None when
+    ``cancel`` is set while waiting for them."""
+    cases, futures = samples
+    outputs = [o for o in ESTIMATED_OUTPUTS if o != "peak_point_displacement" or len(study.scene.points) > 0]
+    if not futures:
+        return exact_estimate(cases, outputs)
+    try:
+        parts = [_wait(client, f, cancel) for f in futures]
+    except Exception as err:  # the study's own results stand; the estimate says why it is missing
+        log.exception("error estimate: the sampled cases failed")
+        nan = {o: float("nan") for o in outputs}
+        return ErrorEstimate(
+            nan,
+            {o: None for o in outputs},
+            tuple(cases),
+            {c: f"reference rerun failed: {type(err).__name__}: {err}" for c in cases},
+            "reference reruns failed",
+        )
+    if any(p is None for p in parts):
+        return None
+    ours = {k: np.concatenate([np.asarray(p["ours"][k]) for p in parts]) for k in parts[0]["ours"]}
+    reference = {
+        k: np.concatenate([np.asarray(p["reference"][k]) for p in parts]) for k in parts[0]["reference"]
+    }
+    method = "nonlinear level, reference integrator (DOP853, rtol 1e-10), sampled at the step each case used"
+    return estimate_errors(ours, reference, cases, outputs, method=method)
+
+
+def _counts(arrays: dict[str, np.ndarray]) -> tuple[int, int]:
+    status = np.asarray(arrays["status"])
+    return int(status.size), int(np.count_nonzero(status != 0))
+
+
+def _design_extra(study: Any) -> dict[str, Any]:
+    """What the design summary adds from the study's ``design:`` block (type, samples, seed; saltelli:
+    second_order, which the sensitivity analysis reads)."""
+    dump = study.design_spec.model_dump(mode="json")
+    if dump.get("type") == "saltelli":
+        dump["second_order"] = bool(dump.get("second_order"))
+    keys = ("type", "seed", "samples", "second_order")
+    return {k: v for k, v in dump.items() if k in keys and v is not None}
+
+
+def make_client(
+    scheduler_address: str | None = None, workers: int = 2, *, dashboard_address: str | None = ":0"
+):
+    """A Dask client: to ``scheduler_address``, else ``DASK_SCHEDULER_ADDRESS`` / dask's
+    ``scheduler-address`` config, else a new LocalCluster of ``workers`` processes with one thread each
+    (closed with the client; its dashboard on ``dashboard_address``, default a free port)."""
+    import dask
+    from dask.distributed import Client
+
+    address = (
+        scheduler_address
+        or os.environ.get("DASK_SCHEDULER_ADDRESS")
+        or dask.config.get("scheduler-address", None)
+        or dask.config.get("distributed.scheduler-address", None)
+    )
+    if address:
+        return Client(address)
+    if int(workers) < 1:
+        raise ValueError(f"workers: {workers} must be at least 1")
+    return Client(
+        n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=dashboard_address
+    )
+
+
+def run_local(
+    source: str | Path | dict | Any,
+    out_path: str | Path,
+    workers: int = 2,
+    progress: Progress | None = None,
+    store: Store | None = None,
+) -> xr.Dataset:
+    """Run a study (YAML/JSON file, text or dict, as :func:`studies.study.load_study` takes, or a validated
+    :class:`studies.study.Study`) on a private LocalCluster of ``workers`` processes (one thread each) and
+    write its dataset to ``out_path`` atomically, with the mode a new file gets under the umask. Uses
+    ``store`` if given (the study stays in its catalog), else a temporary one. Returns the dataset (loaded
+    in memory)."""
+    from dask.distributed import Client, LocalCluster
+
+    from isolab.studies.inputs.study import Study, load_study
+
+    if int(workers) < 1:
+        raise ValueError(f"workers: {workers} must be at least 1")
+    study = source if isinstance(source, Study) else load_study(source)
+    with tempfile.TemporaryDirectory(prefix="isolab-") as tmp:
+        own = store if store is not None else Store(Path(tmp))
+        with (
+            LocalCluster(
+                n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=":0"
+            ) as cluster,
+            Client(cluster) as client,
+        ):
+            study_id = run_study(study, own, client, progress=progress)
+        copy_atomic(own.path(study_id), out_path)
+        return own.open_dataset(study_id)
