@@ -11,7 +11,7 @@ CODE := engine studies service tests benchmarks
 # numba caches each compiled kernel beside its source, but notices an edit only in the kernel's own file:
 # a kernel that inlines code from another engine module would run stale after that module changes. The
 # make targets keep the caches in a folder named for the engine's sources, so any engine edit starts fresh.
-ENGINE_HASH := $(shell cat engine/*.py engine/integrators/*.py 2>/dev/null | sha1sum | cut -c1-12)
+ENGINE_HASH := $(shell cat engine/*.py engine/*/*.py 2>/dev/null | sha1sum | cut -c1-12)
 export NUMBA_CACHE_DIR ?= $(CURDIR)/$(VENV)/numba-cache/$(ENGINE_HASH)
 
 HOST ?= 127.0.0.1
@@ -43,7 +43,7 @@ serve: $(STAMP)
 	$(VENV)/bin/isolab serve --host $(HOST) --port $(PORT) --workers $(WORKERS) --data $(DATA)
 
 # docs/study-files.md, the reference of study and scene files, made from the models (a test fails while it
-# is not what they give: run this after changing a model of studies/inputs/schema.py or studies/inputs/study.py).
+# is not what they give: run this after changing a model of studies/inputs/schema/ or studies/inputs/study.py).
 docs: $(STAMP)
 	$(PY) -m isolab.studies.authoring.file_reference > docs/study-files.md.part
 	mv docs/study-files.md.part docs/study-files.md
@@ -76,13 +76,13 @@ format: $(TEST_STAMP)
 	$(VENV)/bin/ruff check --fix $(CODE)
 	$(VENV)/bin/ruff format $(CODE)
 
-# mypy on isolab.studies and isolab.service. The folders install under the isolab namespace through
+# mypy on isolab.engine, isolab.studies and isolab.service. The folders install under the isolab namespace through
 # setuptools' package-dir mapping, which mypy cannot follow, so it reads them through a view of links
 # laid out as installed (.typecheck/isolab/{engine,studies,service}).
 typecheck: $(TEST_STAMP)
 	mkdir -p .typecheck/isolab
 	for p in engine studies service; do ln -sfn ../../$$p .typecheck/isolab/$$p; done
-	cd .typecheck && ../$(VENV)/bin/mypy --config-file ../pyproject.toml -p isolab.studies -p isolab.service
+	cd .typecheck && ../$(VENV)/bin/mypy --config-file ../pyproject.toml -p isolab.engine -p isolab.studies -p isolab.service
 
 # The browser tests (tests/browser) drive Debian's Chromium through Playwright; install it where missing
 # (root, or sudo when there is one). Playwright's own browser download is never used.

@@ -28,8 +28,9 @@ import numpy as np
 from isolab.engine import concat, simulate
 from isolab.engine.results import OK, STATUS_NAMES
 from isolab.studies.inputs.study import load_scene, scene_batch
-from isolab.studies.run.accuracy import CANDIDATE_PAIRS, output_errors, sizing_error
+from isolab.studies.run.accuracy import CANDIDATE_PAIRS
 from isolab.studies.run.costs import STEP_COST
+from isolab.studies.run.error_estimate import output_errors, sizing_error
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "studies" / "examples" / "article-scriber.yaml"

@@ -23,13 +23,10 @@ a small warm-up study first (the workers load the compiled kernels), then Latin 
 from __future__ import annotations
 
 import argparse
-import contextlib
 import datetime as _dt
 import json
 import os
 import shutil
-import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -40,6 +37,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from benchmarks.live_service import ServiceProcess
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "studies" / "examples" / "lhs-10000.yaml"
@@ -136,79 +135,19 @@ def measure_kernel(definition: dict, n_cases: int) -> dict[str, float]:
 
 
 # ------------------------------------------------------------------------------------------ service
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+class Service(ServiceProcess):
+    """``isolab serve`` (:class:`~benchmarks.live_service.ServiceProcess`) with its study store
+    (``data``), its log (``service.log``) and its timing journal (``timings.jsonl``, ``ISOLAB_TIMINGS``)
+    in ``workdir``."""
 
-
-@dataclass
-class Service:
-    """An ``isolab serve`` subprocess on a loopback port."""
-
-    proc: subprocess.Popen
-    url: str
-    data_dir: Path
-    journal: Path
-    log: Path
-
-    @classmethod
-    def start(cls, workdir: Path, workers: int = 2, timeout: float = 120.0) -> Service:
-        import httpx
-
-        port = free_port()
-        data, journal, log = workdir / "data", workdir / "timings.jsonl", workdir / "service.log"
-        script = Path(sys.executable).with_name("isolab")
-        cmd = (
-            [str(script)]
-            if script.exists()
-            else [sys.executable, "-c", "from isolab.service.cli import app; app()"]
+    def __init__(self, workdir: Path, workers: int = 2):
+        self.journal = workdir / "timings.jsonl"
+        super().__init__(
+            workdir / "data", workers, env={"ISOLAB_TIMINGS": str(self.journal)}, log=workdir / "service.log"
         )
-        cmd += [
-            "serve",
-            "--host",
-            "127.0.0.1",
-            "--port",
-            str(port),
-            "--data",
-            str(data),
-            "--workers",
-            str(workers),
-        ]
-        env = {**os.environ, "ISOLAB_TIMINGS": str(journal)}
-        for name in ("ISOLAB_API_TOKEN", "DASK_SCHEDULER_ADDRESS", "ISOLAB_DATA_DIR"):
-            env.pop(name, None)
-        with open(log, "wb") as out:
-            proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=out, stderr=subprocess.STDOUT)
-        svc = cls(proc, f"http://127.0.0.1:{port}", data, journal, log)
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if proc.poll() is not None:
-                raise RuntimeError(f"isolab serve exited with {proc.returncode}:\n{svc.log_tail()}")
-            with contextlib.suppress(httpx.HTTPError):
-                if httpx.get(f"{svc.url}/health", timeout=2.0).status_code == 200:
-                    return svc
-            time.sleep(0.2)
-        svc.stop()
-        raise RuntimeError(f"isolab serve did not answer within {timeout} s:\n{svc.log_tail()}")
-
-    def log_tail(self, n: int = 3000) -> str:
-        try:
-            return self.log.read_text(errors="replace")[-n:]
-        except OSError:
-            return ""
-
-    def stop(self, timeout: float = 60.0) -> None:
-        if self.proc.poll() is not None:
-            return
-        self.proc.send_signal(signal.SIGINT)
-        try:
-            self.proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait(10)
 
     def journal_events(self) -> list[dict[str, Any]]:
+        """The records of the timing journal so far."""
         if not self.journal.exists():
             return []
         return [json.loads(line) for line in self.journal.read_text().splitlines() if line.strip()]
@@ -364,8 +303,8 @@ def run_study(
                 return sid, info, t_post, time.time()
             if time.monotonic() > deadline:
                 raise RuntimeError(f"study {sid} still {info['status']} after {timeout} s")
-            if svc.proc.poll() is not None:
-                raise RuntimeError(f"the service exited:\n{svc.log_tail()}")
+            if not svc.running():
+                raise RuntimeError(f"the service exited:\n{svc.tail(3000)}")
             time.sleep(poll)
 
 
@@ -587,9 +526,9 @@ def main(argv: list[str]) -> None:
     t_all = time.perf_counter()
     try:
         t0 = time.perf_counter()
-        svc = Service.start(workdir, workers=a.workers)
+        svc = Service(workdir, workers=a.workers).start(timeout=120.0)
         print(f"isolab serve up at {svc.url} in {time.perf_counter() - t0:.1f} s (data in {svc.data_dir})")
-        sampler = MemorySampler(svc.proc.pid)
+        sampler = MemorySampler(svc.pid)
         warm = study_definition(a.warmup_cases, "exact", a.duration, name="endtoend-warmup")
         sid, row, tp, ts = run_study(svc, warm)
         warm_rk4 = study_definition(a.warmup_cases, "rk4", a.duration, name="endtoend-warmup-rk4")

@@ -29,9 +29,7 @@ import os
 import random
 import shutil
 import signal
-import socket
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -41,6 +39,7 @@ from typing import Any
 
 import httpx
 
+from benchmarks.live_service import ServiceProcess
 from isolab.service.api.schemas import EXAMPLE_SCENE
 
 TARGET_P99_S = 0.100
@@ -85,67 +84,6 @@ def percentile(values: list[float], q: float) -> float:
         return float("nan")
     s = sorted(values)
     return s[min(len(s) - 1, max(0, round(q / 100.0 * (len(s) - 1))))]
-
-
-# ------------------------------------------------------------------------------------------- server
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-class Server:
-    """``isolab serve`` in a process group of its own (stopped with SIGTERM, then SIGKILL)."""
-
-    def __init__(self, data_dir: Path, workers: int, log: Path):
-        self.port = free_port()
-        self.url = f"http://127.0.0.1:{self.port}"
-        isolab = Path(sys.executable).with_name("isolab")
-        cmd = [
-            str(isolab),
-            "serve",
-            "--host",
-            "127.0.0.1",
-            "--port",
-            str(self.port),
-            "--workers",
-            str(workers),
-            "--data",
-            str(data_dir),
-        ]
-        env = {k: v for k, v in os.environ.items() if k not in ("DASK_SCHEDULER_ADDRESS", "ISOLAB_API_TOKEN")}
-        self.log = log
-        with open(log, "wb") as out:
-            self.proc = subprocess.Popen(
-                cmd, stdout=out, stderr=subprocess.STDOUT, env=env, start_new_session=True
-            )
-
-    def wait_healthy(self, deadline: float) -> None:
-        while time.monotonic() < deadline:
-            if self.proc.poll() is not None:
-                raise RuntimeError(f"isolab serve exited with {self.proc.returncode}; see {self.log}")
-            try:
-                if httpx.get(self.url + "/health", timeout=2.0).status_code == 200:
-                    return
-            except httpx.HTTPError:
-                pass
-            time.sleep(0.1)
-        raise RuntimeError(f"isolab serve did not become healthy; see {self.log}")
-
-    def stop(self) -> None:
-        for sig, wait in ((signal.SIGTERM, 20.0), (signal.SIGKILL, 10.0)):
-            try:
-                os.killpg(self.proc.pid, sig)
-            except ProcessLookupError:
-                return
-            try:
-                self.proc.wait(wait)
-            except subprocess.TimeoutExpired:
-                continue
-            try:  # the workers of the group may outlive the server for a moment
-                os.killpg(self.proc.pid, 0)
-            except ProcessLookupError:
-                return
 
 
 # -------------------------------------------------------------------------------------------- probe
@@ -301,11 +239,11 @@ def main(argv: list[str] | None = None) -> int:
     start = time.monotonic()
     hard_end = start + args.budget
     tmp = Path(tempfile.mkdtemp(prefix="isolab-load-"))
-    server = Server(tmp / "data", args.workers, tmp / "serve.log")
+    server = ServiceProcess(tmp / "data", args.workers, log=tmp / "serve.log")
     result: dict[str, Any] = {}
     failures: list[str] = []
     try:
-        server.wait_healthy(min(hard_end, time.monotonic() + 60))
+        server.start(timeout=min(hard_end - time.monotonic(), 60.0))
         url = server.url
         with httpx.Client(base_url=url, timeout=30.0) as http:
             warm = http.post("/studies", json=small_study(0)).json()["id"]
@@ -342,7 +280,7 @@ def main(argv: list[str] | None = None) -> int:
             if info["status"] in ("queued", "running"):
                 http.delete(f"/studies/{big}")
     finally:
-        server.stop()
+        server.stop(timeout=20.0)
         shutil.rmtree(tmp / "data", ignore_errors=True)  # the server's log stays, for a failed run
 
     done = tally.finished.get("done", 0)

@@ -74,9 +74,9 @@ def main(argv: list[str]) -> None:
     workdir = Path(tempfile.mkdtemp(prefix="isolab-million-"))
     svc = sampler = None
     try:
-        svc = Service.start(workdir, workers=a.workers)
+        svc = Service(workdir, workers=a.workers).start(timeout=120.0)
         print(f"isolab serve up at {svc.url} (data in {svc.data_dir})")
-        sampler = MemorySampler(svc.proc.pid)
+        sampler = MemorySampler(svc.pid)
         warm = million_definition(a.warmup_cases, a.duration, a.dt, name="million-warmup")
         _, row, tp, ts = run_study(svc, warm)
         print(f"warm-up study ({a.warmup_cases} cases): {ts - tp:.2f} s, {row['status']}")

@@ -10,20 +10,17 @@ answer (upload included) and the prober's median and worst latency. An accepted 
 from __future__ import annotations
 
 import json
-import socket
 import statistics
 import sys
 import tempfile
 import threading
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import httpx
-import uvicorn
 
+from benchmarks.live_service import thread_server
 from isolab.service.api.app import create_app
 from isolab.service.api.schemas import EXAMPLE_SCENE
 from isolab.service.settings import Settings
@@ -77,31 +74,10 @@ def post_and_probe(url: str, content: bytes) -> tuple[httpx.Response, float, lis
     return r, took, latencies
 
 
-@contextmanager
-def thread_server(app: Any) -> Iterator[str]:
-    """Serve ``app`` (with its lifespan) under uvicorn in a thread on a free loopback port."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 120.0
-    while not server.started:
-        if not thread.is_alive() or time.monotonic() > deadline:
-            raise RuntimeError("the service did not start")
-        time.sleep(0.05)
-    try:
-        yield f"http://127.0.0.1:{port}"
-    finally:
-        server.should_exit = True
-        thread.join(60)
-
-
 def main(argv: list[str]) -> None:
     sizes = [int(a) for a in argv] or [600_000, 300_000]
     with tempfile.TemporaryDirectory() as data:
-        with thread_server(create_app(Settings(data_dir=Path(data), workers=1))) as url:
+        with thread_server(create_app(Settings(data_dir=Path(data), workers=1)), start_timeout=120.0) as url:
             httpx.get(f"{url}/health", timeout=60.0)
             for n in sizes:
                 for units in (False, True):

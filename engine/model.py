@@ -6,17 +6,12 @@ displacement (m) and small rotation about X, Y, Z (rad). Matrices are (C, 6, 6) 
 
 from __future__ import annotations
 
-from collections import namedtuple
-
 import numpy as np
-from numba.experimental import structref
 
-from isolab.engine.dynamics import KernelWork, Params, WorkType, feedforward_transients, kernel_struct
+from isolab.engine.kernels.feedforward import feedforward_transients
+from isolab.engine.kernels.params import Params, Work
+from isolab.engine.kernels.structs import kernel_struct
 from isolab.engine.scene import SceneBatch
-
-_WORK_FIELDS = "rho vr ar jr xf vf acc f M R F x1 k1 k2 Fa ffx ffy ffs key tc cc cs cm cK sw"
-Work = namedtuple("Work", _WORK_FIELDS.split())
-structref.define_proxy(KernelWork, WorkType, list(Work._fields))
 
 
 def skew(v: np.ndarray) -> np.ndarray:
@@ -152,13 +147,14 @@ def travel_positions(b: SceneBatch, max_corners: int = 8) -> list[np.ndarray]:
     s_hi = np.maximum(b.prof_s.max(axis=-1), 0.0)
     if not np.any(s_hi - s_lo > 0):
         return []
+    picks: list[list[int | None]]
     if 2**m <= max_corners:
         picks = [[(k >> i) & 1 for i in range(m)] for k in range(2**m)]
     else:
         picks = [[0] * m, [1] * m]
         for i in range(m):
             for end in (0, 1):
-                pick = [None] * m
+                pick: list[int | None] = [None] * m
                 pick[i] = end
                 picks.append(pick)
     _, rho_h, _ = relative_geometry(b)
@@ -166,9 +162,9 @@ def travel_positions(b: SceneBatch, max_corners: int = 8) -> list[np.ndarray]:
     out = []
     for pick in picks:
         s = np.zeros(s_lo.shape)
-        for i, end in enumerate(pick):
-            if end is not None:
-                s[:, i] = (s_hi if end else s_lo)[:, i]
+        for i, side in enumerate(pick):
+            if side is not None:
+                s[:, i] = (s_hi if side else s_lo)[:, i]
         rho = rho_h + s[..., None] * e
         for i in range(m):
             p = int(b.stage_parent[i])
@@ -242,7 +238,7 @@ def feedforward_distribution(b: SceneBatch) -> np.ndarray:
 
 
 def params(b: SceneBatch) -> Params:
-    """The kernels' parameter arrays for a batch (see ``engine.dynamics.Params``)."""
+    """The kernels' parameter arrays for a batch (see ``engine.kernels.params.Params``)."""
     P = _params(b)
     if P.ffon:
         KP, KW = kernel_struct(P), kernel_struct(work(b))
@@ -318,7 +314,7 @@ def _params(b: SceneBatch) -> Params:
 
 def work(b: SceneBatch) -> Work:
     """Scratch arrays for one case at a time. They keep terms of the ``Params`` they serve (packed per
-    case, per time; ``engine.dynamics.time_terms``): one ``Work`` serves one ``Params``."""
+    case, per time; ``engine.kernels.cached_terms.time_terms``): one ``Work`` serves one ``Params``."""
     m, n = b.n_stages, b.n_isolators
     return Work(
         rho=np.zeros((m, 3)),
@@ -329,18 +325,15 @@ def work(b: SceneBatch) -> Work:
         vf=np.zeros(3),
         acc=np.zeros(6),
         f=np.zeros(6),
-        M=np.zeros((6, 6)),
         R=np.eye(3),
         F=np.zeros((n, 3)),
-        x1=np.zeros(13),
-        k1=np.zeros((4, 13)),
-        k2=np.zeros(13),
         Fa=np.zeros((n, 3)),
         ffx=np.zeros((8, 6)),
         ffy=np.zeros(6),
         ffs=np.zeros(24),
         # the accelerations' time-only terms and their key (case, level, time, mass matrix positive
-        # definite, pieces; case -1: none yet), and the packed case (``engine.dynamics.time_terms``)
+        # definite, pieces; case -1: none yet), and the packed case
+        # (``engine.kernels.cached_terms.time_terms``)
         key=np.concatenate([[-1.0, -1.0, np.nan, 0.0], np.zeros(m)]),
         tc=np.zeros((21, 3)),
         cc=np.concatenate([[-1.0], np.zeros(21)]),

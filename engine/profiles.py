@@ -294,7 +294,9 @@ def scurve(
 _MOVE_KEYS = {"move", "v_max", "a_max", "j_max"}
 
 
-def _check_segment(i: int, seg: object) -> dict[str, np.ndarray | None]:
+def _check_segment(i: int, seg: object) -> dict[str, np.ndarray]:
+    """The checked values of segment ``i``: ``dwell`` (s), or ``move`` (m), ``v_max`` (m/s), ``a_max``
+    (m/s^2) and, for an S-curve, ``j_max`` (m/s^3)."""
     where = f"segments[{i}]"
     if not isinstance(seg, Mapping):
         raise SceneError(where, f"must be a mapping with 'move' or 'dwell', got {type(seg).__name__}")
@@ -311,11 +313,10 @@ def _check_segment(i: int, seg: object) -> dict[str, np.ndarray | None]:
     for key in ("v_max", "a_max"):
         if key not in keys:
             raise SceneError(f"{where}.{key}", "is required for a move")
-    out: dict[str, np.ndarray | None] = {
+    out = {
         "move": _finite(f"{where}.move", seg["move"]),
         "v_max": _positive(f"{where}.v_max", seg["v_max"]),
         "a_max": _positive(f"{where}.a_max", seg["a_max"]),
-        "j_max": None,
     }
     if seg.get("j_max") is not None:
         out["j_max"] = _positive(f"{where}.j_max", seg["j_max"])
@@ -339,8 +340,7 @@ def sequence(
     named = {"start": _finite("start", start), "s0": _finite("s0", s0)}
     for i, seg in enumerate(checked):
         for key, x in seg.items():
-            if x is not None:
-                named[f"segments[{i}].{key}"] = x
+            named[f"segments[{i}].{key}"] = x
     c = _n_cases(named)
     t_now, s_now = _cases({"start": named["start"], "s0": named["s0"]}, c)
     zero = np.zeros(c)
@@ -353,7 +353,7 @@ def sequence(
             t_now = t_now + dwell
             continue
         d, v, a = _cases({"move": seg["move"], "v_max": seg["v_max"], "a_max": seg["a_max"]}, c)
-        if seg["j_max"] is None:
+        if "j_max" not in seg:
             p = _trapezoid(d, v, a, t_now, s_now)
         else:
             (j,) = _cases({"j_max": seg["j_max"]}, c)

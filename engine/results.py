@@ -1,9 +1,11 @@
-"""What a simulation returns: per-case outputs that carry a status instead of raising."""
+"""What a simulation returns: per-case outputs that carry a status instead of raising; and the catalogue
+of the outputs a study stores (:data:`OUTPUTS`): each one's name, dimensions, unit, meaning and which way
+is worse, written once on the fields of :class:`SimulationResult`."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
-from typing import Any
+from dataclasses import dataclass, field, fields, replace
+from typing import Any, Final, Literal
 
 import numpy as np
 
@@ -25,16 +27,106 @@ ROTATIONS = DOF_NAMES[3:]
 """Names of the rotations about X, Y, Z (the ``rotation`` dimension of stored results)."""
 N_MODES = len(DOF_NAMES)
 """Natural modes of the rigid base (one per degree of freedom)."""
+
+AXIS = "axis"
+"""The dimension of the translation axes, labelled :data:`AXES`."""
+ROTATION = "rotation"
+"""The dimension of the rotations, labelled :data:`ROTATIONS`."""
 ISOLATOR = "isolator"
-"""Stands for the number of isolators in an output's trailing shape."""
+"""The dimension of the scene's isolators (one per isolator: its size and labels are the scene's)."""
 POINT = "point"
-"""Stands for the number of points of interest in an output's trailing shape."""
+"""The dimension of the scene's points of interest (likewise the scene's)."""
+MODE = "mode"
+"""The dimension of the natural modes, numbered 1 to :data:`N_MODES` by ascending frequency."""
+DOF = "dof"
+"""The dimension of the base's degrees of freedom, labelled :data:`DOF_NAMES`."""
+DIMENSION_LABELS: dict[str, tuple[str, ...] | tuple[int, ...]] = {
+    AXIS: AXES,
+    ROTATION: ROTATIONS,
+    MODE: tuple(range(1, N_MODES + 1)),
+    DOF: DOF_NAMES,
+}
+"""Labels of the dimensions whose size is fixed (:data:`ISOLATOR` and :data:`POINT` are the scene's)."""
+
+LARGER: Final = "larger"
+"""A larger value is worse (a peak, a settling time; for a yes/no output, yes)."""
+SMALLER: Final = "smaller"
+"""A smaller value is worse (the smallest isolator load: the nearer to lift-off; for yes/no, no)."""
 
 
-def _output(*trailing: int | str, flag: bool = False) -> dict[str, Any]:
-    """Field metadata of a per-case output: its shape after the case axis (:data:`ISOLATOR` and
-    :data:`POINT` stand for the scene's counts) and whether it is a yes/no flag (bool) or a number."""
-    return {"trailing": trailing, "flag": flag}
+@dataclass(frozen=True)
+class OutputSpec:
+    """One per-case output a study stores: its name, shape, unit and meaning, and how it is judged.
+
+    Attributes:
+        name: the output's name (the dataset variable's, the case table's column prefix).
+        dims: its dimensions after the case's (:data:`AXIS`, :data:`ROTATION`, :data:`ISOLATOR`,
+            :data:`POINT`, :data:`MODE`, :data:`DOF`); ``()`` for one value per case.
+        unit: SI unit (``"1"`` for dimensionless values and yes/no).
+        long_name: what it holds, in words.
+        flag: a yes/no output (yes/no rather than a number).
+        worse: which way a case is worse, :data:`LARGER` or :data:`SMALLER`; a dimension left unnamed
+            is reduced to the worst value (the largest, or the smallest).
+        field: the :class:`SimulationResult` field its values are read from.
+        components: ``(start, stop)`` of the field's last axis it holds, or None for the whole field.
+        below_zero: a yes/no output read as ``field < 0`` (lift-off, from the smallest isolator load).
+        setting: it says how a case was computed (the step) rather than what it gave: stored after the
+            others.
+    """
+
+    name: str
+    dims: tuple[str, ...]
+    unit: str
+    long_name: str
+    flag: bool = False
+    worse: Literal["larger", "smaller"] = LARGER
+    field: str = ""
+    components: tuple[int, int] | None = None
+    below_zero: bool = False
+    setting: bool = False
+
+    @property
+    def worst(self) -> Literal["max", "min"]:
+        """The reduction that keeps the worst value: ``"max"`` or ``"min"``."""
+        return "max" if self.worse == LARGER else "min"
+
+    def shape(self, n_isolators: int, n_points: int) -> tuple[int, ...]:
+        """Shape of one case's value in a scene of ``n_isolators`` isolators and ``n_points`` points."""
+        return _shape(self.dims, n_isolators, n_points)
+
+    def values(self, result: SimulationResult) -> np.ndarray:
+        """The output's values (case first) in ``result``: its field, the components it holds, and for
+        :attr:`below_zero` whether they are below zero (bool)."""
+        a = np.asarray(getattr(result, self.field or self.name))
+        if self.components is not None:
+            a = a[..., self.components[0] : self.components[1]]
+        return a < 0.0 if self.below_zero else a
+
+
+def _shape(dims: tuple[str, ...], n_isolators: int, n_points: int) -> tuple[int, ...]:
+    size = {ISOLATOR: int(n_isolators), POINT: int(n_points)}
+    return tuple(size[d] if d in size else len(DIMENSION_LABELS[d]) for d in dims)
+
+
+def _output(
+    *dims: str,
+    unit: str,
+    long_name: str,
+    flag: bool = False,
+    worse: Literal["larger", "smaller"] = LARGER,
+    setting: bool = False,
+    also: tuple[OutputSpec, ...] = (),
+) -> dict[str, Any]:
+    """Field metadata of a per-case output stored under the field's own name: its ``dims`` after the
+    case axis and the rest of its :class:`OutputSpec`; ``also``: further outputs read from the field."""
+    own = OutputSpec("", dims, unit, long_name, flag=flag, worse=worse, setting=setting)
+    return {"dims": dims, "flag": flag, "outputs": (own, *also)}
+
+
+def _stored_as(*dims: str, parts: tuple[OutputSpec, ...]) -> dict[str, Any]:
+    """Field metadata of a per-case output (its ``dims`` after the case axis) stored as ``parts``, each
+    some components of its last axis."""
+    return {"dims": dims, "flag": False, "outputs": parts}
 
 
 @dataclass
@@ -95,32 +187,138 @@ class SimulationResult:
         history: time histories of recorded cases, or None (see ``simulate(record=...)``).
 
     The per-case outputs (every field but ``status``, ``message`` and ``history``) are listed, in this
-    order, by :data:`OUTPUT_FIELDS`, with their trailing shapes from :func:`output_shape`.
+    order, by :data:`OUTPUT_FIELDS`, with their trailing shapes from :func:`output_shape`. Each field's
+    metadata says what a study stores of it (:data:`OUTPUTS`): the unit, long name and judgement written
+    here are the only ones.
     """
 
     status: np.ndarray
     message: list[str]
-    dt: np.ndarray = field(metadata=_output())
-    peak_displacement: np.ndarray = field(metadata=_output(len(AXES)))
-    peak_rotation: np.ndarray = field(metadata=_output(len(ROTATIONS)))
-    peak_point_displacement: np.ndarray = field(metadata=_output(POINT, len(AXES)))
-    peak_isolator_force: np.ndarray = field(metadata=_output(ISOLATOR, len(AXES)))
-    static_isolator_load: np.ndarray = field(metadata=_output(ISOLATOR))
-    min_isolator_load: np.ndarray = field(metadata=_output(ISOLATOR))
-    rms_displacement: np.ndarray = field(metadata=_output(len(AXES)))
-    final_displacement: np.ndarray = field(metadata=_output(len(DOF_NAMES)))
-    settling_time: np.ndarray = field(metadata=_output())
-    settled: np.ndarray = field(metadata=_output(flag=True))
-    point_settling_time: np.ndarray = field(metadata=_output(POINT))
-    peak_isolator_deflection: np.ndarray = field(metadata=_output(ISOLATOR, len(AXES)))
-    max_isolator_load: np.ndarray = field(metadata=_output(ISOLATOR))
-    natural_frequency: np.ndarray = field(metadata=_output(N_MODES))
-    damping_ratio: np.ndarray = field(metadata=_output(N_MODES))
-    mode_energy: np.ndarray = field(metadata=_output(N_MODES, len(DOF_NAMES)))
-    mechanism: np.ndarray = field(metadata=_output(N_MODES, flag=True))
-    transmissibility: np.ndarray = field(metadata=_output(len(AXES)))
-    floor_point_velocity: np.ndarray | None = field(default=None, metadata=_output(POINT, len(AXES)))
-    floor_point_velocity_band: np.ndarray | None = field(default=None, metadata=_output(POINT, len(AXES)))
+    dt: np.ndarray = field(metadata=_output(unit="s", long_name="integration time step used", setting=True))
+    peak_displacement: np.ndarray = field(
+        metadata=_output(AXIS, unit="m", long_name="peak absolute displacement of the machine c.g.")
+    )
+    peak_rotation: np.ndarray = field(
+        metadata=_output(ROTATION, unit="rad", long_name="peak absolute rotation of the machine base")
+    )
+    peak_point_displacement: np.ndarray = field(
+        metadata=_output(POINT, AXIS, unit="m", long_name="peak absolute displacement of a point of interest")
+    )
+    peak_isolator_force: np.ndarray = field(
+        metadata=_output(ISOLATOR, AXIS, unit="N", long_name="peak absolute dynamic isolator force")
+    )
+    static_isolator_load: np.ndarray = field(
+        metadata=_output(ISOLATOR, unit="N", long_name="vertical isolator preload at the reference state")
+    )
+    min_isolator_load: np.ndarray = field(
+        metadata=_output(
+            ISOLATOR,
+            unit="N",
+            long_name="smallest total vertical isolator load",
+            worse=SMALLER,
+            also=(
+                OutputSpec(
+                    "liftoff",
+                    (ISOLATOR,),
+                    "1",
+                    "isolator lifts off (smallest total vertical load below zero)",
+                    flag=True,
+                    below_zero=True,
+                ),
+            ),
+        )
+    )
+    rms_displacement: np.ndarray = field(
+        metadata=_output(AXIS, unit="m", long_name="RMS displacement of the machine c.g.")
+    )
+    final_displacement: np.ndarray = field(
+        metadata=_stored_as(
+            DOF,
+            parts=(
+                OutputSpec(
+                    "final_displacement",
+                    (AXIS,),
+                    "m",
+                    "static c.g. displacement with the stages parked at the end",
+                    components=(0, 3),
+                ),
+                OutputSpec(
+                    "final_rotation",
+                    (ROTATION,),
+                    "rad",
+                    "static base rotation with the stages parked at the end",
+                    components=(3, 6),
+                ),
+            ),
+        )
+    )
+    settling_time: np.ndarray = field(
+        metadata=_output(
+            unit="s", long_name="settling time after the last stage move (lower bound if not settled)"
+        )
+    )
+    settled: np.ndarray = field(
+        metadata=_output(
+            unit="1",
+            long_name="motion settled within the tolerance before the end of the simulation",
+            flag=True,
+            worse=SMALLER,
+        )
+    )
+    point_settling_time: np.ndarray = field(
+        metadata=_output(
+            POINT,
+            unit="s",
+            long_name="settling time of a point of interest after each stage move, worst over the moves",
+        )
+    )
+    peak_isolator_deflection: np.ndarray = field(
+        metadata=_output(
+            ISOLATOR, AXIS, unit="m", long_name="peak absolute isolator deflection from its static state"
+        )
+    )
+    max_isolator_load: np.ndarray = field(
+        metadata=_output(ISOLATOR, unit="N", long_name="largest total vertical isolator load")
+    )
+    natural_frequency: np.ndarray = field(
+        metadata=_output(MODE, unit="Hz", long_name="undamped natural frequency (0 for a mechanism)")
+    )
+    damping_ratio: np.ndarray = field(metadata=_output(MODE, unit="1", long_name="modal damping ratio"))
+    mode_energy: np.ndarray = field(
+        metadata=_output(
+            MODE, DOF, unit="1", long_name="kinetic-energy share of a degree of freedom in a mode"
+        )
+    )
+    mechanism: np.ndarray = field(
+        metadata=_output(MODE, unit="1", long_name="zero-stiffness (rigid-body) mode", flag=True)
+    )
+    transmissibility: np.ndarray = field(
+        metadata=_output(
+            AXIS,
+            unit="1",
+            long_name="floor-to-c.g. displacement transmissibility at the floor frequency",
+        )
+    )
+    floor_point_velocity: np.ndarray | None = field(
+        default=None,
+        metadata=_output(
+            POINT,
+            AXIS,
+            unit="m/s",
+            long_name="largest one-third-octave band RMS velocity (1 to 80 Hz) of a point of interest "
+            "under the floor spectrum (0 without one)",
+        ),
+    )
+    floor_point_velocity_band: np.ndarray | None = field(
+        default=None,
+        metadata=_output(
+            POINT,
+            AXIS,
+            unit="Hz",
+            long_name="centre frequency of the one-third-octave band of floor_point_velocity (0 without a "
+            "floor spectrum)",
+        ),
+    )
     history: dict[str, np.ndarray] | None = field(default=None)
 
     def __post_init__(self) -> None:
@@ -147,16 +345,25 @@ class SimulationResult:
         return out
 
 
-_OUTPUTS = {f.name: f.metadata for f in fields(SimulationResult) if "trailing" in f.metadata}
-OUTPUT_FIELDS: tuple[str, ...] = tuple(_OUTPUTS)
+_FIELDS = {f.name: f.metadata for f in fields(SimulationResult) if "outputs" in f.metadata}
+OUTPUT_FIELDS: tuple[str, ...] = tuple(_FIELDS)
 """Names of the per-case outputs of :class:`SimulationResult`, in declaration order (every field but
 ``status``, ``message`` and ``history``)."""
-FLAG_FIELDS: frozenset[str] = frozenset(name for name, meta in _OUTPUTS.items() if meta["flag"])
+FLAG_FIELDS: frozenset[str] = frozenset(name for name, meta in _FIELDS.items() if meta["flag"])
 """The yes/no (bool) outputs among :data:`OUTPUT_FIELDS`; the others are floats."""
+
+_STORED = [
+    replace(spec, name=spec.name or name, field=name)
+    for name, meta in _FIELDS.items()
+    for spec in meta["outputs"]
+]
+OUTPUTS: dict[str, OutputSpec] = {spec.name: spec for spec in sorted(_STORED, key=lambda s: s.setting)}
+"""The catalogue of the outputs a study stores, name -> :class:`OutputSpec`, in the order stored: the
+fields' outputs in declaration order (``liftoff`` after the smallest isolator load it is read from,
+``final_rotation`` after ``final_displacement``), the settings (the step ``dt``) last."""
 
 
 def output_shape(name: str, n_isolators: int, n_points: int) -> tuple[int, ...]:
-    """Shape of one case's value of the output ``name`` in a scene of ``n_isolators`` isolators and
-    ``n_points`` points of interest (``()`` for a scalar)."""
-    size = {ISOLATOR: int(n_isolators), POINT: int(n_points)}
-    return tuple(size[d] if isinstance(d, str) else int(d) for d in _OUTPUTS[name]["trailing"])
+    """Shape of one case's value of the :class:`SimulationResult` field ``name`` in a scene of
+    ``n_isolators`` isolators and ``n_points`` points of interest (``()`` for a scalar)."""
+    return _shape(_FIELDS[name]["dims"], n_isolators, n_points)

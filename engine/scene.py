@@ -15,6 +15,7 @@ piece start times are the exact breakpoints an integrator may land steps on.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
+from typing import Any
 
 import numpy as np
 
@@ -166,7 +167,7 @@ class SceneBatch:
     def take(self, index: np.ndarray | slice | list[int]) -> SceneBatch:
         """The cases at ``index`` as a new batch (scene-level fields are shared)."""
         shared = {"stage_parent", "floor_t", "gravity_stiffness", "g", "preload_with_base"}
-        kw = {}
+        kw: dict[str, Any] = {}
         for f in fields(self):
             v = getattr(self, f.name)
             kw[f.name] = v if f.name in shared else np.asarray(v)[index]
@@ -175,10 +176,12 @@ class SceneBatch:
     def last_move_end(self) -> np.ndarray:
         """(C,) time at which every stage has come to rest for good, s."""
         t = self.prof_t
+        if not t.shape[-1]:
+            return np.zeros(self.n_cases)
         moving = (self.prof_v != 0.0) | (self.prof_a != 0.0) | (self.prof_j != 0.0)
         # a piece that moves ends where the next piece starts
         ends = np.concatenate([t[..., 1:], t[..., -1:]], axis=-1)
-        last = np.where(moving, ends, 0.0).max(axis=-1) if t.shape[-1] else np.zeros(t.shape[:2])
+        last = np.where(moving, ends, 0.0).max(axis=-1)  # (C, m)
         return last.max(axis=-1) if last.shape[-1] else np.zeros(self.n_cases)
 
     def rest_intervals(self) -> tuple[np.ndarray, np.ndarray]:

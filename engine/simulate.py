@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from isolab.engine import frequency, modal, model, peaks, stability
-from isolab.engine.dynamics import FIDELITIES
+from isolab.engine import frequency, modal, model, stability
 from isolab.engine.integrators import INTEGRATORS
+from isolab.engine.kernels import peaks
+from isolab.engine.kernels.params import FIDELITIES
 from isolab.engine.results import FAILED, OK, TIPPING, UNSTABLE, SimulationResult
 from isolab.engine.scene import SceneBatch, SceneError
 from isolab.engine.validation import validate
@@ -102,7 +103,7 @@ def simulate(
     md = modal.modes(M0, K0, C0)
     status = np.zeros(C, dtype=np.int8)
     message = [""] * C
-    for c in np.flatnonzero(md.tipping):
+    for c in np.flatnonzero(md.tipping).tolist():
         status[c] = TIPPING
         message[c] = (
             "statically unstable: the rocking stiffness of the weights above the mounts "
@@ -116,7 +117,7 @@ def simulate(
         for rho in (model.travel_positions(batch) if fidelity != "lti" else [])
     ]
     for M, K in placed:
-        for c in np.flatnonzero(modal.modes(M, K, C0).tipping & (status == OK)):
+        for c in np.flatnonzero(modal.modes(M, K, C0).tipping & (status == OK)).tolist():
             status[c] = TIPPING
             message[c] = (
                 "statically unstable with the stages at the ends of their travel: the rocking "
@@ -148,13 +149,13 @@ def simulate(
                 n_div[c] = 1
         n_div[status != OK] = 1
         steps = dt / n_div
-        for c in np.flatnonzero(n_div > 1):
+        for c in np.flatnonzero(n_div > 1).tolist():
             message[c] = substep_message(dt, steps[c], int(n_div[c]), integrator, fastest[c])
     duration = np.asarray(batch.duration, dtype=float)
     n_steps = np.rint(duration / steps).astype(np.int64)
     n_steps = np.maximum(n_steps, 1)
     too_many = n_steps > MAX_STEPS
-    for c in np.flatnonzero(too_many & (status == OK)):
+    for c in np.flatnonzero(too_many & (status == OK)).tolist():
         status[c] = FAILED
         message[c] = f"{n_steps[c]} steps of {steps[c]:.3g} s exceed the limit of {MAX_STEPS} per case"
     n_steps[too_many] = 1
@@ -167,7 +168,7 @@ def simulate(
         batch.n_isolators,
         target,
         batch.last_move_end(),
-        batch.settle_tol,
+        np.asarray(batch.settle_tol),
         record,
         int(n_steps[list(record)].max()) if record else 0,
         rest=rest,

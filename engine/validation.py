@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import fields
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from isolab.engine.scene import SceneBatch, SceneError
 
@@ -12,9 +13,11 @@ MAX_LENGTH = 100.0
 """Largest coordinate (m) any machine this tool models may have."""
 
 
-def _case(a: np.ndarray) -> str:
-    bad = np.argwhere(a)
-    return f" (case {int(bad[0][0])})" if bad.size and a.ndim else ""
+def _case(bad: ArrayLike) -> str:
+    """`` (case c)`` naming the first case flagged in ``bad`` (C,), or nothing for a scene-level flag."""
+    flags = np.asarray(bad)
+    where = np.argwhere(flags)
+    return f" (case {int(where[0][0])})" if where.size and flags.ndim else ""
 
 
 def validate(b: SceneBatch) -> None:
@@ -80,16 +83,17 @@ def validate(b: SceneBatch) -> None:
     for name in ("iso_ff_gain", "iso_ff_bandwidth", "iso_ff_limit", "iso_ff_weight"):
         if np.shape(getattr(b, name)) != (C, n):
             raise SceneError(name, f"shape {np.shape(getattr(b, name))}, expected {(C, n)}")
-    if (b.iso_ff_gain < 0).any():
-        raise SceneError("iso_ff_gain", "feedforward gain must not be negative" + _case(b.iso_ff_gain < 0))
-    slow = (b.iso_ff_gain != 0) & ~(b.iso_ff_bandwidth > 0)
+    gain, bandwidth, limit = (np.asarray(v) for v in (b.iso_ff_gain, b.iso_ff_bandwidth, b.iso_ff_limit))
+    if (gain < 0).any():
+        raise SceneError("iso_ff_gain", "feedforward gain must not be negative" + _case(gain < 0))
+    slow = (gain != 0) & ~(bandwidth > 0)
     if slow.any():
         raise SceneError(
             "iso_ff_bandwidth", "must be positive where a mount feeds forward" + _case(slow.any(axis=1))
         )
-    if (b.iso_ff_limit <= 0).any():
+    if (limit <= 0).any():
         raise SceneError(
-            "iso_ff_limit", "actuator force limit must be positive" + _case((b.iso_ff_limit <= 0).any(axis=1))
+            "iso_ff_limit", "actuator force limit must be positive" + _case((limit <= 0).any(axis=1))
         )
     for name in ("iso_pos", "stage_home", "points", "cg"):
         v = np.asarray(getattr(b, name))
@@ -115,20 +119,21 @@ def validate(b: SceneBatch) -> None:
                 )
         if (np.diff(b.prof_t, axis=-1) < 0).any():
             raise SceneError("prof_t", "piece start times must not decrease")
-    if (b.duration <= 0).any():
+    if (np.asarray(b.duration) <= 0).any():
         raise SceneError("duration", "must be positive")
-    if (b.settle_tol <= 0).any():
+    if (np.asarray(b.settle_tol) <= 0).any():
         raise SceneError("settle_tol", "must be positive")
-    if (b.point_settle_tol <= 0).any():
-        raise SceneError(
-            "point_settle_tol", "must be positive" + _case((b.point_settle_tol <= 0).any(axis=1))
-        )
+    point_tol = np.asarray(b.point_settle_tol)
+    if (point_tol <= 0).any():
+        raise SceneError("point_settle_tol", "must be positive" + _case((point_tol <= 0).any(axis=1)))
     if (b.floor_freq < 0).any():
         raise SceneError("floor_freq", "must not be negative")
-    if not (np.isfinite(b.floor_band_velocity) & (b.floor_band_velocity >= 0)).all():
+    band = np.asarray(b.floor_band_velocity)
+    if not (np.isfinite(band) & (band >= 0)).all():
         raise SceneError("floor_band_velocity", "must be finite and not negative")
     if len(b.floor_t):
-        if b.floor_disp.shape != (C, 3, len(b.floor_t)):
-            raise SceneError("floor_disp", f"shape {b.floor_disp.shape}, expected {(C, 3, len(b.floor_t))}")
+        disp = np.asarray(b.floor_disp)
+        if disp.shape != (C, 3, len(b.floor_t)):
+            raise SceneError("floor_disp", f"shape {disp.shape}, expected {(C, 3, len(b.floor_t))}")
         if (np.diff(b.floor_t) <= 0).any():
             raise SceneError("floor_t", "sample times must increase")

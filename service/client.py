@@ -4,7 +4,7 @@
 
     with Client("http://127.0.0.1:8000") as api:
         study_id = api.submit("studies/examples/isolator-comparison.yaml")["id"]
-        api.wait(study_id)                          # rich progress bar
+        api.wait(study_id)                          # until done, failed or cancelled
         ds = api.dataset(study_id)                  # xarray.Dataset, in memory
         quiet = api.cases(study_id, filter="peak_displacement_y<5 mm,liftoff_any==false",
                           sort="settling_time")
@@ -20,12 +20,11 @@ import json
 import os
 import tempfile
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, NoReturn
+from typing import TYPE_CHECKING, Any
 
 import httpx
-import typer
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -171,53 +170,31 @@ class Client:
         return self._request("GET", "/studies", params=params).json()["items"]
 
     def wait(
-        self, study_id: str, progress: bool = True, poll: float = 0.5, timeout: float | None = None
+        self,
+        study_id: str,
+        progress: Callable[[dict[str, Any]], object] | None = None,
+        poll: float = 0.5,
+        timeout: float | None = None,
     ) -> dict[str, Any]:
         """Poll until the study is done, failed or cancelled; returns its final status.
 
         Args:
-            progress: show a rich progress bar of the cases computed.
+            progress: called with each status polled (its ``progress`` is ``{done, total, failed}``),
+                e.g. the progress bar of ``isolab submit --wait``,
+                :class:`isolab.service.cli.remote.StudyProgressBar`.
             poll: seconds between polls.
             timeout: give up after this many seconds (ClientError); None waits for ever.
         """
         deadline = None if timeout is None else time.monotonic() + timeout
-        bar = None
-        try:
-            if progress:
-                from rich.progress import (
-                    BarColumn,
-                    MofNCompleteColumn,
-                    Progress,
-                    TextColumn,
-                    TimeElapsedColumn,
-                )
-
-                bar = Progress(
-                    TextColumn("{task.description}"),
-                    BarColumn(),
-                    MofNCompleteColumn(),
-                    TextColumn("cases"),
-                    TimeElapsedColumn(),
-                )
-                bar.start()
-                task = bar.add_task(study_id[:8], total=None)
-            while True:
-                info = self.status(study_id)
-                if bar is not None:
-                    bar.update(
-                        task,
-                        total=info["progress"]["total"],
-                        completed=info["progress"]["done"],
-                        description=f"{info['name']} [{info['status']}]",
-                    )
-                if info["status"] in FINISHED:
-                    return info
-                if deadline is not None and time.monotonic() > deadline:
-                    raise ClientError(f"study {study_id} is still {info['status']} after {timeout} s")
-                time.sleep(poll)
-        finally:
-            if bar is not None:
-                bar.stop()
+        while True:
+            info = self.status(study_id)
+            if progress is not None:
+                progress(info)
+            if info["status"] in FINISHED:
+                return info
+            if deadline is not None and time.monotonic() > deadline:
+                raise ClientError(f"study {study_id} is still {info['status']} after {timeout} s")
+            time.sleep(poll)
 
     def download(self, study_id: str, path: str | Path) -> Path:
         """Stream a done study's netCDF dataset to ``path`` (written atomically); returns the path."""
@@ -389,15 +366,6 @@ class Client:
         return self._request("POST", "/calibrations", json=body).json()
 
 
-# ------------------------------------------------------------------------------ command-line commands
-# ``isolab submit``, ``isolab status`` and ``isolab fetch``, registered in service/cli/__init__.py.
-UrlOption = Annotated[str, typer.Option("--url", envvar=URL_ENV, help="Address of the isolab service.")]
-TokenOption = Annotated[
-    str | None,
-    typer.Option("--token", envvar="ISOLAB_API_TOKEN", help="Bearer token of the service, if any."),
-]
-
-
 def sensitivity_frame(answer: Mapping[str, Any]) -> pd.DataFrame:
     """A sensitivity answer (JSON of ``/studies/{id}/sensitivity``) as a DataFrame (see
     :meth:`Client.sensitivity`); missing indices are NaN."""
@@ -417,93 +385,3 @@ def sensitivity_frame(answer: Mapping[str, Any]) -> pd.DataFrame:
         n_excluded=answer["n_excluded"], n_dropped=answer.get("n_dropped", 0), notes=list(answer["notes"])
     )
     return df
-
-
-def _fail(err: Exception) -> NoReturn:
-    typer.echo(f"error: {err}", err=True)
-    raise typer.Exit(code=1)
-
-
-def _progress_text(info: Mapping[str, Any]) -> str:
-    p = info["progress"]
-    text = f"{info['id']}  {info['name']}  {info['status']}  {p['done']}/{p['total']} cases"
-    if p.get("failed"):
-        text += f" ({p['failed']} not ok)"
-    if info.get("error"):
-        text += f"  error: {info['error']}"
-    return text
-
-
-def submit_command(
-    study: Annotated[Path, typer.Argument(help="Study file (YAML or JSON).", exists=True, dir_okay=False)],
-    wait: Annotated[
-        bool, typer.Option("--wait", help="Wait for the study to finish (progress bar).")
-    ] = False,
-    url: UrlOption = DEFAULT_URL,
-    token: TokenOption = None,
-) -> None:
-    """Submit a study file to the service (its scene_file is read here and sent inline); print its id."""
-    try:
-        with Client(url, token=token) as api:
-            accepted = api.submit(study)
-            typer.echo(f"{accepted['id']}  queued  {accepted['n_cases']} cases")
-            if not wait:
-                return
-            info = api.wait(accepted["id"], progress=True)
-    except (ClientError, OSError, ValueError) as err:
-        _fail(err)
-    typer.echo(_progress_text(info))
-    if info["status"] != "done":
-        raise typer.Exit(code=1)
-
-
-def status_command(
-    study_id: Annotated[
-        str | None, typer.Argument(help="Study id; without it, list the latest studies.")
-    ] = None,
-    url: UrlOption = DEFAULT_URL,
-    token: TokenOption = None,
-    limit: Annotated[int, typer.Option(min=1, max=500, help="Studies to list.")] = 20,
-) -> None:
-    """Show one study's status and progress, or list the latest studies."""
-    try:
-        with Client(url, token=token) as api:
-            if study_id is not None:
-                info = api.status(study_id)
-            else:
-                rows = api.list(limit=limit)
-    except ClientError as err:
-        _fail(err)
-    if study_id is not None:
-        typer.echo(_progress_text(info))
-        for key in ("created", "started", "finished"):
-            if info.get(key):
-                typer.echo(f"  {key:<9}{info[key]}")
-        if info.get("parameters"):
-            typer.echo(f"  varies   {', '.join(info['parameters'])}")
-        return
-    from rich.console import Console
-    from rich.table import Table
-
-    table = Table("id", "name", "status", "cases", "created")
-    for r in rows:
-        p = r["progress"]
-        table.add_row(r["id"], r["name"], r["status"], f"{p['done']}/{p['total']}", r["created"][:19])
-    Console(width=160).print(table)
-
-
-def fetch_command(
-    study_id: Annotated[str, typer.Argument(help="Study id.")],
-    output: Annotated[
-        Path, typer.Option("--output", "-o", help="Where to write the netCDF file.", dir_okay=False)
-    ],
-    url: UrlOption = DEFAULT_URL,
-    token: TokenOption = None,
-) -> None:
-    """Download a done study's netCDF dataset."""
-    try:
-        with Client(url, token=token) as api:
-            path = api.download(study_id, output)
-    except (ClientError, OSError) as err:
-        _fail(err)
-    typer.echo(f"{path}  {path.stat().st_size} bytes")

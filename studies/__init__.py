@@ -5,6 +5,16 @@ through this package: the names below are the engine's, re-exported for it.
 """
 
 from isolab.engine import STATUS_NAMES, SceneError, __version__, simulate
-from isolab.engine.results import AXES, DOF_NAMES, ROTATIONS
+from isolab.engine.results import AXES, DOF_NAMES, OUTPUTS, ROTATIONS, OutputSpec
 
-__all__ = ["AXES", "DOF_NAMES", "ROTATIONS", "STATUS_NAMES", "SceneError", "__version__", "simulate"]
+__all__ = [
+    "AXES",
+    "DOF_NAMES",
+    "OUTPUTS",
+    "ROTATIONS",
+    "STATUS_NAMES",
+    "OutputSpec",
+    "SceneError",
+    "__version__",
+    "simulate",
+]

@@ -251,3 +251,109 @@ def test_a_wheel_installs_the_three_packages_under_one_namespace(tmp_path):
         [str(py), "-c", code], cwd=tmp_path, env=env, check=True, capture_output=True, text=True, timeout=300
     ).stdout.split()
     assert out[0].startswith(site) and out[1] == "True", out
+
+
+# ------------------------------------------------------------------------------------------------ rooms
+STUDY_ROOMS = ("questions", "inputs", "results", "run", "answers", "authoring")
+"""The rooms of ``isolab.studies``, lowest first: a room imports only its own modules, lower rooms and
+the vocabulary directly in the package (``isolab.studies``, ``.units``, ``.quantities``); see
+docs/architecture.md."""
+
+SERVICE_ROOMS = {
+    "settings": set(),
+    "client": {"settings"},
+    "plots": {"settings"},
+    "api": {"settings", "plots"},
+    "cli": {"settings", "client", "plots", "api"},
+}
+"""The rooms of ``isolab.service`` and the rooms each may import besides itself."""
+
+MAX_LINES = 700
+MAX_MODULES_PER_FOLDER = 10
+
+
+def _room(module: str) -> str:
+    """``isolab.studies.run.runner`` -> ``run``; a module directly in the package -> ``""``."""
+    parts = module.split(".")
+    return parts[2] if len(parts) > 3 else ""
+
+
+def test_study_rooms_import_only_lower_rooms():
+    rank = {"": -1, **{room: i for i, room in enumerate(STUDY_ROOMS)}}
+    mods = project_modules()
+    assert all(_room(m) in rank for m in mods if _package(m) == "studies"), "a studies room is not listed"
+    wrong = [
+        f"{a} ({_room(a) or 'vocabulary'}) imports {b} ({_room(b) or 'vocabulary'})"
+        for a, deps in import_graph().items()
+        if _package(a) == "studies"
+        for b in deps
+        if _package(b) == "studies" and rank[_room(b)] > rank[_room(a)]
+    ]
+    assert not wrong, "\n".join(wrong)
+
+
+def test_service_rooms_import_only_their_allowed_rooms():
+    wrong = []
+    for a, deps in import_graph().items():
+        if _package(a) != "service" or a == "isolab.service":
+            continue
+        room = a.split(".")[2]
+        assert room in SERVICE_ROOMS, f"{a}: room {room!r} is not in SERVICE_ROOMS"
+        for b in deps:
+            if _package(b) == "service" and b != "isolab.service":
+                other = b.split(".")[2]
+                if other != room and other not in SERVICE_ROOMS[room]:
+                    wrong.append(f"{a} ({room}) imports {b} ({other})")
+    assert not wrong, "\n".join(wrong)
+
+
+def test_the_client_is_plain_http():
+    """The Python client is httpx and the study file reader: no command-line or web framework in it."""
+    found = [
+        imp
+        for imp in imported_names(ROOT / "service" / "client.py", "isolab.service.client")
+        if imp.split(".")[0] in ("typer", "rich", *WEB)
+    ]
+    assert not found, found
+
+
+def test_no_module_is_over_the_size_limit():
+    sizes = {str(p.relative_to(ROOT)): len(p.read_text().splitlines()) for p in project_modules().values()}
+    big = {name: n for name, n in sizes.items() if n > MAX_LINES}
+    assert not big, f"modules over {MAX_LINES} lines: {big}"
+
+
+def test_no_folder_holds_more_than_ten_modules():
+    folders: dict[Path, int] = {}
+    for path in project_modules().values():
+        if path.name != "__init__.py":
+            folders[path.parent] = folders.get(path.parent, 0) + 1
+    crowded = {str(p.relative_to(ROOT)): n for p, n in folders.items() if n > MAX_MODULES_PER_FOLDER}
+    assert not crowded, f"folders with more than {MAX_MODULES_PER_FOLDER} modules: {crowded}"
+
+
+def test_no_private_name_is_imported_from_another_module():
+    """What one module uses of another is public: a ``_name`` imported across modules is a seam in hiding."""
+    found = []
+    for name, path in project_modules().items():
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            if (
+                isinstance(node, ast.ImportFrom)
+                and (node.module or "").startswith("isolab")
+                and not node.level
+            ):
+                private = [
+                    a.name for a in node.names if a.name.startswith("_") and not a.name.startswith("__")
+                ]
+                if private and node.module != name:
+                    found.append(f"{name} imports {private} from {node.module}")
+    assert not found, "\n".join(found)
+
+
+def test_the_room_rules_catch_an_upward_import(tmp_path):
+    """The room check reads the same graph: an import from a higher room is caught."""
+    low = tmp_path / "criteria.py"
+    low.write_text("from isolab.studies.results.store import Store\n")
+    deps = imported_names(low, "isolab.studies.questions.criteria")
+    rank = {room: i for i, room in enumerate(STUDY_ROOMS)}
+    assert any(rank[_room(d)] > rank["questions"] for d in deps if _package(d) == "studies")

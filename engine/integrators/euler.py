@@ -12,7 +12,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from isolab.engine.dynamics import NONLINEAR, accel, quat_step
+from isolab.engine.kernels.dynamics import accel
+from isolab.engine.kernels.params import NONLINEAR
+from isolab.engine.kernels.rotations import quat_step
 
 NAME = "euler"
 LEVELS = ("lti", "ltv", "nonlinear")

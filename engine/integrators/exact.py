@@ -19,8 +19,11 @@ import numpy as np
 import scipy.linalg
 from numba import njit
 
-from isolab.engine.dynamics import _cross, feedforward_generalised, lti_forcing, recorded_floor, stage_state
 from isolab.engine.integrators.step_maps import maps as structured_maps
+from isolab.engine.kernels.excitation import lti_forcing, recorded_floor, stage_state
+from isolab.engine.kernels.feedforward import feedforward_generalised
+from isolab.engine.kernels.params import Params
+from isolab.engine.kernels.rotations import cross
 
 NAME = "exact"
 LEVELS = ("lti",)
@@ -33,7 +36,7 @@ PREPARE_BLOCK = 256
 """Cases whose full split-step exponentials are held at once while the step maps are prepared."""
 
 
-def _degree(P) -> int:
+def _degree(P: Params) -> int:
     """Highest derivative of the forcing that can be non-zero within a piece (at least 1 with feedforward
     actuators: their force enters each sub-step as a ramp, see :func:`_feedforward_ramp`)."""
     if P.ffon:
@@ -41,7 +44,7 @@ def _degree(P) -> int:
     return _polynomial_degree(P)
 
 
-def _polynomial_degree(P) -> int:
+def _polynomial_degree(P: Params) -> int:
     if np.any(P.pj != 0.0):
         return 3
     if P.sm.shape[1]:
@@ -51,7 +54,7 @@ def _polynomial_degree(P) -> int:
     return 0
 
 
-def augmented(P) -> tuple[np.ndarray, int, int]:
+def augmented(P: Params) -> tuple[np.ndarray, int, int]:
     """The augmented continuous-time matrix (C, N, N), the forcing degree, and the oscillator flag.
 
     Layout: ``[x (12), F0..F_deg (6 each), sine-floor oscillator (6, optional)]``.
@@ -122,7 +125,7 @@ def _rest_of_step(E_full: np.ndarray, E_before: np.ndarray) -> np.ndarray:
     return E_full[:, None, :12, :] @ inv
 
 
-def breakpoints(P, dt: np.ndarray, duration: np.ndarray) -> np.ndarray:
+def breakpoints(P: Params, dt: np.ndarray, duration: np.ndarray) -> np.ndarray:
     """Per case, the sorted breakpoints inside (0, duration) that do not fall on a step (C, E), s.
 
     Padded with +inf. These are the times where the forcing polynomial changes.
@@ -142,7 +145,9 @@ def breakpoints(P, dt: np.ndarray, duration: np.ndarray) -> np.ndarray:
     return out
 
 
-def prepare(P, dt: np.ndarray, duration: np.ndarray):
+def prepare(
+    P: Params, dt: np.ndarray, duration: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, int]:
     """Step maps for the full step and for the split steps around each breakpoint.
 
     Without a sine floor motion the maps come from the structured exponential of
@@ -233,18 +238,18 @@ def _forcing_poly(P, c, t, idx, W, deg, Fv):
         Fv[6] -= m * j0
         Fv[7] -= m * j1
         Fv[8] -= m * j2
-        p0, p1, p2 = _cross(v0, v1, v2, a0, a1, a2)
-        q0, q1, q2 = _cross(r0, r1, r2, j0, j1, j2)
+        p0, p1, p2 = cross(v0, v1, v2, a0, a1, a2)
+        q0, q1, q2 = cross(r0, r1, r2, j0, j1, j2)
         Fv[9] += -m * (p0 + q0) - m * v1 * g
         Fv[10] += -m * (p1 + q1) + m * v0 * g
         Fv[11] += -m * (p2 + q2)
         if deg >= 2:
-            p0, p1, p2 = _cross(v0, v1, v2, j0, j1, j2)
+            p0, p1, p2 = cross(v0, v1, v2, j0, j1, j2)
             Fv[15] += -2.0 * m * p0 - m * a1 * g
             Fv[16] += -2.0 * m * p1 + m * a0 * g
             Fv[17] += -2.0 * m * p2
         if deg >= 3:
-            p0, p1, p2 = _cross(a0, a1, a2, j0, j1, j2)
+            p0, p1, p2 = cross(a0, a1, a2, j0, j1, j2)
             Fv[21] += -2.0 * m * p0 - m * j1 * g
             Fv[22] += -2.0 * m * p1 + m * j0 * g
             Fv[23] += -2.0 * m * p2
@@ -256,7 +261,7 @@ def _forcing_poly(P, c, t, idx, W, deg, Fv):
             Fv[6] += p0
             Fv[7] += p1
             Fv[8] += p2
-            m0, m1, m2 = _cross(P.d[c, j, 0], P.d[c, j, 1], P.d[c, j, 2], p0, p1, p2)
+            m0, m1, m2 = cross(P.d[c, j, 0], P.d[c, j, 1], P.d[c, j, 2], p0, p1, p2)
             Fv[9] += m0
             Fv[10] += m1
             Fv[11] += m2

@@ -10,8 +10,11 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from isolab.engine.dynamics import NONLINEAR, advance_pieces, derivative, kernel_struct
-from isolab.engine.peaks import observe
+from isolab.engine.kernels.dynamics import derivative
+from isolab.engine.kernels.excitation import advance_pieces
+from isolab.engine.kernels.params import NONLINEAR, Params, Work
+from isolab.engine.kernels.peaks import Peaks, observe
+from isolab.engine.kernels.structs import kernel_struct
 from isolab.engine.results import FAILED, OK, UNSTABLE
 
 NAME = "reference"
@@ -24,9 +27,21 @@ RTOL = 1e-10
 ATOL = 1e-13
 
 
-def run(P, level, dt, n_steps, O, W, status, rtol: float = RTOL, atol: float = ATOL, messages=None):
-    """Integrate every OK case, sampling the outputs every ``dt[c]`` s; set ``status[c]`` (UNSTABLE when
-    the base runs away, FAILED when ``solve_ivp`` fails, with the reason in ``messages[c]``)."""
+def run(
+    P: Params,
+    level: int,
+    dt: np.ndarray,
+    n_steps: np.ndarray,
+    O: Peaks,
+    W: Work,
+    status: np.ndarray,
+    rtol: float = RTOL,
+    atol: float = ATOL,
+    messages: list[str] | None = None,
+) -> None:
+    """Integrate every OK case, sampling the outputs every ``dt[c]`` s (``n_steps[c]`` of them); set
+    ``status[c]`` (UNSTABLE when the base runs away, FAILED when ``solve_ivp`` fails, with the reason in
+    ``messages[c]``). ``rtol`` and ``atol`` are ``solve_ivp``'s tolerances."""
     C = dt.shape[0]
     m = P.sm.shape[1]
     KP, KO, KW = kernel_struct(P), kernel_struct(O), kernel_struct(W)
@@ -54,7 +69,9 @@ def run(P, level, dt, n_steps, O, W, status, rtol: float = RTOL, atol: float = A
             idx_a = idx.copy()
             advance_pieces(KP, c, a, idx_a, 1e-9 * h)
 
-            def rhs(t, y, idx_a=idx_a, c=c, dx=dx):
+            def rhs(
+                t: float, y: np.ndarray, idx_a: np.ndarray = idx_a, c: int = c, dx: np.ndarray = dx
+            ) -> np.ndarray:
                 derivative(KP, c, level, t, y, idx_a, KW, dx)
                 return dx.copy()
 

@@ -12,22 +12,17 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from isolab.engine.dynamics import (
-    LTI,
-    LTV,
-    NONLINEAR,
-    derivative,
+from isolab.engine.kernels.cached_terms import (
     extra_inputs,
     key_holds,
-    ltv_acc,
     moving_terms,
-    nonlinear_acc,
     pack_case,
-    rates,
     recorded_and_feedforward,
     set_key,
     stages_and_floor,
 )
+from isolab.engine.kernels.dynamics import derivative, ltv_acc, nonlinear_acc, rates
+from isolab.engine.kernels.params import LTI, LTV, NONLINEAR
 
 NAME = "rk4"
 LEVELS = ("lti", "ltv", "nonlinear")
@@ -45,8 +40,8 @@ def step(P, c, level, t, h, x, S, idx, W):
     scratch. Returns False when a mass matrix is singular.
 
     At the time-varying levels the terms that depend on time only are evaluated at ``t``, ``t + h/2`` and
-    ``t + h`` (``engine.dynamics.time_terms``; those at ``t`` are usually still there from the previous
-    step's end), and the slopes read them through arrays bound once per step."""
+    ``t + h`` (``engine.kernels.cached_terms.time_terms``; those at ``t`` are usually still there from the
+    previous step's end), and the slopes read them through arrays bound once per step."""
     if level == LTI:
         return _step_lti(P, c, t, h, x, S, idx, W)
     nx = x.shape[0]
@@ -88,7 +83,7 @@ def step(P, c, level, t, h, x, S, idx, W):
 
 @njit(cache=True)
 def _step_lti(P, c, t, h, x, S, idx, W):
-    """:func:`step` at the LTI level (each slope through ``engine.dynamics.derivative``)."""
+    """:func:`step` at the LTI level (each slope through ``engine.kernels.dynamics.derivative``)."""
     nx = x.shape[0]
     xs, k1, k2, k3, k4 = S[0], S[1], S[2], S[3], S[4]
     ok = derivative(P, c, LTI, t, x, idx, W, k1)

@@ -19,10 +19,12 @@ from __future__ import annotations
 import numpy as np
 from numba import literally, njit
 
-from isolab.engine import output_map
-from isolab.engine.dynamics import LTI, LTV, NONLINEAR, advance_pieces, kernel_struct, next_breakpoint
 from isolab.engine.integrators import euler, exact, rk4
-from isolab.engine.peaks import observe
+from isolab.engine.kernels import output_map
+from isolab.engine.kernels.excitation import advance_pieces, next_breakpoint
+from isolab.engine.kernels.params import LTI, LTV, NONLINEAR, Params, Work
+from isolab.engine.kernels.peaks import Peaks, observe
+from isolab.engine.kernels.structs import kernel_struct
 from isolab.engine.results import FAILED, OK, UNSTABLE
 
 EULER, RK4, EXACT = 0, 1, 2
@@ -35,11 +37,11 @@ def drive(method, P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, d
 
     Each step ``[k h, (k + 1) h]`` is split at the breakpoints inside it, so every sub-step sees one
     polynomial piece of every profile; the outputs are observed at the end of each step. ``status[c]``
-    becomes UNSTABLE when the base runs away (``engine.peaks.observe``) and FAILED on a singular mass
+    becomes UNSTABLE when the base runs away (``engine.kernels.peaks.observe``) and FAILED on a singular mass
     matrix; the case stops there. ``full``, ``ev``, ``sub_b``, ``sub_a``, ``deg``, ``osc`` are the exact
     method's prepared maps (empty for the others). ``outmap`` is the linear output map ``(G, KF, target,
-    rest_target, still)`` (``engine.output_map``; empty at the nonlinear level), through which the linear
-    levels observe every case whose floor stands still and that is not recorded.
+    rest_target, still)`` (``engine.kernels.output_map``; empty at the nonlinear level), through which the
+    linear levels observe every case whose floor stands still and that is not recorded.
     """
     literally(method)  # one compiled (and cached) loop per method and level, with no branch on either
     literally(level)
@@ -166,7 +168,9 @@ def _run_exact(P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg,
     drive(EXACT, P, LTI, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap)
 
 
-_ENTRIES = {"euler": _run_euler, "rk4": _run_rk4, "exact": _run_exact}
+ENTRIES = {"euler": _run_euler, "rk4": _run_rk4, "exact": _run_exact}
+"""The cached entry kernel of each stepped method: what a run calls from Python, and what a check of the
+kernel cache on disk reads."""
 
 _NO_MAPS = (
     np.zeros((1, 0, 12)),
@@ -188,12 +192,12 @@ _NO_OUTPUT_MAP = (
 
 def run(
     name: str,
-    P,
+    P: Params,
     level: int,
     dt: np.ndarray,
     n_steps: np.ndarray,
-    O,
-    W,
+    O: Peaks,
+    W: Work,
     status: np.ndarray,
     messages: list[str] | None = None,
 ) -> None:
@@ -209,7 +213,7 @@ def run(
         outmap = (*output_map.build(P, O.target, O.rest_target), output_map.still_floor(P))
     else:
         outmap = _NO_OUTPUT_MAP
-    _ENTRIES[name](
+    ENTRIES[name](
         kernel_struct(P),
         level,
         dt,

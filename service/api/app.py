@@ -32,6 +32,7 @@ from fastapi.middleware.cors import CORSMiddleware
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from isolab.service.api.errors import add_domain_error_handlers
 from isolab.service.api.jobs import RUNNING_STUDIES, JobQueue
 from isolab.service.api.openapi import describe_settings
 from isolab.service.api.request_limits import RequestLimits, unreadable_body_is_422, validation_errors_as_json
@@ -193,6 +194,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.heavy_work = heavy_work_limiter()
     app.add_middleware(RequestLimits, max_bytes=settings.max_body_bytes)
     add_store_handlers(app)  # a full disk or a catalog SQLite refuses: 503 with the reason
+    add_domain_error_handlers(app)  # a refused definition or case query: 422; no such case or example: 404
     app.add_exception_handler(StarletteHTTPException, unreadable_body_is_422)  # type: ignore[arg-type]
     app.add_exception_handler(RequestValidationError, validation_errors_as_json)  # type: ignore[arg-type]
     if settings.cors_origins:

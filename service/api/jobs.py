@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from isolab.studies.results.catalog import CATALOG_FILE, StudyNotFound, utc_now
-from isolab.studies.results.store import Store
+from isolab.studies.results.store import Store, StudyFilter, StudyRecord
 
 log = logging.getLogger(__name__)
 
@@ -140,17 +140,17 @@ class JobQueue:
     def _unfinished_ids(self) -> list[str]:
         if self._store is None and not (self._root / CATALOG_FILE).exists():
             return []  # no catalog yet: nothing to resume
-        rows: list[dict[str, Any]] = []
+        rows: list[StudyRecord] = []
         for status in UNFINISHED:
             offset = 0
             while True:
-                page = self.store.list(status=status, limit=_PAGE, offset=offset)
+                page = self.store.list(StudyFilter(status=status), limit=_PAGE, offset=offset)
                 rows += page
                 if len(page) < _PAGE:
                     break
                 offset += _PAGE
-        rows.sort(key=lambda r: r["created"])
-        return [r["id"] for r in rows]
+        rows.sort(key=lambda r: r.created)
+        return [r.id for r in rows]
 
     # ------------------------------------------------------------------------------------- requests
     def submit(self, study_id: str) -> None:

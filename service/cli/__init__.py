@@ -87,7 +87,7 @@ from isolab.service.cli.local import run_study_command, simulate  # noqa: E402
 app.command("simulate")(simulate)
 app.command("run")(run_study_command)
 
-from isolab.service.client import fetch_command, status_command, submit_command  # noqa: E402
+from isolab.service.cli.remote import fetch_command, status_command, submit_command  # noqa: E402
 
 app.command("submit")(submit_command)
 app.command("status")(status_command)

@@ -66,11 +66,11 @@ def compare_command(
     from isolab.studies.answers.comparisons import compare, comparison_frame
     from isolab.studies.inputs.definitions import DefinitionError
     from isolab.studies.inputs.schema import error_messages
-    from isolab.studies.inputs.study import _read, load_study
+    from isolab.studies.inputs.study import load_study, read_definition
     from isolab.studies.units import readable_unit
 
     try:
-        data, _ = _read(scene)
+        data, _ = read_definition(scene)
         if "scene" in data or "scene_file" in data:  # a study file: its scene on its floor, with its criteria
             study_scene = load_study(scene).scene
             assert study_scene is not None  # a validated study always has its scene

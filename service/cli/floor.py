@@ -38,7 +38,7 @@ def floor_command(
     from isolab.studies.answers.floor_response import velocity_spectra
     from isolab.studies.inputs.definitions import DefinitionError, dotted
     from isolab.studies.inputs.schema import error_messages
-    from isolab.studies.inputs.study import _read, load_scene, load_study
+    from isolab.studies.inputs.study import load_scene, load_study, read_definition
 
     chosen = [t.strip() for t in types.split(",") if t.strip()]
     unknown = [t for t in chosen if t not in ISOLATOR_TYPES]
@@ -48,7 +48,7 @@ def floor_command(
         )
         raise typer.Exit(code=2)
     try:
-        data, _ = _read(scene)
+        data, _ = read_definition(scene)
         if "scene" in data or "scene_file" in data:  # a study file: its scene on its own floor
             spectra = velocity_spectra(load_study(scene).scene, chosen, point)
         else:

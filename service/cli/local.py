@@ -41,9 +41,30 @@ def heave_mode(mode_energy: np.ndarray) -> int:
     return int(np.argmax(e[:, DOF_NAMES.index("z")]))
 
 
+UNITS_STATED = (
+    "peak_displacement",
+    "peak_rotation",
+    "peak_point_displacement",
+    "peak_isolator_force",
+    "min_isolator_load",
+    "max_isolator_load",
+    "peak_isolator_deflection",
+    "static_isolator_load",
+    "rms_displacement",
+    "settling_time",
+    "point_settling_time",
+    "natural_frequency",
+    "damping_ratio",
+    "transmissibility",
+    "dt",
+)
+"""The outputs whose SI unit (the output catalogue's, :data:`isolab.studies.OUTPUTS`) the JSON of
+``simulate`` states under ``units``, in order."""
+
+
 def case_outputs(result, case: int, isolators: list[str], points: list[str]) -> dict:
     """One case's outputs keyed by quantity and by axis, isolator, point or mode (SI units)."""
-    from isolab.studies import AXES, DOF_NAMES, ROTATIONS, STATUS_NAMES
+    from isolab.studies import AXES, DOF_NAMES, OUTPUTS, ROTATIONS, STATUS_NAMES
 
     r = result
     ok = int(r.status[case]) == 0
@@ -58,23 +79,7 @@ def case_outputs(result, case: int, isolators: list[str], points: list[str]) -> 
         "heave_mode": heave_mode(r.mode_energy[case]) + 1,
         "mechanism": [bool(m) for m in r.mechanism[case]],
         "static_isolator_load": _labelled(r.static_isolator_load[case], isolators),
-        "units": {
-            "peak_displacement": "m",
-            "peak_rotation": "rad",
-            "peak_point_displacement": "m",
-            "peak_isolator_force": "N",
-            "min_isolator_load": "N",
-            "max_isolator_load": "N",
-            "peak_isolator_deflection": "m",
-            "static_isolator_load": "N",
-            "rms_displacement": "m",
-            "settling_time": "s",
-            "point_settling_time": "s",
-            "natural_frequency": "Hz",
-            "damping_ratio": "1",
-            "transmissibility": "1",
-            "dt": "s",
-        },
+        "units": {name: OUTPUTS[name].unit for name in UNITS_STATED},
     }
     if not ok:
         return out

@@ -10,7 +10,8 @@ from typing import Annotated, Any
 
 import typer
 
-from isolab.service.client import DEFAULT_URL, Client, ClientError, TokenOption, UrlOption
+from isolab.service.cli.remote import TokenOption, UrlOption
+from isolab.service.client import DEFAULT_URL, Client, ClientError
 
 
 def _local_answer(path: Path, output: str) -> dict[str, Any]:

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from isolab.service.plots.studies import DPI, _png
+from isolab.service.plots.studies import DPI, figure_png
 
 _COLOURS = {"S1": "#1f77b4", "ST": "#d62728", "delta": "#2ca02c"}
 _LABELS = {"S1": "S1 (first order)", "ST": "ST (total order)", "delta": "delta (Borgonovo)"}
@@ -68,4 +68,4 @@ def sensitivity_png(result: dict[str, Any], title: str = "") -> bytes:
         f"cases, bars: {int(round(100 * result.get('conf_level', 0.95)))} % CI",
         fontsize=9,
     )
-    return _png(fig)
+    return figure_png(fig)

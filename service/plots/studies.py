@@ -110,7 +110,8 @@ def format_value(value: Any) -> str:
     return str(value)
 
 
-def _png(fig: Figure) -> bytes:
+def figure_png(fig: Figure) -> bytes:
+    """A matplotlib figure as PNG bytes (drawn by Agg, without pyplot)."""
     canvas = FigureCanvasAgg(fig)
     buf = io.BytesIO()
     canvas.print_png(buf)
@@ -179,7 +180,7 @@ def case_png(
     title: str = "",
 ) -> bytes:
     """:func:`case_figure` as PNG bytes."""
-    return _png(case_figure(time, displacement, rotation, isolator_force, isolator_names, title))
+    return figure_png(case_figure(time, displacement, rotation, isolator_force, isolator_names, title))
 
 
 def parameters_text(values: dict[str, Any], design: Design) -> str:
@@ -375,7 +376,7 @@ def study_png(
     title: str = "",
 ) -> bytes:
     """:func:`study_figure` as PNG bytes."""
-    return _png(study_figure(y, x, x2, group, sampled, reduce, title))
+    return figure_png(study_figure(y, x, x2, group, sampled, reduce, title))
 
 
 def _title(title: str, y: Shown, x: Shown, x2: Shown | None = None) -> str:
@@ -496,7 +497,7 @@ def floor_velocity_png(spectra: dict[str, Any], title: str = "") -> bytes:
         (title or f"{spectra['point']}: floor-induced velocity against the VC curves")
         + (f"\nworst band: {notes}" if notes else "")
     )
-    return _png(fig)
+    return figure_png(fig)
 
 
 def _band(centre: float) -> int:

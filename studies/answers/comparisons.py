@@ -13,33 +13,17 @@ from typing import Any
 import numpy as np
 
 from isolab.engine import simulate
+from isolab.engine.results import LARGER, OUTPUTS
 from isolab.studies.inputs.definitions import DefinitionError, check_definition, detail
-from isolab.studies.inputs.study import Study
+from isolab.studies.inputs.study import Study, study_labels
 from isolab.studies.questions.criteria import add_criteria
 from isolab.studies.results.cases import CaseColumns, case_table, json_values
 from isolab.studies.results.dataset import to_dataset
 from isolab.studies.run.accuracy import resolved_study
-from isolab.studies.run.runner import study_labels
 
-#: Column prefix -> what "best" means for it.
-CRITERIA: tuple[tuple[str, str], ...] = (
-    ("peak_displacement_", "lowest"),
-    ("peak_rotation_", "lowest"),
-    ("peak_point_displacement_", "lowest"),
-    ("peak_isolator_force_", "lowest"),
-    ("min_isolator_load_min", "highest"),
-    ("max_isolator_load_max", "lowest"),
-    ("peak_isolator_deflection_", "lowest"),
-    ("point_settling_time_", "lowest"),
-    ("floor_point_velocity_", "lowest"),
-    ("liftoff_any", "false"),
-    ("settling_time", "lowest"),
-    ("natural_frequency_", "lowest"),
-    ("meets_criteria", "true"),
-    ("margin_", "highest"),
-)
-"""Lowest peaks and settling time; the highest smallest isolator load (farthest from lift-off); no
-lift-off; the lowest natural frequencies (the softest suspension isolates best from the floor)."""
+SHOWN_UNJUDGED = ("settled", "status")
+"""Summary columns a comparison shows without judging them (whether the motion settled: its settling time
+is judged)."""
 
 
 def comparison_study(
@@ -92,12 +76,26 @@ def run_comparison(study: Study) -> CaseColumns:
     return case_table(add_criteria(ds, study.criteria))
 
 
-def criterion(column: str) -> str | None:
-    """The rule (\"lowest\", \"highest\", \"false\" or \"true\") a column is judged by, or None."""
-    for prefix, rule in CRITERIA:
-        if column == prefix or (prefix.endswith("_") and column.startswith(prefix)):
-            return rule
-    return None
+def criterion(table: CaseColumns, column: str) -> str | None:
+    """The rule (\"lowest\", \"highest\", \"false\" or \"true\") a column of ``table`` is judged by, or None.
+
+    An output's column is judged as the catalogue judges the output (:data:`isolab.engine.results.OUTPUTS`):
+    the lowest number (the highest where a smaller value is worse, as the smallest isolator load: the
+    farthest from lift-off), or no (yes) for a yes/no output. So the lowest peaks, settling times and
+    natural frequencies (the softest suspension isolates best from the floor) win; and the types that meet
+    the criteria (``meets_criteria``) with the highest margins (``margin_<criterion>``).
+    """
+    if column == "meets_criteria":
+        return "true"
+    if column.startswith("margin_"):
+        return "highest"
+    output = table.outputs.get(column)
+    if output is None or column in SHOWN_UNJUDGED:
+        return None
+    spec = OUTPUTS[output]
+    if spec.flag:
+        return "false" if spec.worse == LARGER else "true"
+    return "lowest" if spec.worse == LARGER else "highest"
 
 
 #: Differences below these are numerical noise, not a better isolator (SI unit -> absolute tolerance).
@@ -193,14 +191,14 @@ def comparison_table(
     """The side-by-side answer: one row per isolator type (outputs in SI), the units, the rule of each
     criterion and the best type on each (``best``), and the simulation block the cases ran with."""
     types = [str(t) for t in table.data["isolator_type"]]
-    columns = [c for c in table.default if criterion(c) is not None or c in ("settled", "status")]
+    columns = [c for c in table.default if criterion(table, c) is not None or c in SHOWN_UNJUDGED]
     rows: dict[str, dict[str, Any]] = {t: {} for t in types}
     for c in columns + ["message"]:
         for t, v in zip(types, json_values(table.data[c], table.kinds[c]), strict=True):
             rows[t][c] = v
     best, criteria = {}, {}
     for c in columns:
-        rule = criterion(c)
+        rule = criterion(table, c)
         if rule is None:
             continue
         criteria[c] = rule
@@ -262,6 +260,7 @@ def compare(
                     )
                 ]
             )
+        assert study.scene is not None  # a validated study has its scene
         data = study.scene.model_dump(mode="json", exclude_none=True)
         try:
             tuned = [

@@ -23,13 +23,12 @@ import xarray as xr
 
 from isolab.engine import STATUS_NAMES, simulate
 from isolab.engine.profiles import Pieces, evaluate
-from isolab.engine.results import AXES, DOF_NAMES, ROTATIONS
+from isolab.engine.results import AXES, DOF_NAMES, OUTPUTS, ROTATIONS
 from isolab.studies.inputs.definitions import definition_json, study_of
-from isolab.studies.inputs.study import Study, study_from_json
+from isolab.studies.inputs.study import Study, study_from_json, study_labels
 from isolab.studies.results.cases import CaseQueryError
-from isolab.studies.results.store import NETCDF_LOCK
+from isolab.studies.results.store import NETCDF_LOCK, StudyRecord
 from isolab.studies.run.accuracy import recorded_choice, resolved_study
-from isolab.studies.run.runner import study_labels
 
 MAX_RECORDED_SAMPLES = 2_000_000
 """Longest time history (samples) a case is recomputed with: about 200 bytes a sample in memory."""
@@ -94,19 +93,21 @@ class CaseHistory:
     last_move_end: float = math.nan  # s
 
 
-def case_history(study: Any, case: int, every: int = 1) -> CaseHistory:
+def case_history(study: Study, case: int, every: int = 1) -> CaseHistory:
     """Recompute one case with its time histories recorded (runs the engine: call it off the event loop).
 
     Refused (:class:`~isolab.studies.results.cases.CaseQueryError`) when the case would record more than
     :data:`MAX_RECORDED_SAMPLES` samples, or return more than :data:`MAX_RETURNED_SAMPLES` with every
     ``every``-th kept."""
     sim = study.simulation
+    scene = study.scene
+    assert scene is not None  # a validated study has its scene
     try:
         batch = study.batch([case])
     except ValueError as err:  # a combination of values no scene can have
         raise CaseQueryError("case", f"case {case} cannot be simulated: {err}", where="path") from None
     if sim.dt is not None:
-        samples = int(math.ceil(float(batch.duration[0]) / float(sim.dt))) + 1
+        samples = int(math.ceil(float(np.asarray(batch.duration)[0]) / float(sim.dt))) + 1
         if samples > MAX_RECORDED_SAMPLES:
             raise CaseQueryError(
                 "case",
@@ -120,13 +121,9 @@ def case_history(study: Any, case: int, every: int = 1) -> CaseHistory:
                 f"case {case} has {samples} samples; keep at most {MAX_RETURNED_SAMPLES} "
                 f"(every >= {math.ceil(samples / MAX_RETURNED_SAMPLES)})",
             )
+    fidelity, integrator, dt = sim.engine_choice()  # the study's own, or what its runner chose
     result = simulate(
-        batch,
-        fidelity=sim.fidelity,
-        integrator=sim.integrator,
-        dt=sim.dt,
-        auto_step=sim.auto_step,
-        record=[0],
+        batch, fidelity=fidelity, integrator=integrator, dt=dt, auto_step=sim.auto_step, record=[0]
     )
     h = result.history
     assert h is not None  # asked for with record=[0]
@@ -146,7 +143,7 @@ def case_history(study: Any, case: int, every: int = 1) -> CaseHistory:
         point_displacement=np.asarray(h["point_displacement"][0, :n]),
         isolator_names=iso,
         point_names=pts,
-        stage_names=[str(st.name) for st in study.scene.stages],
+        stage_names=[str(st.name) for st in scene.stages],
         stage_position=stage_s,
         stage_velocity=stage_v,
         stage_acceleration=stage_a,
@@ -159,20 +156,20 @@ def case_history(study: Any, case: int, every: int = 1) -> CaseHistory:
     )
 
 
-def case_study(row: dict[str, Any], case: int) -> Study:
-    """The study of a catalog ``row`` as its case ``case`` runs: an accuracy request resolved to the model
-    the runner chose and recorded.
+def case_study(record: StudyRecord, case: int) -> Study:
+    """The study of a catalog ``record`` as its case ``case`` runs: an accuracy request resolved to the
+    model the runner chose and recorded.
 
     Raises:
         CaseNotFound: the study has no such case.
     """
-    if not 0 <= case < row["n_cases"]:
-        raise CaseNotFound(f"study {row['id']} has no case {case} (cases 0..{row['n_cases'] - 1})")
-    study = study_of(row)
+    if not 0 <= case < record.n_cases:
+        raise CaseNotFound(f"study {record.id} has no case {case} (cases 0..{record.n_cases - 1})")
+    study = study_of(record)
     if study.simulation.request is None:
         return study
-    choice = recorded_choice(study, row["fidelity"], row["integrator"], row["dt"])
-    return _resolved(definition_json(row), choice)
+    choice = recorded_choice(study, record.fidelity, record.integrator, record.dt)
+    return _resolved(definition_json(record), choice)
 
 
 @functools.lru_cache(maxsize=16)
@@ -203,8 +200,8 @@ def history_json(study_id: str, case: int, h: CaseHistory, every: int) -> dict[s
             "stage_position": "m",
             "stage_velocity": "m/s",
             "stage_acceleration": "m/s^2",
-            "natural_frequency": "Hz",
-            "settling_time": "s",
+            "natural_frequency": OUTPUTS["natural_frequency"].unit,
+            "settling_time": OUTPUTS["settling_time"].unit,
         },
         "time": _series(h.time[s]),
         "displacement": {a: _series(h.displacement[s, k]) for k, a in enumerate(axes)},

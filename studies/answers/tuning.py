@@ -20,10 +20,9 @@ from scipy.optimize import differential_evolution
 
 from isolab.engine import simulate
 from isolab.studies.inputs.isolators import PRESETS
-from isolab.studies.inputs.study import validate_study
+from isolab.studies.inputs.study import study_labels, validate_study
 from isolab.studies.questions.criteria import add_criteria
 from isolab.studies.results.dataset import to_dataset
-from isolab.studies.run.runner import study_labels
 
 #: What each isolator type can be built or set to: (low, high) of f_vertical (Hz), f_horizontal (Hz),
 #: zeta (1). Active systems: their controller sets 0.5-2 Hz and 20-70 % damping. Air springs: 1.5 Hz

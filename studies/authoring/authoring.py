@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import math
 import re
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -235,7 +236,7 @@ def _written_unit(values: list[Any], dimension: str, field: str) -> tuple[str, f
     return "", 1.0
 
 
-def design_summary(row: dict[str, Any]) -> dict[str, Any]:
+def design_summary(row: Mapping[str, Any]) -> dict[str, Any]:
     """A stored study's design as its author wrote it: per parameter its column ``name``, ``path``,
     ``unit`` (SI), ``values`` or ``range`` as written, ``scale`` (linear or log), ``categorical`` and the
     ``display_unit`` its author wrote with ``display_scale`` (SI per display unit); the design type,

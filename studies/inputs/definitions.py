@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
 
 from pydantic import ValidationError
@@ -291,12 +291,12 @@ def stored_definition(study: Study) -> dict[str, Any]:
     return study.model_dump(mode="json", by_alias=True, exclude_none=True)
 
 
-def definition_json(row: dict[str, Any]) -> str:
-    """The stored definition of a catalog row as canonical JSON (sorted keys): the key that
-    :func:`studies.study.study_from_json` caches a parsed study under."""
+def definition_json(row: Mapping[str, Any]) -> str:
+    """The stored definition of a catalog row (a study's record) as canonical JSON (sorted keys): the key
+    that :func:`studies.study.study_from_json` caches a parsed study under."""
     return json.dumps(row["definition"], sort_keys=True)
 
 
-def study_of(row: dict[str, Any]) -> Study:
+def study_of(row: Mapping[str, Any]) -> Study:
     """The study object of a catalog row (parsed once per definition and process)."""
     return study_from_json(definition_json(row))

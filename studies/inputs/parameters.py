@@ -37,6 +37,34 @@ from isolab.studies.inputs.schema import (
     SCurveProfile,
     SequenceProfile,
 )
+from isolab.studies.inputs.schema.scene_paths import (
+    AXIS_ALIASES,
+    BLOCK_CORNER,
+    BLOCK_DENSITY,
+    BLOCK_SIZE,
+    EXPLICIT_VALUES,
+    FLOOR_SINE_KEYS,
+    ISOLATOR_PRESET,
+    ISOLATORS,
+    LAYOUT_HEIGHT,
+    LAYOUT_SPAN_X,
+    LAYOUT_SPAN_Y,
+    MACHINE_CG,
+    MACHINE_INERTIA_DIAGONAL,
+    MACHINE_MASS,
+    MOUNT_FIGURES,
+    SIMULATION_DURATION,
+    SIMULATION_SETTLE_TOLERANCE,
+    components,
+    floor_sine,
+    group_axis,
+    isolator_group,
+    mount,
+    point,
+    profile_segment,
+    stage,
+    stage_profile,
+)
 from isolab.studies.units import si_unit
 
 CATEGORICAL = "categorical"
@@ -107,7 +135,7 @@ def _leaf_key(path: str) -> str:
     parts = path.split(".")
     if parts[0] == "points":
         return "point"
-    if parts[-1].isdigit() or (parts[0] == "isolators" and parts[-2] in ("k", "c")):
+    if parts[-1].isdigit() or (parts[0] == ISOLATORS and parts[-2] in EXPLICIT_VALUES):
         return parts[-2]
     return parts[-1]
 
@@ -140,38 +168,33 @@ def check_leaf_values(path: str, values: np.ndarray) -> None:
 # what exists
 
 
-def _vector(prefix: str) -> list[str]:
-    return [f"{prefix}.{i}" for i in range(3)]
-
-
 def available_paths(scene: Scene) -> list[str]:
     """Every canonical parameter path of ``scene``, in scene order."""
     out: list[str] = []
     m = scene.machine
     if m.block is not None:
-        out += _vector("machine.block.size") + ["machine.block.density"] + _vector("machine.block.corner")
+        out += components(BLOCK_SIZE) + [BLOCK_DENSITY] + components(BLOCK_CORNER)
     else:
-        out += ["machine.mass"] + _vector("machine.cg")
+        out += [MACHINE_MASS] + components(MACHINE_CG)
         if m.inertia_diagonal is not None:
-            out += _vector("machine.inertia_diagonal")
+            out += components(MACHINE_INERTIA_DIAGONAL)
     iso = scene.isolators
-    out += ["isolators.preset", "isolators.f_vertical", "isolators.f_horizontal", "isolators.zeta"]
-    for kc in ("k", "c"):
-        out += [f"isolators.{kc}.{a}" for a in (*AXES, "horizontal", "vertical")]
+    out += [ISOLATOR_PRESET] + [isolator_group(key) for key in MOUNT_FIGURES]
+    for kc in EXPLICIT_VALUES:
+        out += [group_axis(kc, a) for a in (*AXES, *AXIS_ALIASES)]
     if iso.layout is not None:
-        out += ["isolators.layout.span_x", "isolators.layout.span_y", "isolators.layout.height"]
+        out += [LAYOUT_SPAN_X, LAYOUT_SPAN_Y, LAYOUT_HEIGHT]
     else:
-        for j, mount in enumerate(iso.mounts):
-            p = f"isolators.list.{j}"
-            out += _vector(f"{p}.position")
-            out += [f"{p}.preset", f"{p}.f_vertical", f"{p}.f_horizontal", f"{p}.zeta"]
-            if mount.k is not None:
-                out += _vector(f"{p}.k")
-            if mount.c is not None:
-                out += _vector(f"{p}.c")
+        for j, listed in enumerate(iso.mounts):
+            p = mount(j)
+            out += components(f"{p}.position")
+            out += [f"{p}.preset"] + [f"{p}.{key}" for key in MOUNT_FIGURES]
+            for kc in EXPLICIT_VALUES:
+                if getattr(listed, kc) is not None:
+                    out += components(f"{p}.{kc}")
     for s in scene.stages:
-        p = f"stages.{s.name}"
-        out += [f"{p}.mass"] + _vector(f"{p}.home")
+        p = stage(s.name)
+        out += [f"{p}.mass"] + components(f"{p}.home")
         prof = s.profile
         if isinstance(prof, SequenceProfile):
             for k, seg in enumerate(prof.segments):
@@ -180,8 +203,8 @@ def available_paths(scene: Scene) -> list[str]:
                     if isinstance(seg, MoveSegment)
                     else ("dwell",)
                 )
-                out += [f"{p}.profile.segments.{k}.{key}" for key in keys]
-            out.append(f"{p}.profile.start")
+                out += [f"{profile_segment(s.name, k)}.{key}" for key in keys]
+            out.append(f"{stage_profile(s.name)}.start")
             continue
         keys = ["travel", "velocity", "acceleration"]
         if isinstance(prof, SCurveProfile | ScanProfile):
@@ -189,13 +212,13 @@ def available_paths(scene: Scene) -> list[str]:
         if isinstance(prof, ScanProfile):
             keys.append("dwell")
         keys.append("start")
-        out += [f"{p}.profile.{key}" for key in keys]
+        out += [f"{stage_profile(s.name)}.{key}" for key in keys]
     for name in scene.points:
-        out += _vector(f"points.{name}")
+        out += components(point(name))
     if scene.floor is not None and scene.floor.sine is not None:
-        for key in ("amplitude", "frequency", "phase"):
-            out += _vector(f"floor.sine.{key}")
-    out += ["simulation.duration", "simulation.settle_tolerance"]
+        for key in FLOOR_SINE_KEYS:
+            out += components(floor_sine(key))
+    out += [SIMULATION_DURATION, SIMULATION_SETTLE_TOLERANCE]
     return out
 
 
@@ -278,11 +301,8 @@ def resolve(path: str, scene: Scene) -> Target:
     if parts[-1] == "preset":
         return Target(canon, name, CATEGORICAL, "", tuple(PRESETS), (canon,), None)
     writes: tuple[str, ...] = (canon,)
-    if parts[0] == "isolators" and parts[1] in ("k", "c"):
-        if parts[2] == "horizontal":
-            writes = (f"isolators.{parts[1]}.x", f"isolators.{parts[1]}.y")
-        elif parts[2] == "vertical":
-            writes = (f"isolators.{parts[1]}.z",)
+    if parts[0] == ISOLATORS and parts[1] in EXPLICIT_VALUES and parts[2] in AXIS_ALIASES:
+        writes = tuple(group_axis(parts[1], axis) for axis in AXIS_ALIASES[parts[2]])
     dimension, bound = leaf_rule(writes[0])
     return Target(canon, name, dimension, si_unit(dimension), None, writes, bound)
 

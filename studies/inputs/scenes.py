@@ -44,6 +44,30 @@ from isolab.studies.inputs.schema import (
     Simulation,
     TrapezoidProfile,
 )
+from isolab.studies.inputs.schema.scene_paths import (
+    BLOCK_CORNER,
+    BLOCK_DENSITY,
+    BLOCK_SIZE,
+    ISOLATORS,
+    LAYOUT_HEIGHT,
+    LAYOUT_SPAN_X,
+    LAYOUT_SPAN_Y,
+    MACHINE_CG,
+    MACHINE_INERTIA_DIAGONAL,
+    MACHINE_MASS,
+    MOUNT_FIGURES,
+    SIMULATION_DURATION,
+    SIMULATION_SETTLE_TOLERANCE,
+    floor_sine,
+    group_axis,
+    isolator_group,
+    mount,
+    point,
+    profile_segment,
+    stage,
+    stage_entry,
+    stage_profile,
+)
 from isolab.studies.questions.floor import scene_band_velocity
 
 _LAYOUT_SX = np.array([-1.0, 1.0, 1.0, -1.0])
@@ -136,20 +160,20 @@ def _machine(cases: _Cases) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndar
     m0 = cases.scenes[0].machine
     c = cases.c
     if m0.block is not None:
-        size = cases.vec("machine.block.size", lambda s: s.machine.block.size)
-        rho = cases.get("machine.block.density", lambda s: s.machine.block.density)
-        corner = cases.vec("machine.block.corner", lambda s: s.machine.block.corner)
+        size = cases.vec(BLOCK_SIZE, lambda s: s.machine.block.size)
+        rho = cases.get(BLOCK_DENSITY, lambda s: s.machine.block.density)
+        corner = cases.vec(BLOCK_CORNER, lambda s: s.machine.block.corner)
         mass, inertia, cg = block_properties(size, rho, corner)
         return mass, inertia, cg, size
-    mass = cases.get("machine.mass", lambda s: s.machine.mass)
-    cg = cases.vec("machine.cg", lambda s: s.machine.cg)
+    mass = cases.get(MACHINE_MASS, lambda s: s.machine.mass)
+    cg = cases.vec(MACHINE_CG, lambda s: s.machine.cg)
     if m0.inertia is not None:
         inertia = np.array(cases.each(lambda s: s.machine.inertia), dtype=np.float64).reshape(c, 3, 3)
     else:
-        diag = cases.vec("machine.inertia_diagonal", lambda s: s.machine.inertia_diagonal)
+        diag = cases.vec(MACHINE_INERTIA_DIAGONAL, lambda s: s.machine.inertia_diagonal)
         srt = np.sort(diag, axis=-1)
         _fail(
-            "machine.inertia_diagonal",
+            MACHINE_INERTIA_DIAGONAL,
             "principal moments break the triangle inequality (no rigid body has them)",
             srt[:, 2] > (srt[:, 0] + srt[:, 1]) * (1.0 + 1e-9),
             c,
@@ -166,14 +190,14 @@ def _mount_values(cases: _Cases, n: int) -> tuple[np.ndarray, np.ndarray, np.nda
     group_preset = cases.each(lambda s: s.isolators.preset_of(s.isolators.preset))
     listed = cases.scenes[0].isolators.mounts is not None
     out = {}
-    for key in ("f_vertical", "f_horizontal", "zeta"):
-        group = cases.get(f"isolators.{key}", lambda s, key=key: getattr(s.isolators, key))
+    for key in MOUNT_FIGURES:
+        group = cases.get(isolator_group(key), lambda s, key=key: getattr(s.isolators, key))
         base = np.array([getattr(p, key) for p in group_preset])
         cols = []
         for j in range(n):
             if listed:
                 own = cases.get(
-                    f"isolators.list.{j}.{key}", lambda s, j=j, key=key: getattr(s.isolators.mounts[j], key)
+                    f"{mount(j)}.{key}", lambda s, j=j, key=key: getattr(s.isolators.mounts[j], key)
                 )
                 own_preset = np.array(
                     cases.each(
@@ -246,7 +270,7 @@ def _profiles(cases: _Cases) -> profiles.Pieces:
     stages = cases.scenes[0].stages
     pieces = []
     for i, st in enumerate(stages):
-        p = f"stages.{st.name}.profile"
+        p = stage_profile(st.name)
         prof = st.profile
 
         def get(key: str, p: str = p, i: int = i) -> np.ndarray:
@@ -275,7 +299,7 @@ def _profiles(cases: _Cases) -> profiles.Pieces:
             else:
                 segs = []
                 for k, seg in enumerate(prof.segments):
-                    q = f"{p}.segments.{k}"
+                    q = profile_segment(st.name, k)
 
                     def sget(key: str, q: str = q, k: int = k, i: int = i) -> np.ndarray:
                         return cases.get(
@@ -295,7 +319,7 @@ def _profiles(cases: _Cases) -> profiles.Pieces:
             field = err.field
             for old, new in names.items():
                 field = field.replace(old, new)
-            raise SceneError(f"stages[{i}].profile.{field}", err.reason) from None
+            raise SceneError(f"{stage_entry(i)}.profile.{field}", err.reason) from None
         if pc.t.shape[0] != c:
             pc = profiles.Pieces(*(np.broadcast_to(x, (c, x.shape[1])) for x in pc))
         pieces.append(pc)
@@ -361,8 +385,8 @@ def build_batch(
     stage_mass = np.zeros((c, m))
     stage_home = np.zeros((c, m, 3))
     for i, name in enumerate(names):
-        stage_mass[:, i] = cases.get(f"stages.{name}.mass", lambda s, i=i: s.stages[i].mass)
-        stage_home[:, i] = cases.vec(f"stages.{name}.home", lambda s, i=i: s.stages[i].home)
+        stage_mass[:, i] = cases.get(f"{stage(name)}.mass", lambda s, i=i: s.stages[i].mass)
+        stage_home[:, i] = cases.vec(f"{stage(name)}.home", lambda s, i=i: s.stages[i].home)
     stage_axis = np.array(cases.each(lambda s: [st.axis for st in s.stages]), dtype=np.float64).reshape(
         c, m, 3
     )
@@ -374,9 +398,9 @@ def build_batch(
     iso0 = s0.isolators
     if iso0.layout is not None:
         n = 4
-        sx = cases.get("isolators.layout.span_x", lambda s: s.isolators.layout.span_x)
-        sy = cases.get("isolators.layout.span_y", lambda s: s.isolators.layout.span_y)
-        h = cases.get("isolators.layout.height", lambda s: s.isolators.layout.height)
+        sx = cases.get(LAYOUT_SPAN_X, lambda s: s.isolators.layout.span_x)
+        sy = cases.get(LAYOUT_SPAN_Y, lambda s: s.isolators.layout.span_y)
+        h = cases.get(LAYOUT_HEIGHT, lambda s: s.isolators.layout.height)
         iso_pos = np.stack(
             [
                 cg[:, None, 0] + _LAYOUT_SX * sx[:, None] / 2.0,
@@ -389,7 +413,7 @@ def build_batch(
         n = len(iso0.mounts)
         iso_pos = np.stack(
             [
-                cases.vec(f"isolators.list.{j}.position", lambda s, j=j: s.isolators.mounts[j].position)
+                cases.vec(f"{mount(j)}.position", lambda s, j=j: s.isolators.mounts[j].position)
                 for j in range(n)
             ],
             axis=1,
@@ -400,7 +424,7 @@ def build_batch(
     try:
         load = load_share(iso_pos[..., :2], weight_xy, total_mass * g)
     except CollinearIsolatorsError as err:
-        raise SceneError("isolators", str(err).removeprefix("isolators: ")) from None
+        raise SceneError(ISOLATORS, str(err).removeprefix(f"{ISOLATORS}: ")) from None
 
     f_v, f_h, zeta, skyhook = _mount_values(cases, n)
     ff_gain, ff_bandwidth, ff_limit, ff_weight = _mount_feedforward(cases, n)
@@ -408,17 +432,17 @@ def build_batch(
     c_explicit = np.full((c, n, 3), np.nan)
     for a, axis in enumerate(AXES):
         k_explicit[:, :, a] = cases.get(
-            f"isolators.k.{axis}", lambda s, axis=axis: _axis(s.isolators.k, axis)
+            group_axis("k", axis), lambda s, axis=axis: _axis(s.isolators.k, axis)
         )[:, None]
         c_explicit[:, :, a] = cases.get(
-            f"isolators.c.{axis}", lambda s, axis=axis: _axis(s.isolators.c, axis)
+            group_axis("c", axis), lambda s, axis=axis: _axis(s.isolators.c, axis)
         )[:, None]
     if iso0.mounts is not None:
         for j in range(n):
             for kc, arr in (("k", k_explicit), ("c", c_explicit)):
                 if getattr(iso0.mounts[j], kc) is not None:
                     own = cases.vec(
-                        f"isolators.list.{j}.{kc}", lambda s, j=j, kc=kc: getattr(s.isolators.mounts[j], kc)
+                        f"{mount(j)}.{kc}", lambda s, j=j, kc=kc: getattr(s.isolators.mounts[j], kc)
                     )
                     arr[:, j, :] = own
     freq = np.stack([f_h, f_h, f_v], axis=-1)
@@ -427,7 +451,7 @@ def build_batch(
     if bad_load.any():
         case, j = (int(x[0]) for x in np.nonzero(bad_load))
         raise SceneError(
-            "isolators",
+            ISOLATORS,
             f"isolator {j} would carry a static load of {load[case, j]:.6g} N (not positive): the weight of "
             "machine "
             "and stages lies too far from the mounts' centre for preset (load-based) stiffness; move the "
@@ -437,7 +461,7 @@ def build_batch(
     iso_k = _first_set(k_explicit, stiffness_from_frequency(safe_load, freq, g))
     iso_c = _first_set(c_explicit, damping_from_ratio(iso_k, safe_load, zeta[..., None], g))
     _fail(
-        "isolators",
+        ISOLATORS,
         "stiffness and damping must be finite and non-negative",
         ~(np.isfinite(iso_k) & np.isfinite(iso_c) & (iso_k >= 0) & (iso_c >= 0)),
         c,
@@ -452,7 +476,7 @@ def build_batch(
         if over.any():
             i = int(np.flatnonzero(over.any(axis=0))[0])
             _fail(
-                f"stages[{i}].profile.travel",
+                f"{stage_entry(i)}.profile.travel",
                 "the stage would travel farther than the base's extent along its axis"
                 if block_size is not None
                 else f"the stage would travel more than {MAX_TRAVEL:g} m",
@@ -464,16 +488,16 @@ def build_batch(
     point_names = list(s0.points)
     points = np.zeros((c, len(point_names), 3))
     for i, name in enumerate(point_names):
-        points[:, i] = cases.vec(f"points.{name}", lambda s, name=name: s.points[name])
+        points[:, i] = cases.vec(point(name), lambda s, name=name: s.points[name])
     floor_amp = np.zeros((c, 3))
     floor_freq = np.zeros((c, 3))
     floor_phase = np.zeros((c, 3))
     floor_t = np.zeros(0)
     floor_disp = None
     if s0.floor is not None and s0.floor.sine is not None:
-        floor_amp = cases.vec("floor.sine.amplitude", lambda s: s.floor.sine.amplitude)
-        floor_freq = cases.vec("floor.sine.frequency", lambda s: s.floor.sine.frequency)
-        floor_phase = cases.vec("floor.sine.phase", lambda s: s.floor.sine.phase)
+        floor_amp = cases.vec(floor_sine("amplitude"), lambda s: s.floor.sine.amplitude)
+        floor_freq = cases.vec(floor_sine("frequency"), lambda s: s.floor.sine.frequency)
+        floor_phase = cases.vec(floor_sine("phase"), lambda s: s.floor.sine.phase)
     elif s0.floor is not None and s0.floor.recorded is not None:
         rec = s0.floor.recorded
         samples = np.array(cases.each(lambda s: s.floor.recorded.displacement.samples()), dtype=np.float64)
@@ -493,10 +517,10 @@ def build_batch(
     if len(preload) != 1:
         raise ValueError("build_batch: scenes of one batch must agree on simulation.preload")
     duration = cases.get(
-        "simulation.duration", lambda s: None if sim(s).duration == "auto" else sim(s).duration
+        SIMULATION_DURATION, lambda s: None if sim(s).duration == "auto" else sim(s).duration
     )
     last_move = profiles.end_time(pieces).max(axis=-1) if m else np.zeros(c)
-    settle = cases.get("simulation.settle_tolerance", lambda s: sim(s).settle_tolerance)
+    settle = cases.get(SIMULATION_SETTLE_TOLERANCE, lambda s: sim(s).settle_tolerance)
     # each point settles to its own criterion's ``within`` (studies.criteria), else to settle_tolerance
     point_tol = np.repeat(np.asarray(settle, dtype=np.float64).reshape(-1, 1), len(point_names), axis=1)
     within = [s.criteria.settle_tolerances() if s.criteria is not None else {} for s in scenes]

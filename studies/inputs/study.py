@@ -33,10 +33,10 @@ from isolab.studies.inputs.scenes import build_batch, check_scene
 from isolab.studies.inputs.schema import (
     DesignSpec,
     Floor,
+    InputModel,
     ParameterSpec,
     Scene,
     Simulation,
-    _Model,
     error_messages,
 )
 from isolab.studies.questions import designs
@@ -56,7 +56,7 @@ REPRESENTATIVE_CASES = 64
 """Most cases whose modes are computed when a study is checked (:meth:`Study._check_statics`)."""
 
 
-class Study(_Model):
+class Study(InputModel):
     """A design of experiments over a scene.
 
     ``simulation`` given here overrides the scene's simulation block field by field; after validation it
@@ -479,7 +479,7 @@ def _is_text(source: str | Path) -> bool:
     return isinstance(source, str) and ("\n" in source or source.lstrip().startswith("{"))
 
 
-def _read(source: str | Path, base_dir: str | Path | None = None) -> tuple[dict[str, Any], Path]:
+def read_definition(source: str | Path, base_dir: str | Path | None = None) -> tuple[dict[str, Any], Path]:
     """The mapping in a YAML/JSON file or text, and the folder relative paths in it start from."""
     if _is_text(source):
         data, where, here = yaml.safe_load(source), "the study text", Path(base_dir or Path.cwd())
@@ -569,7 +569,7 @@ def load_scene(source: str | Path | Mapping[str, Any]) -> Scene:
     """A validated :class:`~studies.schema.Scene` from a YAML/JSON file, YAML/JSON text or a dict."""
     if isinstance(source, Mapping):
         return validate_scene(dict(source))
-    data, _ = _read(source)
+    data, _ = read_definition(source)
     return validate_scene(data)
 
 
@@ -585,12 +585,12 @@ def load_study(source: str | Path | Mapping[str, Any], base_dir: str | Path | No
     if isinstance(source, Mapping):
         data, here = dict(source), Path(base_dir) if base_dir is not None else Path.cwd()
     else:
-        data, here = _read(source, base_dir)
+        data, here = read_definition(source, base_dir)
     if data.get("scene_file") is not None and data.get("scene") is None:
         scene_path = here / str(data["scene_file"])
         if not scene_path.is_file():
             raise FileNotFoundError(f"scene_file: no file {scene_path}")
-        data["scene"], _ = _read(scene_path)
+        data["scene"], _ = read_definition(scene_path)
     return validate_study(data)
 
 
@@ -598,6 +598,13 @@ def isolator_names(scene: Scene) -> list[str]:
     """Labels of the scene's isolators, in batch order (:func:`studies.isolators.mount_labels`; a layout's
     order is :data:`studies.schema.LAYOUT_ORDER`)."""
     return mount_labels(scene.isolators.count)
+
+
+def study_labels(study: Study) -> tuple[list[str], list[str]]:
+    """(isolator names, point names) of a study's scene, in batch order: the labels of the ``isolator`` and
+    ``point`` dimensions of its results (:func:`isolator_names` and the points' own names)."""
+    scene = study.scene
+    return isolator_names(scene), [str(p) for p in scene.points]
 
 
 def scene_batch(scene: Scene) -> tuple[SceneBatch, dict[str, list[str]]]:

@@ -15,8 +15,8 @@ criterion of the study's ``criteria:`` block is met: one constraint per criterio
 bare).
 
 :func:`plan_goals` checks the names against the outputs a study's dataset will hold, without running
-anything: it reads them from a one-case dataset of the study's layout whose case is missing
-(:func:`template_dataset`). :func:`goal_values` turns a dataset of evaluated cases into the objective
+anything: it reads them from the output catalogue (:data:`isolab.engine.results.OUTPUTS`) and the scene's
+labels (:func:`quantity_layout`). :func:`goal_values` turns a dataset of evaluated cases into the objective
 values ``F`` (to minimise) and constraint values ``G`` (met when <= 0) an optimiser takes: always finite,
 with :data:`PENALTY` where a case failed or a value is missing.
 """
@@ -30,11 +30,10 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from isolab.engine.results import OK
-from isolab.studies.quantities import output_values
-from isolab.studies.questions.criteria import add_criteria, judged_criteria
-from isolab.studies.questions.designs import Design, Factor
-from isolab.studies.results.dataset import failed_arrays, from_chunks, to_dataset
+from isolab.engine.results import DIMENSION_LABELS, ISOLATOR, OK, OUTPUTS, POINT
+from isolab.studies.quantities import output_values, pick_quantity
+from isolab.studies.questions.criteria import Criteria, judged_criteria
+from isolab.studies.questions.designs import Factor
 from isolab.studies.units import dimension_of, to_si
 
 CRITERIA = "criteria"
@@ -100,27 +99,42 @@ class Goals:
     space: :meth:`studies.designs.Factor.from_unit`)."""
 
 
-def template_dataset(
-    factors: list[Factor], isolator_names: list[str], point_names: list[str], criteria: Any = None
-) -> xr.Dataset:
-    """A one-case dataset with the layout a study's cases will have (the case itself missing): what the
-    quantity names are checked against."""
-    names = [f.name for f in factors]
-    values = {f.name: np.array([f.low if f.low is not None else 0.0]) for f in factors}
-    design = Design(
-        "sampled", names, values, {}, {f.name: f.path for f in factors}, {f.name: f.unit for f in factors}
-    )
-    result = from_chunks(
-        {0: failed_arrays(1, "template")},
-        [np.arange(1)],
-        n_isolators=len(isolator_names),
-        n_points=len(point_names),
-    )
-    ds = to_dataset(result, design, isolator_names=isolator_names, point_names=point_names, attrs={})
-    return add_criteria(ds, criteria)
+QuantityLayout = dict[str, dict[str, list[str]]]
+"""The quantities a study's dataset holds: name -> its dimensions after the case's -> their labels."""
 
 
-def _objectives(spec: Any, template: xr.Dataset) -> tuple[Objective, ...]:
+def quantity_layout(
+    isolator_names: list[str], point_names: list[str], criteria: Criteria | None = None
+) -> QuantityLayout:
+    """The quantities a study's dataset will hold, in its order, without building it: the catalogue's
+    outputs (:data:`isolab.engine.results.OUTPUTS`) over the scene's isolators and points, then, for a
+    study with criteria, ``criterion_margin`` (one per criterion) and ``meets_criteria``
+    (:func:`studies.criteria.add_criteria`)."""
+    labels = {
+        **{d: [str(v) for v in values] for d, values in DIMENSION_LABELS.items()},
+        ISOLATOR: [str(n) for n in isolator_names],
+        POINT: [str(n) for n in point_names],
+    }
+    layout = {name: {d: labels[d] for d in spec.dims} for name, spec in OUTPUTS.items()}
+    judged = judged_criteria(criteria) if criteria is not None else []
+    if judged:
+        layout["criterion_margin"] = {"criterion": [c.name for c in judged]}
+        layout["meets_criteria"] = {}
+    return layout
+
+
+def quantity_unit(layout: QuantityLayout, quantity: str) -> str:
+    """The SI unit of the quantity ``quantity`` (``"1"`` for a dimensionless one or a yes/no).
+
+    Raises:
+        ValueError: an unknown variable or label, naming ``quantity`` and the valid choices
+            (:func:`studies.quantities.pick_quantity`).
+    """
+    name, _, _ = pick_quantity(quantity, list(layout), layout.__getitem__)
+    return OUTPUTS[name].unit if name in OUTPUTS else "1"
+
+
+def _objectives(spec: Any, layout: QuantityLayout) -> tuple[Objective, ...]:
     given = spec.objective
     if given is None:
         raise ValueError(
@@ -140,14 +154,14 @@ def _objectives(spec: Any, template: xr.Dataset) -> tuple[Objective, ...]:
             )
         sense = "minimize" if m.group(1).lower().startswith("min") else "maximize"
         try:
-            output_values(template, m.group(2))
+            quantity_unit(layout, m.group(2))
         except ValueError as err:
             raise ValueError(f"{where}: {err}") from None
         out.append(Objective(m.group(2), sense))
     return tuple(out)
 
 
-def _constraints(spec: Any, template: xr.Dataset, criteria: Any) -> tuple[Constraint, ...]:
+def _constraints(spec: Any, layout: QuantityLayout, criteria: Criteria | None) -> tuple[Constraint, ...]:
     out = []
     for i, text in enumerate(spec.constraints or []):
         where = f"design.constraints[{i}]"
@@ -168,10 +182,9 @@ def _constraints(spec: Any, template: xr.Dataset, criteria: Any) -> tuple[Constr
             )
         quantity, op, value = m.groups()
         try:
-            da = output_values(template, quantity)
+            unit = quantity_unit(layout, quantity)
         except ValueError as err:
             raise ValueError(f"{where}: {err}") from None
-        unit = str(da.attrs.get("units", "1"))
         dimension = dimension_of(unit)
         if dimension is None:
             try:
@@ -191,7 +204,7 @@ def plan_goals(
     factors: list[Factor],
     isolator_names: list[str],
     point_names: list[str],
-    criteria: Any = None,
+    criteria: Criteria | None = None,
 ) -> Goals:
     """Check an optimize design block (``spec``, a :class:`studies.schema.DesignSpec`) against the study's
     parameters (``factors``), its scene's labels and its criteria; nothing runs.
@@ -212,9 +225,9 @@ def plan_goals(
             raise ValueError(f"parameters[{i}].range: {f.name}'s range is empty (start == stop)")
     if not factors:
         raise ValueError("parameters: an optimize design needs at least one parameter with a range")
-    template = template_dataset(factors, isolator_names, point_names, criteria)
-    objectives = _objectives(spec, template)
-    constraints = _constraints(spec, template, criteria)
+    layout = quantity_layout(isolator_names, point_names, criteria)
+    objectives = _objectives(spec, layout)
+    constraints = _constraints(spec, layout, criteria)
     algorithm = (spec.algorithm or ("ga" if len(objectives) == 1 else "nsga2")).strip().lower()
     if algorithm not in ALGORITHMS:
         raise ValueError(f"design.algorithm: {spec.algorithm!r} is not one of {', '.join(ALGORITHMS)}")
@@ -232,7 +245,7 @@ def plan_goals(
         )
     names = ["case_ok"]
     for c in constraints:
-        if c.quantity == CRITERIA:
+        if c.quantity == CRITERIA and criteria is not None:  # checked above: the study has criteria
             names += [f"criterion {n}" for n in criteria.names()]
         else:
             names.append(c.text)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import csv
 import io
+import itertools
 import math
 import re
 import threading
@@ -31,6 +32,7 @@ import netCDF4
 import numpy as np
 import xarray as xr
 
+from isolab.engine.results import ISOLATOR, OUTPUTS, OutputSpec
 from isolab.studies.results.store import NETCDF_LOCK, Store
 from isolab.studies.units import dimension_of, quantity_problem, to_si
 
@@ -59,6 +61,7 @@ class CaseColumns:
         scales: numeric parameter -> "linear" or "log", from the coordinate's ``scale``.
         long_names: column -> what it holds (the dataset variable's ``long_name`` and the column's label),
             for the columns that come from a dataset variable.
+        outputs: column -> the output of the catalogue (:data:`isolab.engine.results.OUTPUTS`) it shows.
     """
 
     names: list[str] = field(default_factory=list)
@@ -71,6 +74,7 @@ class CaseColumns:
     display_units: dict[str, str] = field(default_factory=dict)
     scales: dict[str, str] = field(default_factory=dict)
     long_names: dict[str, str] = field(default_factory=dict)
+    outputs: dict[str, str] = field(default_factory=dict)
 
     @property
     def n_cases(self) -> int:
@@ -87,13 +91,54 @@ class CaseColumns:
             self.default.append(name)
 
 
+EACH = ""
+"""A summary column per component of an output (every label of its dimensions)."""
+SUMMARY: tuple[tuple[str, str], ...] = (
+    ("peak_displacement", EACH),
+    ("peak_rotation", EACH),
+    ("peak_isolator_force", ISOLATOR),
+    ("min_isolator_load", ISOLATOR),
+    ("max_isolator_load", ISOLATOR),
+    ("peak_isolator_deflection", ISOLATOR),
+    ("liftoff", ISOLATOR),
+    ("settling_time", EACH),
+    ("settled", EACH),
+    ("natural_frequency", EACH),
+    ("peak_point_displacement", EACH),
+    ("point_settling_time", EACH),
+    ("floor_point_velocity", "axis"),
+)
+"""The outputs the case table shows by default, in order, and how: each component (:data:`EACH`), or the
+worst over a dimension (as the catalogue judges the output: ``peak_isolator_force_z`` the largest over the
+isolators; ``min_isolator_load_min``, ``liftoff_any`` when no dimension is left)."""
+DETAIL: tuple[tuple[str, ...], ...] = (
+    ("damping_ratio",),
+    ("peak_isolator_force",),
+    ("peak_isolator_deflection",),
+    ("min_isolator_load",),
+    ("max_isolator_load",),
+    ("static_isolator_load",),
+    ("liftoff",),
+    ("rms_displacement",),
+    ("final_displacement",),
+    ("final_rotation",),
+    ("transmissibility",),
+    ("floor_point_velocity", "floor_point_velocity_band"),
+)
+"""The outputs whose every component is a column asked for by name, in order (outputs of the same dimensions
+grouped in a tuple alternate, component by component); any other output of the catalogue follows, the
+settings (the step ``dt``) last."""
+NOT_TABULATED = frozenset({"mode_energy", "mechanism"})
+"""Outputs of the dataset the case table leaves out (per mode and degree of freedom: read them there)."""
+
+
 def case_table(ds: xr.Dataset) -> CaseColumns:
     """Flatten a study dataset to one row per case (see the column list of ``GET /studies/{id}/cases``).
 
     Grid studies are flattened in C order of their parameter dimensions, which is the study's case order;
     sampled studies follow their ``case`` dimension.
     """
-    case_dims = tuple(ds["status"].dims)
+    case_dims = tuple(str(d) for d in ds["status"].dims)
     sampled = case_dims == ("case",)
     n = int(np.prod([ds.sizes[d] for d in case_dims])) if case_dims else 1
     t = CaseColumns(design_kind="sampled" if sampled else "grid")
@@ -132,57 +177,45 @@ def case_table(ds: xr.Dataset) -> CaseColumns:
             t.display_units[p] = str(ds[p].attrs.get("display_units", "")) or unit_of(p)
             t.scales[p] = str(ds[p].attrs.get("scale", "linear"))
 
-    axes = [str(a) for a in ds["axis"].values]
-    rotations = [str(r) for r in ds["rotation"].values]
-    isolators = [str(i) for i in ds["isolator"].values]
-    points = [str(p) for p in ds["point"].values]
-    modes = [str(int(m)) for m in ds["mode"].values]
+    def components(name: str) -> tuple[list[str], np.ndarray]:
+        """Column suffixes of every component of an output, and its values (n, components)."""
+        own = [str(d) for d in ds[name].dims if d not in case_dims]
+        labels = [[str(v) for v in ds[d].values] for d in own]
+        suffixes = ["_".join(combo) for combo in itertools.product(*labels)]
+        return suffixes, flat(name).astype(np.float64)
 
-    def per(
-        name: str, labels: list[str], default: bool, prefix: str | None = None, kind: str = "number"
-    ) -> None:
-        a = flat(name).astype(np.float64)
-        for k, label in enumerate(labels):
-            t.add(f"{prefix or name}_{label}", a[:, k], unit_of(name), kind, default)
+    def add_output(name: str, column: str, values: np.ndarray, default: bool) -> None:
+        spec = OUTPUTS[name]
+        t.add(column, values, unit_of(name), "bool" if spec.flag else "number", default)
+        t.outputs.setdefault(column, name)
 
-    per("peak_displacement", axes, True)
-    per("peak_rotation", rotations, True)
-    force = flat("peak_isolator_force").astype(np.float64).reshape(n, len(isolators), len(axes))
-    for k, a in enumerate(axes):
-        t.add(f"peak_isolator_force_{a}", _nan_reduce(np.nanmax, force[:, :, k]), "N", "number", True)
-    min_load = flat("min_isolator_load").astype(np.float64)
-    t.add("min_isolator_load_min", _nan_reduce(np.nanmin, min_load), "N", "number", True)
-    mounts = "max_isolator_load" in ds and "peak_isolator_deflection" in ds  # not in older datasets
-    if mounts:
-        max_load = flat("max_isolator_load").astype(np.float64)
-        t.add("max_isolator_load_max", _nan_reduce(np.nanmax, max_load), "N", "number", True)
-        deflection = flat("peak_isolator_deflection").astype(np.float64).reshape(n, len(isolators), len(axes))
-        for k, a in enumerate(axes):
-            worst = _nan_reduce(np.nanmax, deflection[:, :, k])
-            t.add(f"peak_isolator_deflection_{a}", worst, "m", "number", True)
-    liftoff = flat("liftoff").astype(np.float64)
-    t.add("liftoff_any", _nan_reduce(np.nanmax, liftoff), "1", "bool", True)
-    for name in ("settling_time", "settled"):
-        t.add(
-            name,
-            flat(name).astype(np.float64)[:, 0],
-            unit_of(name),
-            "bool" if name == "settled" else "number",
-            True,
-        )
-    per("natural_frequency", modes, True)
-    ppd = flat("peak_point_displacement").astype(np.float64).reshape(n, len(points), len(axes))
-    for j, p in enumerate(points):
-        for k, a in enumerate(axes):
-            t.add(f"peak_point_displacement_{p}_{a}", ppd[:, j, k], "m", "number", True)
-    if "point_settling_time" in ds:  # not in older datasets
-        per("point_settling_time", points, True)
-    floor_velocity = "floor_point_velocity" in ds  # not in older datasets
-    if floor_velocity:
-        fpv = flat("floor_point_velocity").astype(np.float64).reshape(n, len(points), len(axes))
-        fpb = flat("floor_point_velocity_band").astype(np.float64).reshape(n, len(points), len(axes))
-        for j, p in enumerate(points):
-            t.add(f"floor_point_velocity_{p}", _nan_reduce(np.nanmax, fpv[:, j, :]), "m/s", "number", True)
+    def summary(name: str, over: str) -> None:
+        spec = OUTPUTS[name]
+        if over == EACH:
+            suffixes, values = components(name)
+            for k, suffix in enumerate(suffixes):
+                add_output(name, f"{name}_{suffix}" if suffix else name, values[:, k], True)
+            return
+        kept, values = _worst_over(ds[name], case_dims, over, spec)
+        labels = [[str(v) for v in ds[d].values] for d in kept]
+        if not kept:
+            suffix = "any" if spec.flag else spec.worst
+            add_output(name, f"{name}_{suffix}", values[:, 0], True)
+        for k, combo in enumerate(itertools.product(*labels) if kept else []):
+            add_output(name, f"{name}_{'_'.join(combo)}", values[:, k], True)
+
+    def detail(names: tuple[str, ...]) -> None:
+        parts = [(name, *components(name)) for name in names if name in ds]
+        if not parts:
+            return
+        for k in range(len(parts[0][1])):
+            for name, suffixes, values in parts:
+                column = f"{name}_{suffixes[k]}" if suffixes[k] else name
+                add_output(name, column, values[:, k], False)
+
+    for name, over in SUMMARY:
+        if name in ds:  # older datasets lack the newer outputs
+            summary(name, over)
     status_names = str(ds["status"].attrs.get("flag_meanings", "ok unstable tipping failed")).split()
     codes = flat("status")[:, 0].astype(np.int64)
     t.add(
@@ -200,29 +233,10 @@ def case_table(ds: xr.Dataset) -> CaseColumns:
         for k, name in enumerate(str(c) for c in ds["criterion"].values):
             t.add(f"margin_{name}", margin[:, k], "1", "number", True)
     # the rest: asked for by name
-    per("damping_ratio", modes, False)
-    for j, iso in enumerate(isolators):
-        for k, a in enumerate(axes):
-            t.add(f"peak_isolator_force_{iso}_{a}", force[:, j, k], "N", "number", False)
-    if mounts:
-        for j, iso in enumerate(isolators):
-            for k, a in enumerate(axes):
-                t.add(f"peak_isolator_deflection_{iso}_{a}", deflection[:, j, k], "m", "number", False)
-    per("min_isolator_load", isolators, False)
-    if mounts:
-        per("max_isolator_load", isolators, False)
-    per("static_isolator_load", isolators, False)
-    per("liftoff", isolators, False, kind="bool")
-    per("rms_displacement", axes, False)
-    per("final_displacement", axes, False)
-    per("final_rotation", rotations, False)
-    per("transmissibility", axes, False)
-    if floor_velocity:
-        for j, p in enumerate(points):
-            for k, a in enumerate(axes):
-                t.add(f"floor_point_velocity_{p}_{a}", fpv[:, j, k], "m/s", "number", False)
-                t.add(f"floor_point_velocity_band_{p}_{a}", fpb[:, j, k], "Hz", "number", False)
-    t.add("dt", flat("dt").astype(np.float64)[:, 0], "s", "number", False)
+    listed = {name for group in DETAIL for name in group} | {name for name, _ in SUMMARY}
+    others = [name for name in OUTPUTS if name not in listed and name not in NOT_TABULATED]
+    for group in (*DETAIL, *((name,) for name in others)):  # the catalogue's order: the settings last
+        detail(group)
     t.add("message", flat("message")[:, 0].astype(str), "", "text", False)
     # an optimisation's cases (studies.optimisation): shown by default
     for name, kind in (("generation", "number"), ("feasible", "bool"), ("pareto", "bool"), ("best", "bool")):
@@ -247,6 +261,22 @@ def _add_long_names(t: CaseColumns, ds: xr.Dataset) -> None:
             continue
         label = c[len(v) + 1 :].replace("_", " ")
         t.long_names[c] = str(ds[v].attrs["long_name"]) + (f", {label}" if label else "")
+
+
+def _worst_over(
+    var: xr.DataArray, case_dims: tuple[str, ...], over: str, spec: OutputSpec
+) -> tuple[list[str], np.ndarray]:
+    """``var`` reduced over its dimension ``over`` to the worst value as the catalogue judges the output
+    (``spec.worst``; missing values ignored, all missing stays missing): (the dimensions kept, the values
+    as (cases, components kept))."""
+    n = int(np.prod([var.sizes[d] for d in case_dims])) if case_dims else 1
+    kept = [str(d) for d in var.dims if d not in case_dims and d != over]
+    width = int(np.prod([var.sizes[d] for d in kept]))
+    a = np.asarray(var.transpose(*case_dims, *kept, over).values, dtype=np.float64)
+    worst = _nan_reduce(
+        np.nanmax if spec.worst == "max" else np.nanmin, a.reshape(n * width, var.sizes[over])
+    )
+    return kept, worst.reshape(n, width)
 
 
 def _nan_reduce(func: Any, a: np.ndarray) -> np.ndarray:

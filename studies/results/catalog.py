@@ -2,7 +2,8 @@
 
 A row holds what a listing needs (name, status, times, case counts, varied parameters, isolator types,
 the model the cases ran with, an optimisation's finished and planned generations) and the study's stored
-definition; the results themselves are files (see :mod:`isolab.studies.results.store`). The catalog opens a
+definition, and reads back as a :class:`~isolab.studies.results.records.StudyRecord`; the results themselves
+are files (see :mod:`isolab.studies.results.store`). The catalog opens a
 fresh connection per call, so one :class:`Catalog` can be shared between threads; listing and filtering
 run in SQL. The database is in WAL mode, and opening it adds the columns an older catalog lacks
 (migrations).
@@ -21,33 +22,14 @@ from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from isolab.studies.results.records import COLUMNS, JSON_COLUMNS, StudyFilter, StudyRecord
+
 CATALOG_FILE = "catalog.sqlite"
 """File name of the catalog under a store's root."""
 STATUSES = ("queued", "running", "done", "failed", "cancelled")
 STUDY_ID = re.compile(r"[0-9a-f]{32}")
 """A study id: a uuid4 hex string, 32 lowercase hex digits."""
-_JSON_COLUMNS = ("parameters", "isolator_types", "definition")
-_COLUMNS = (
-    "id",
-    "name",
-    "status",
-    "created",
-    "started",
-    "finished",
-    "n_cases",
-    "n_done",
-    "n_failed",
-    "parameters",
-    "isolator_types",
-    "fidelity",
-    "integrator",
-    "dt",
-    "error",
-    "definition",
-    "generation",
-    "generations",
-)
-_UPDATABLE = frozenset(_COLUMNS) - {"id", "created"}
+_UPDATABLE = frozenset(COLUMNS) - {"id", "created"}
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS studies (
@@ -212,14 +194,14 @@ class Catalog:
             con.execute(f"INSERT INTO studies ({cols}) VALUES ({marks})", tuple(row.values()))
         return study_id
 
-    def get(self, study_id: str) -> dict[str, Any]:
-        """The catalog row of a study (JSON columns decoded). Raises StudyNotFound."""
+    def get(self, study_id: str) -> StudyRecord:
+        """The catalog record of a study. Raises StudyNotFound."""
         check_id(study_id)
         with self._connect() as con:
             row = con.execute("SELECT * FROM studies WHERE id = ?", (study_id,)).fetchone()
         if row is None:
             raise StudyNotFound(study_id)
-        return _decode(row)
+        return _record(row)
 
     def update(self, study_id: str, **fields: Any) -> None:
         """Set catalog fields of a study (any column but id and created). Raises StudyNotFound.
@@ -237,7 +219,7 @@ class Catalog:
             raise ValueError(f"status: {fields['status']!r} is not one of {', '.join(STATUSES)}")
         values = {}
         for key, value in fields.items():
-            if key in _JSON_COLUMNS and not isinstance(value, str):
+            if key in JSON_COLUMNS and not isinstance(value, str):
                 value = json.dumps(value)
             elif key in ("started", "finished") and value is not None:
                 value = _utc_text(value, key)
@@ -249,51 +231,40 @@ class Catalog:
                 raise StudyNotFound(study_id)
 
     def list(
-        self,
-        name: str | None = None,
-        status: str | None = None,
-        isolator_type: str | None = None,
-        created_after: str | _dt.datetime | None = None,
-        created_before: str | _dt.datetime | None = None,
-        limit: int = 50,
-        offset: int = 0,
-    ) -> builtins.list[dict[str, Any]]:
-        """Catalog rows, newest first, filtered in SQL.
+        self, where: StudyFilter | None = None, *, limit: int = 50, offset: int = 0
+    ) -> builtins.list[StudyRecord]:
+        """Catalog records, newest first, filtered in SQL (``where``: every filter given must hold).
 
         Args:
-            name: exact study name.
-            status: one of STATUSES.
-            isolator_type: studies whose ``isolator_types`` include it.
-            created_after, created_before: creation time bounds (inclusive), ISO 8601 or datetime.
-            limit: at most this many rows (1..1000); offset: skip this many first.
+            where: the filters (see :class:`StudyFilter`); None lists every study.
+            limit: at most this many records (1..1000); offset: skip this many first.
+
+        Raises:
+            ValueError: ``<field>: reason`` for a status or time that is not one, or a limit or offset out
+                of range.
         """
-        where, args = self._where(name, status, isolator_type, created_after, created_before)
+        clauses, args = self._where(where or StudyFilter())
         if not 1 <= int(limit) <= 1000:
             raise ValueError(f"limit: {limit} is outside 1..1000")
         if int(offset) < 0:
             raise ValueError(f"offset: {offset} is negative")
-        sql = f"SELECT * FROM studies{where} ORDER BY created DESC, rowid DESC LIMIT ? OFFSET ?"
+        sql = f"SELECT * FROM studies{clauses} ORDER BY created DESC, rowid DESC LIMIT ? OFFSET ?"
         with self._connect() as con:
             rows = con.execute(sql, (*args, int(limit), int(offset))).fetchall()
-        return [_decode(r) for r in rows]
+        return [_record(r) for r in rows]
 
-    def count(
-        self,
-        name: str | None = None,
-        status: str | None = None,
-        isolator_type: str | None = None,
-        created_after: str | _dt.datetime | None = None,
-        created_before: str | _dt.datetime | None = None,
-    ) -> int:
-        """Number of catalog rows matching the same filters as :meth:`list`."""
-        where, args = self._where(name, status, isolator_type, created_after, created_before)
+    def count(self, where: StudyFilter | None = None) -> int:
+        """Number of catalog records matching ``where`` (as :meth:`list` filters them)."""
+        clauses, args = self._where(where or StudyFilter())
         with self._connect() as con:
-            return int(con.execute(f"SELECT COUNT(*) FROM studies{where}", args).fetchone()[0])
+            return int(con.execute(f"SELECT COUNT(*) FROM studies{clauses}", args).fetchone()[0])
 
     @staticmethod
-    def _where(name, status, isolator_type, created_after, created_before) -> tuple[str, tuple]:
-        clauses: list[str] = []
-        args: list[Any] = []
+    def _where(where: StudyFilter) -> tuple[str, tuple[Any, ...]]:
+        name, status, isolator_type = where.name, where.status, where.isolator_type
+        created_after, created_before = where.created_after, where.created_before
+        clauses: builtins.list[str] = []
+        args: builtins.list[Any] = []
         if name is not None:
             clauses.append("name = ?")
             args.append(str(name))
@@ -329,9 +300,5 @@ def _unavailable(path: Path, err: sqlite3.OperationalError) -> CatalogUnavailabl
     return CatalogUnavailable(f"the study catalog {path.name} cannot be used now: {text}")
 
 
-def _decode(row: sqlite3.Row) -> dict[str, Any]:
-    out = {k: row[k] for k in row.keys()}  # noqa: SIM118 (sqlite3.Row)
-    for key in _JSON_COLUMNS:
-        if out.get(key) is not None:
-            out[key] = json.loads(out[key])
-    return out
+def _record(row: sqlite3.Row) -> StudyRecord:
+    return StudyRecord.from_row({k: row[k] for k in row.keys()})  # noqa: SIM118 (sqlite3.Row)

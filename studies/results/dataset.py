@@ -4,8 +4,9 @@ A study's cases come back from the engine as one :class:`~engine.results.Simulat
 dimension first). :func:`to_dataset` lays them out along the study's design: a grid gets one dimension per
 varied parameter with its levels as the coordinate (``ds.sel(isolator_type="air", stage_y_mass=1000)``); a
 sampled design gets a ``case`` dimension with each parameter as a coordinate along it. The per-case
-outputs add the dimensions ``axis`` (x, y, z), ``rotation`` (rx, ry, rz: about X pitch, Y roll, Z yaw),
-``isolator``, ``point``, ``mode`` (1..6) and ``dof``.
+outputs are the output catalogue's (:data:`isolab.engine.results.OUTPUTS`: name, dimensions, unit and long
+name, in its order); they add the dimensions ``axis`` (x, y, z), ``rotation`` (rx, ry, rz: about X pitch,
+Y roll, Z yaw), ``isolator``, ``point``, ``mode`` (1..6) and ``dof``.
 
 Every variable and coordinate carries CF ``units`` and ``long_name`` (``"1"`` for dimensionless quantities
 and labels); a numeric parameter's coordinate also carries ``display_units`` (the unit the study was written
@@ -13,7 +14,8 @@ in, ``"g"`` or ``"%"``, while ``units`` stays SI) and ``scale`` (``linear`` or `
 A case whose ``status`` is not OK has missing values (NaN; ``_FillValue`` on disk) in every
 numeric output, never numbers; ``status`` (CF ``flag_values``/``flag_meanings``) and ``message`` say why.
 Yes/no outputs (``liftoff``, ``settled``, ``mechanism``) are float32 in memory (1.0 yes, 0.0 no, NaN
-missing) and int8 with ``_FillValue`` -1 on disk, so they too can be missing.
+missing) and int8 with ``_FillValue`` -1 on disk, so they too can be missing (the store writes them:
+:func:`isolab.studies.results.store.netcdf_encoding`).
 
 Results that arrive in chunks (see :mod:`studies.fanout`) travel as plain dicts of numpy arrays
 (:func:`result_arrays`) and are put back together in case order by :func:`from_chunks`, or, for a study's
@@ -44,6 +46,7 @@ from isolab.engine.results import (
     N_MODES,
     OK,
     OUTPUT_FIELDS,
+    OUTPUTS,
     ROTATIONS,
     STATUS_NAMES,
     SimulationResult,
@@ -52,64 +55,6 @@ from isolab.engine.results import (
 from isolab.studies.questions.designs import Design
 
 CONVENTIONS = "CF-1.10"
-
-# Dataset variables: name -> (per-case dims, units, long_name, "f" float | "b" yes/no).
-_VARIABLES: dict[str, tuple[tuple[str, ...], str, str, str]] = {
-    "peak_displacement": (("axis",), "m", "peak absolute displacement of the machine c.g.", "f"),
-    "peak_rotation": (("rotation",), "rad", "peak absolute rotation of the machine base", "f"),
-    "peak_point_displacement": (
-        ("point", "axis"),
-        "m",
-        "peak absolute displacement of a point of interest",
-        "f",
-    ),
-    "peak_isolator_force": (("isolator", "axis"), "N", "peak absolute dynamic isolator force", "f"),
-    "static_isolator_load": (("isolator",), "N", "vertical isolator preload at the reference state", "f"),
-    "min_isolator_load": (("isolator",), "N", "smallest total vertical isolator load", "f"),
-    "liftoff": (("isolator",), "1", "isolator lifts off (smallest total vertical load below zero)", "b"),
-    "rms_displacement": (("axis",), "m", "RMS displacement of the machine c.g.", "f"),
-    "final_displacement": (("axis",), "m", "static c.g. displacement with the stages parked at the end", "f"),
-    "final_rotation": (("rotation",), "rad", "static base rotation with the stages parked at the end", "f"),
-    "settling_time": ((), "s", "settling time after the last stage move (lower bound if not settled)", "f"),
-    "settled": ((), "1", "motion settled within the tolerance before the end of the simulation", "b"),
-    "point_settling_time": (
-        ("point",),
-        "s",
-        "settling time of a point of interest after each stage move, worst over the moves",
-        "f",
-    ),
-    "peak_isolator_deflection": (
-        ("isolator", "axis"),
-        "m",
-        "peak absolute isolator deflection from its static state",
-        "f",
-    ),
-    "max_isolator_load": (("isolator",), "N", "largest total vertical isolator load", "f"),
-    "natural_frequency": (("mode",), "Hz", "undamped natural frequency (0 for a mechanism)", "f"),
-    "damping_ratio": (("mode",), "1", "modal damping ratio", "f"),
-    "mode_energy": (("mode", "dof"), "1", "kinetic-energy share of a degree of freedom in a mode", "f"),
-    "mechanism": (("mode",), "1", "zero-stiffness (rigid-body) mode", "b"),
-    "transmissibility": (
-        ("axis",),
-        "1",
-        "floor-to-c.g. displacement transmissibility at the floor frequency",
-        "f",
-    ),
-    "floor_point_velocity": (
-        ("point", "axis"),
-        "m/s",
-        "largest one-third-octave band RMS velocity (1 to 80 Hz) of a point of interest under the floor "
-        "spectrum (0 without one)",
-        "f",
-    ),
-    "floor_point_velocity_band": (
-        ("point", "axis"),
-        "Hz",
-        "centre frequency of the one-third-octave band of floor_point_velocity (0 without a floor spectrum)",
-        "f",
-    ),
-    "dt": ((), "s", "integration time step used", "f"),
-}
 
 _BOOL_ENCODING = {"dtype": "int8", "_FillValue": np.int8(-1)}
 BLOCK_CASES = 4096
@@ -306,7 +251,7 @@ def to_dataset(
 
 
 def _check_parameter_names(design: Design) -> None:
-    reserved = set(_VARIABLES) | {
+    reserved = set(OUTPUTS) | {
         "status",
         "message",
         "axis",
@@ -513,34 +458,16 @@ def _case_variables(
     array put there by ``lay_out`` (case order in, the case dimensions' layout out). Outputs of a case
     whose status is not OK are NaN."""
     bad = ~np.asarray(result.status == OK)
-
-    def masked(a: np.ndarray, kind: str) -> np.ndarray:
-        a = np.asarray(a)
-        if kind == "b":
-            out = a.astype(np.float32)
-        else:
-            out = a.astype(np.float64, copy=True)
-        out[bad] = np.nan
-        return out
-
-    fd = np.asarray(result.final_displacement, dtype=np.float64)
-    raw = {
-        name: getattr(result, name)
-        for name in _VARIABLES
-        if name not in ("liftoff", "final_displacement", "final_rotation")
-    }
-    raw["liftoff"] = np.asarray(result.min_isolator_load) < 0.0
-    raw["final_displacement"] = fd[:, :3]
-    raw["final_rotation"] = fd[:, 3:]
-
     data_vars: dict[str, xr.Variable] = {}
-    for name, (dims, units, long_name, kind) in _VARIABLES.items():
-        values = lay_out(masked(raw[name], kind))
-        var_attrs: dict[str, Any] = {"units": units, "long_name": long_name}
-        if kind == "b":
+    for name, spec in OUTPUTS.items():  # the catalogue's outputs, in its order
+        raw = spec.values(result)
+        masked = raw.astype(np.float32) if spec.flag else raw.astype(np.float64, copy=True)
+        masked[bad] = np.nan
+        var_attrs: dict[str, Any] = {"units": spec.unit, "long_name": spec.long_name}
+        if spec.flag:
             var_attrs.update(_BOOL_FLAGS)
-        var = xr.Variable(case_dims + dims, values, attrs=var_attrs)
-        if kind == "b":
+        var = xr.Variable(case_dims + spec.dims, lay_out(masked), attrs=var_attrs)
+        if spec.flag:
             var.encoding = dict(_BOOL_ENCODING)
         data_vars[name] = var
 
@@ -712,35 +639,6 @@ def _json_default(value: Any) -> Any:
     return str(value)
 
 
-def netcdf_encoding(ds: xr.Dataset) -> dict[str, dict[str, Any]]:
-    """Per-variable netCDF encoding: NaN ``_FillValue`` on floats, int8/-1 for yes/no, zlib for numbers.
-
-    zlib at level 1 with the byte-shuffle filter: on a 10,000-case study the same size as level 4 (7.0 MB,
-    against 8.6 MB uncompressed) in 60 % of the time; the outputs are float64 peaks with little
-    redundancy, so higher levels buy almost nothing.
-
-    A variable backed by a dask array (:func:`streamed_dataset`) keeps the ``chunksizes`` its encoding
-    names (its blocks); the others get the netCDF library's default chunking."""
-    enc: dict[str, dict[str, Any]] = {}
-    for name, var in ds.variables.items():
-        e: dict[str, Any] = {}
-        if var.dtype.kind in "fiub" and var.ndim > 0:
-            e.update(zlib=True, complevel=1, shuffle=True)
-            chunks = var.encoding.get("chunksizes") if var.chunks is not None else None
-            if chunks is not None and len(chunks) == var.ndim and 0 < min(*chunks, *var.shape):
-                e["chunksizes"] = tuple(
-                    min(int(c), int(size)) for c, size in zip(chunks, var.shape, strict=True)
-                )
-        if var.encoding.get("dtype") == "int8" and "_FillValue" in var.encoding:
-            e.update(dtype="int8", _FillValue=np.int8(var.encoding["_FillValue"]))
-        elif var.dtype.kind == "f" and name not in ds.dims:
-            e["_FillValue"] = np.nan
-        elif name in ds.dims or var.dtype.kind in "iuUSO":
-            e["_FillValue"] = None
-        enc[str(name)] = e
-    return enc
-
-
 # ------------------------------------------------------------------------------------- error estimate
 ERROR_ESTIMATE_PREFIX = "error_estimate_"
 
@@ -787,24 +685,3 @@ def error_estimate(ds: xr.Dataset) -> dict[str, float]:
         for name in ds.data_vars
         if str(name).startswith(ERROR_ESTIMATE_PREFIX)
     }
-
-
-def failures(path: Any) -> str:
-    """What went wrong in a study's dataset file: how many cases have each status other than ok, and the
-    message of the first of them (``"12 tipping; case 0: statically unstable: ..."``). Empty when every
-    case is ok."""
-    with xr.open_dataset(path) as ds:
-        status = np.asarray(ds["status"].values, dtype=np.int8).reshape(-1)
-        bad = np.flatnonzero(status != OK)
-        if bad.size == 0:
-            return ""
-        # the first message only (a large study's messages are not all read)
-        first = np.unravel_index(int(bad[0]), ds["status"].shape)
-        message = str(ds["message"][first].values)
-    counts = ", ".join(
-        f"{int((status == code).sum())} {name}"
-        for code, name in enumerate(STATUS_NAMES)
-        if code != OK
-        if (status == code).any()
-    )
-    return f"{counts}; case {int(bad[0])}: {message}"

@@ -1,4 +1,4 @@
-"""Speed against accuracy: pick the cheapest model for an accuracy request, and measure a study's error.
+"""Speed against accuracy: pick the cheapest model for an accuracy request, and the study as it runs.
 
 **Choosing.** A simulation block may ask for an accuracy instead of naming the model
 (``accuracy: fast | balanced | reference`` or ``tolerance: "10 um" | "1 %"``, see
@@ -8,20 +8,18 @@ screening run) at the reference level (nonlinear model, adaptive reference integ
 candidate step: the "truth"), then tries the candidate fidelity/integrator/step triples in order of their
 estimated cost (:data:`studies.costs.STEP_COST`, stability sub-steps included) and takes the first whose
 largest error on the pilot cases stays inside the tolerance. A relative tolerance applies to every sizing
-output (:data:`SIZING_OUTPUTS`: peak c.g. and point displacement, peak rotation, peak isolator force,
-relative to the reference's largest of each; the smallest isolator load relative to the largest preload); an
-absolute one (metres) to the peak displacements. A per-output tolerance (``tolerance: {settling_time: 5 ms,
-peak_point_displacement: 1 %}``) bounds instead the worst component of each named output
-(:func:`component_errors`). A candidate the stability guard would sub-step on a pilot case is never
-chosen. ``fast`` allows 5 %, ``balanced`` 0.5 %; ``reference`` runs
+output (:data:`~isolab.studies.run.error_estimate.SIZING_OUTPUTS`: peak c.g. and point displacement, peak
+rotation, peak isolator force, relative to the reference's largest of each; the smallest isolator load
+relative to the largest preload); an absolute one (metres) to the peak displacements. A per-output
+tolerance (``tolerance: {settling_time: 5 ms, peak_point_displacement: 1 %}``) bounds instead the worst
+component of each named output
+(:func:`~isolab.studies.run.error_estimate.component_errors`). A candidate the stability guard would
+sub-step on a pilot case is never chosen. ``fast`` allows 5 %, ``balanced`` 0.5 %; ``reference`` runs
 the nonlinear level with the reference integrator at the requested step (default 1 ms). When no candidate
 meets the tolerance the reference itself is chosen. Choices are cached per study definition.
 
-**Measuring.** Every stored study carries the error its outputs carry: :func:`error_sample` picks a few
-cases (seeded, at least one per isolator type), :func:`sample_arrays` runs each with the study's model and
-at the reference level at the step that run used (beside the study's chunks), and :func:`estimate_errors`
-keeps the largest error per output
-(:data:`ESTIMATED_OUTPUTS`; settling time as an absolute difference in s).
+How an error is measured, and the error estimate every stored study carries, are
+:mod:`isolab.studies.run.error_estimate`'s.
 """
 
 from __future__ import annotations
@@ -39,7 +37,6 @@ from isolab.engine import modal, model, simulate, stability
 from isolab.engine.integrators import INTEGRATORS
 from isolab.engine.results import OK, STATUS_NAMES
 from isolab.engine.scene import SceneBatch
-from isolab.engine.simulate import SUB_STEPPED
 from isolab.studies.inputs.schema import (
     ACCURACY_LEVELS,
     DEFAULT_DT,
@@ -49,9 +46,16 @@ from isolab.studies.inputs.schema import (
     parse_tolerance,
     tolerance_text,
 )
-from isolab.studies.inputs.study import study_from_json
+from isolab.studies.inputs.study import Study, study_from_json
 from isolab.studies.results.dataset import result_arrays
 from isolab.studies.run.costs import step_cost
+from isolab.studies.run.error_estimate import (
+    REFERENCE_PAIR,
+    case_groups,
+    component_errors,
+    output_errors,
+    sizing_error,
+)
 
 CANDIDATE_STEPS = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3)
 """Steps the chooser tries, s (those at or below a requested ``dt``)."""
@@ -65,7 +69,6 @@ CANDIDATE_PAIRS = (
     ("nonlinear", "rk4"),
 )
 """Fidelity/integrator pairs the chooser tries, cheapest level first (the order breaks cost ties)."""
-REFERENCE_PAIR = ("nonlinear", "reference")
 PILOT_MARGIN = 0.5
 """A candidate must meet this fraction of the tolerance on the pilot cases: the other cases of a study
 can err more (on the isolator-comparison example, before the fixed-step integrators split steps at profile
@@ -77,131 +80,8 @@ SCREEN_LIMIT = 48
 """Most cases of a study the pilot screening simulates (a seeded sample of larger studies)."""
 SCREEN_STEP = 2e-3
 """Step of the screening run (lti, exact), s."""
-ERROR_SAMPLE = 4
-"""Cases of a study rerun at the reference level for its error estimate (more when it has more isolator
-types, at most :data:`ERROR_SAMPLE_LIMIT`)."""
-ERROR_SAMPLE_LIMIT = 6
-DISPLACEMENT_FLOOR = 1e-9
-"""Peak displacements (m) and rotations (rad) below this count as zero when forming relative errors."""
-FORCE_FLOOR = 1e-6
-"""Peak isolator forces below this fraction of the largest preload count as zero, likewise."""
-
-SIZING_OUTPUTS = (
-    "peak_displacement",
-    "peak_point_displacement",
-    "peak_rotation",
-    "peak_isolator_force",
-    "min_isolator_load",
-)
-"""Outputs a relative tolerance applies to."""
-ESTIMATED_OUTPUTS = (*SIZING_OUTPUTS, "settling_time")
-"""Outputs whose error every stored study carries (point displacement only where the scene has points)."""
-OUTPUT_UNITS = {name: ("s" if name == "settling_time" else "1") for name in ESTIMATED_OUTPUTS}
-OUTPUT_MEANING = {
-    "peak_displacement": "largest |error| of a peak c.g. displacement relative to the largest reference peak",
-    "peak_point_displacement": "largest |error| of a peak point displacement relative to the largest "
-    "reference peak",
-    "peak_rotation": "largest |error| of a peak rotation relative to the largest reference peak",
-    "peak_isolator_force": "largest |error| of a peak isolator force relative to the largest reference peak",
-    "min_isolator_load": "largest |error| of a smallest isolator load relative to the largest preload",
-    "settling_time": "largest |error| of the settling time",
-}
 
 
-# ----------------------------------------------------------------------------------------------- errors
-def output_errors(result: Any, reference: Any) -> dict[str, np.ndarray]:
-    """Per-case error (C,) of each output of ``result`` against ``reference`` (same cases).
-
-    Both are :class:`~engine.results.SimulationResult` (or anything with its fields). Keys: the
-    :data:`ESTIMATED_OUTPUTS` (relative, 1; settling time absolute, s) and ``displacement_m``, the largest
-    absolute error of a peak c.g. or point displacement, m. NaN where either case is not OK.
-    """
-    status = np.asarray(result.status)
-    C = status.shape[0]
-    ok = (status == OK) & (np.asarray(reference.status) == OK)
-    preload = np.abs(np.asarray(reference.static_isolator_load, dtype=float)).reshape(C, -1).max(axis=1)
-
-    def diff(name: str) -> tuple[np.ndarray, np.ndarray]:
-        a = np.asarray(getattr(result, name), dtype=float).reshape(C, -1)
-        b = np.asarray(getattr(reference, name), dtype=float).reshape(C, -1)
-        if a.shape[1] == 0:
-            return np.zeros(C), np.zeros(C)
-        with np.errstate(invalid="ignore"):
-            return np.abs(a - b).max(axis=1), np.abs(b).max(axis=1)
-
-    out: dict[str, np.ndarray] = {}
-    for name, floor in (
-        ("peak_displacement", DISPLACEMENT_FLOOR),
-        ("peak_point_displacement", DISPLACEMENT_FLOOR),
-        ("peak_rotation", DISPLACEMENT_FLOOR),
-        ("peak_isolator_force", FORCE_FLOOR * preload),
-    ):
-        num, big = diff(name)
-        out[name] = num / np.maximum(big, floor)
-    num, _ = diff("min_isolator_load")
-    out["min_isolator_load"] = num / np.maximum(preload, np.finfo(float).tiny)
-    num, _ = diff("settling_time")
-    out["settling_time"] = num
-    out["displacement_m"] = np.maximum(diff("peak_displacement")[0], diff("peak_point_displacement")[0])
-    return {k: np.where(ok, v, np.nan) for k, v in out.items()}
-
-
-def sizing_error(errors: Mapping[str, np.ndarray], relative: bool) -> np.ndarray:
-    """Per-case error a tolerance is checked against: the largest relative error of the sizing outputs
-    (1), or the largest absolute error of the peak displacements (m). NaN where a case is not OK."""
-    if relative:
-        return np.max(np.stack([np.asarray(errors[k]) for k in SIZING_OUTPUTS]), axis=0)
-    return np.asarray(errors["displacement_m"])
-
-
-COMPONENT_FLOOR = 1e-3
-"""Per-output relative tolerances: a component whose reference value is below this fraction of the largest
-reference value of its output is measured against that fraction (a peak that is almost zero has no
-meaningful relative error)."""
-SETTLING_FLOOR = 1e-3
-"""Per-output relative tolerance on the settling time: reference settling times below this (s) count as
-this."""
-
-
-def component_errors(
-    result: Any, reference: Any, tolerances: Mapping[str, tuple[float, bool]]
-) -> dict[str, np.ndarray]:
-    """Per case (C,), for each output named in ``tolerances`` (output -> (value, relative), as
-    :func:`studies.schema.parse_output_tolerance` gives them), the error of its worst component as a
-    fraction of its tolerance (1 = at the tolerance). NaN where either case is not OK.
-
-    A component is one axis of one point, isolator or the c.g. A relative error is ``|a - b| / |b|`` with
-    ``b`` the reference value of that component (at least :data:`COMPONENT_FLOOR` of the output's largest
-    component); the smallest and largest isolator loads are relative to that isolator's preload; the
-    settling time to the reference's (at least :data:`SETTLING_FLOOR` s). An absolute one is ``|a - b|``
-    in SI.
-    """
-    status = np.asarray(result.status)
-    C = status.shape[0]
-    ok = (status == OK) & (np.asarray(reference.status) == OK)
-    out: dict[str, np.ndarray] = {}
-    for name, (tol, relative) in tolerances.items():
-        a = np.asarray(getattr(result, name), dtype=float).reshape(C, -1)
-        b = np.asarray(getattr(reference, name), dtype=float).reshape(C, -1)
-        if a.shape[1] == 0:
-            out[name] = np.where(ok, 0.0, np.nan)
-            continue
-        with np.errstate(invalid="ignore", divide="ignore"):
-            err = np.abs(a - b)
-            if relative:
-                if name in ("min_isolator_load", "max_isolator_load"):
-                    scale = np.abs(np.asarray(reference.static_isolator_load, dtype=float)).reshape(C, -1)
-                elif name == "settling_time":
-                    scale = np.maximum(np.abs(b), SETTLING_FLOOR)
-                else:
-                    big = np.abs(b).max(axis=1, keepdims=True)
-                    scale = np.maximum(np.abs(b), np.maximum(COMPONENT_FLOOR * big, DISPLACEMENT_FLOOR))
-                err = err / np.maximum(scale, np.finfo(float).tiny)
-            out[name] = np.where(ok, err.max(axis=1) / tol, np.nan)
-    return out
-
-
-# ----------------------------------------------------------------------------------------------- choice
 @dataclass(frozen=True)
 class Choice:
     """The fidelity, integrator and step a study runs with, and why.
@@ -430,24 +310,13 @@ def _take_result(result: Any, index: np.ndarray) -> SimpleNamespace:
     return SimpleNamespace(**{k: np.asarray(v)[index] for k, v in arrays.items()})
 
 
-def _groups(study: Any) -> dict[tuple, list[int]]:
-    """Cases of a study by their categorical values (isolator types ...), in case order."""
-    design = study.design()
-    names = [n for n, t in zip(design.names, study.targets, strict=True) if t.categorical]
-    groups: dict[tuple, list[int]] = {}
-    keys = zip(*(design.values[n].tolist() for n in names), strict=True) if names else [()] * study.n_cases
-    for i, key in enumerate(keys):
-        groups.setdefault(tuple(key), []).append(i)
-    return groups
-
-
-def pilot_cases(study: Any, limit: int = PILOT_LIMIT, seed: int = 0) -> list[int]:
+def pilot_cases(study: Study, limit: int = PILOT_LIMIT, seed: int = 0) -> list[int]:
     """Cases of ``study`` to measure candidates on, found by a cheap screening run (lti, exact at
     :data:`SCREEN_STEP`, over at most :data:`SCREEN_LIMIT` cases, seeded). In order of priority: per group
     of categorical values (isolator types), the case that rotates most (the hardest for the cheaper
     levels); the case whose fastest mode is the fastest (the hardest for a fixed step); the case that moves
     most; the case with the least damped mode (the longest ringing). At most ``limit`` cases, sorted."""
-    groups = _groups(study)
+    groups = case_groups(study)
     n = study.n_cases
     if n <= SCREEN_LIMIT:
         screen = np.arange(n)
@@ -491,7 +360,7 @@ def _reference_choice(sim: Simulation, request: str) -> Choice:
     )
 
 
-def choose(study: Any) -> Choice:
+def choose(study: Study) -> Choice:
     """The fidelity, integrator and step ``study`` runs with (see the module docstring).
 
     An explicit simulation block is returned as it is; ``accuracy: reference`` needs no measurement; any
@@ -508,23 +377,23 @@ CHOICE_CACHE_SIZE = 64
 _CHOICES: dict[str, Choice] = {}
 
 
-def _definition_key(study: Any) -> str:
+def _definition_key(study: Study) -> str:
     return json.dumps(study.model_dump(mode="json"), sort_keys=True)
 
 
-def cached_choice(study: Any) -> Choice | None:
+def cached_choice(study: Study) -> Choice | None:
     """The choice made for this study definition earlier in this process, or None."""
     return _CHOICES.get(_definition_key(study))
 
 
-def remember_choice(study: Any, choice: Choice) -> None:
+def remember_choice(study: Study, choice: Choice) -> None:
     """Cache ``choice`` for this study definition (e.g. one a worker made)."""
     while len(_CHOICES) >= CHOICE_CACHE_SIZE:
         _CHOICES.pop(next(iter(_CHOICES)))
     _CHOICES[_definition_key(study)] = choice
 
 
-def _choose(study: Any) -> Choice:
+def _choose(study: Study) -> Choice:
     sim = study.simulation
     request = sim.request
     if request is None:
@@ -550,7 +419,7 @@ def choose_from_json(definition_json: str) -> Choice:
     return choose(study_from_json(definition_json))
 
 
-def resolved_definition(study: Any, choice: Choice) -> dict[str, Any]:
+def resolved_definition(study: Study, choice: Choice) -> dict[str, Any]:
     """The study's definition with the choice written into its simulation block (no accuracy request)."""
     definition = study.model_dump(mode="json")
     definition["simulation"] = {
@@ -564,7 +433,7 @@ def resolved_definition(study: Any, choice: Choice) -> dict[str, Any]:
     return definition
 
 
-def resolved_simulation(study: Any, choice: Choice | None = None) -> Simulation:
+def resolved_simulation(study: Study, choice: Choice | None = None) -> Simulation:
     """The simulation block ``study`` runs with: its own when explicit, else with the choice filled in
     (``choice`` default: :func:`choose`)."""
     sim = study.simulation
@@ -582,7 +451,7 @@ def resolved_simulation(study: Any, choice: Choice | None = None) -> Simulation:
     return Simulation.model_validate(data)
 
 
-def resolved_study(study: Any, choice: Choice | None = None) -> Any:
+def resolved_study(study: Study, choice: Choice | None = None) -> Study:
     """``study`` as it runs: itself when its simulation block is explicit, else the same study with the
     choice (default: :func:`choose`) written into its simulation block."""
     if study.simulation.request is None:
@@ -591,115 +460,9 @@ def resolved_study(study: Any, choice: Choice | None = None) -> Any:
 
 
 def recorded_choice(
-    study: Any, fidelity: str | None, integrator: str | None, dt: float | None
+    study: Study, fidelity: str | None, integrator: str | None, dt: float | None
 ) -> Choice | None:
     """The choice a runner recorded for ``study`` (catalog columns), or None when there is none yet."""
     if study.simulation.request is None or not (fidelity and integrator and dt):
         return None
     return Choice(study.simulation.request, fidelity, integrator, float(dt), reason="recorded by the runner")
-
-
-# ------------------------------------------------------------------------------------------- estimates
-def error_sample(
-    study: Any, n: int = ERROR_SAMPLE, seed: int = 0, limit: int = ERROR_SAMPLE_LIMIT
-) -> list[int]:
-    """A seeded sample of cases to rerun at the reference level: one per group of categorical values
-    (isolator types) first, then others up to ``n`` cases; at most ``limit``. Sorted."""
-    rng = np.random.default_rng(seed)
-    groups = list(_groups(study).values())
-    picked = [int(rng.choice(members)) for members in groups][:limit]
-    rest = np.setdiff1d(np.arange(study.n_cases), picked)
-    extra = max(0, min(n, limit) - len(picked))
-    if extra and rest.size:
-        picked += [int(c) for c in rng.choice(rest, min(extra, rest.size), replace=False)]
-    return sorted(picked)
-
-
-def sample_arrays(definition_json: str, case: int) -> dict[str, dict[str, np.ndarray]]:
-    """One sampled case of a study (JSON definition) run twice (a Dask task): with the study's own model
-    (``"ours"``, the numbers its chunk gives: a case's result does not depend on the batch it runs in)
-    and at the reference level sampled at the step that run used (``"reference"``)."""
-    study = study_from_json(definition_json)
-    sim = study.simulation
-    batch = study.batch(np.array([int(case)]))
-    ours = result_arrays(
-        simulate(batch, sim.fidelity, sim.integrator, dt=float(sim.dt), auto_step=sim.auto_step)
-    )
-    dt = float(ours["dt"][0]) if np.isfinite(ours["dt"][0]) else float(sim.dt)
-    reference = result_arrays(simulate(batch, *REFERENCE_PAIR, dt=dt, auto_step=sim.auto_step))
-    return {"ours": ours, "reference": reference}
-
-
-@dataclass(frozen=True)
-class ErrorEstimate:
-    """The largest error found per output on the sampled cases.
-
-    Attributes:
-        values: output -> largest error (1, or s for the settling time); NaN when no sampled case could be
-            compared.
-        worst_case: output -> the study case where it was found (None when none).
-        cases: the sampled study cases.
-        excluded: case -> why it could not be compared (the case or its reference rerun is not OK).
-        method: how the reference was run (and which sampled cases the stability guard sub-stepped).
-        sub_stepped: case -> the message of a sampled case the stability guard sub-stepped; such a case
-            is ``ok`` and compared like any other, so its (often larger) error is in ``values``.
-    """
-
-    values: dict[str, float]
-    worst_case: dict[str, int | None]
-    cases: tuple[int, ...]
-    excluded: dict[int, str]
-    method: str
-    sub_stepped: dict[int, str] = field(default_factory=dict)
-
-
-def estimate_errors(
-    study_arrays: Mapping[str, np.ndarray],
-    reference: Mapping[str, np.ndarray],
-    cases: Sequence[int],
-    outputs: Sequence[str] = ESTIMATED_OUTPUTS,
-    method: str = "",
-) -> ErrorEstimate:
-    """Largest error per output of the study's results (``study_arrays``: result arrays of the sampled
-    ``cases``, in that order) against their reference reruns (``reference``, same cases)."""
-    cases = tuple(int(c) for c in cases)
-    ours = SimpleNamespace(**{k: np.asarray(v) for k, v in study_arrays.items()})
-    ref = SimpleNamespace(**{k: np.asarray(v) for k, v in reference.items()})
-    errors = output_errors(ours, ref)
-    excluded = {}
-    for k, c in enumerate(cases):
-        if ours.status[k] != OK:
-            excluded[c] = f"the case is {STATUS_NAMES[int(ours.status[k])]}"
-        elif ref.status[k] != OK:
-            excluded[c] = f"its reference rerun is {STATUS_NAMES[int(ref.status[k])]}"
-    messages = [str(m) for m in np.asarray(study_arrays.get("message", [""] * len(cases))).reshape(-1)]
-    sub_stepped = {
-        c: m
-        for c, m, s in zip(cases, messages, ours.status, strict=True)
-        if s == OK and m.startswith(SUB_STEPPED)
-    }
-    if sub_stepped:
-        method = (
-            f"{method}; sampled cases {sorted(sub_stepped)} were sub-stepped by the stability guard and are "
-            "compared like the others"
-        ).lstrip("; ")
-    values, worst = {}, {}
-    for name in outputs:
-        e = np.asarray(errors[name])
-        if np.all(np.isnan(e)):
-            values[name], worst[name] = float("nan"), None
-        else:
-            k = int(np.nanargmax(e))
-            values[name], worst[name] = float(e[k]), cases[k]
-    return ErrorEstimate(values, worst, cases, excluded, method, sub_stepped)
-
-
-def exact_estimate(cases: Sequence[int], outputs: Sequence[str] = ESTIMATED_OUTPUTS) -> ErrorEstimate:
-    """The estimate of a study that ran at the reference level itself: zero by definition."""
-    return ErrorEstimate(
-        {k: 0.0 for k in outputs},
-        {k: None for k in outputs},
-        tuple(cases),
-        {},
-        "the study ran at the reference level (nonlinear, reference integrator)",
-    )

@@ -8,11 +8,10 @@ few changes no result. ``python -m benchmarks accuracy`` prints measured figures
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from isolab.studies.inputs.schema import DEFAULT_DT
+from isolab.studies.inputs.study import Study
 
 STEP_COST: dict[tuple[str, str], float] = {
     ("lti", "euler"): 0.65e-6,
@@ -37,12 +36,15 @@ UNKNOWN_DURATION = 10.0
 """Simulated time assumed for a study whose first case cannot be built, s."""
 
 
-def step_cost(fidelity: str, integrator: str) -> float:
-    """Engine time per step of one case, s (:data:`STEP_COST`)."""
+def step_cost(fidelity: str | None, integrator: str | None) -> float:
+    """Engine time per step of one case, s (:data:`STEP_COST`; a pair not chosen yet costs
+    :data:`UNKNOWN_STEP_COST`)."""
+    if fidelity is None or integrator is None:
+        return UNKNOWN_STEP_COST
     return STEP_COST.get((fidelity, integrator), UNKNOWN_STEP_COST)
 
 
-def estimate_seconds_per_case(study: Any) -> float:
+def estimate_seconds_per_case(study: Study) -> float:
     """Rough engine time per case of ``study``, s: :data:`CASE_OVERHEAD` plus ``duration / dt`` steps at
     :func:`step_cost` of its fidelity and integrator (the duration of its first case; a study that leaves the
     step to the accuracy chooser is taken at :data:`studies.schema.DEFAULT_DT`)."""
@@ -51,12 +53,12 @@ def estimate_seconds_per_case(study: Any) -> float:
     return CASE_OVERHEAD + steps * step_cost(sim.fidelity, sim.integrator)
 
 
-def _duration(study: Any) -> float:
+def _duration(study: Study) -> float:
     """Simulated time of the study's first case, s (``duration: auto`` depends on the motion)."""
     d = study.simulation.duration
     if isinstance(d, int | float):
         return float(d)
     try:
-        return float(np.max(study.batch(np.array([0])).duration))
+        return float(np.max(np.asarray(study.batch(np.array([0])).duration)))
     except Exception:  # sizing only: a case that cannot be built fails in its own chunk
         return UNKNOWN_DURATION

@@ -20,9 +20,9 @@ STEPPED = ("euler", "rk4", "exact")
 def entry_kernels(integrator: str | None) -> list[Any]:
     """The numba dispatchers a run with ``integrator`` calls from Python; every integrator's for None (a
     model still to be chosen)."""
-    from isolab.engine.dynamics import derivative
-    from isolab.engine.integrators.stepping import _ENTRIES
-    from isolab.engine.peaks import observe
+    from isolab.engine.integrators.stepping import ENTRIES as _ENTRIES
+    from isolab.engine.kernels.dynamics import derivative
+    from isolab.engine.kernels.peaks import observe
 
     if integrator in STEPPED:
         return [_ENTRIES[integrator]]

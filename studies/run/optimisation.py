@@ -42,12 +42,13 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from isolab.studies.inputs.study import Study
 from isolab.studies.quantities import output_values
 from isolab.studies.questions.criteria import add_criteria
 from isolab.studies.questions.designs import Design
 from isolab.studies.questions.goals import PENALTY, Goals, goal_values
 from isolab.studies.results.dataset import from_chunks, result_arrays, to_dataset
-from isolab.studies.results.store import atomic_path
+from isolab.studies.results.store import Store, atomic_path
 
 log = logging.getLogger(__name__)
 
@@ -444,9 +445,9 @@ def optimum_dataset(
 
 # ------------------------------------------------------------------------------------------ the runner
 def run_optimisation(
-    study: Any,
+    study: Study,
     run_json: str,
-    store: Any,
+    store: Store,
     client: Any,
     study_id: str,
     model_attrs: dict[str, Any],
@@ -473,18 +474,20 @@ def run_optimisation(
     The row's ``n_cases`` is the budget while it runs and the cases evaluated once done; ``n_done`` and
     ``n_failed`` follow the chunks, ``generation``/``generations`` the finished and planned generations.
     """
-    from isolab.studies.inputs.study import isolator_names, study_from_json
+    from isolab.studies.inputs.study import study_from_json, study_labels
     from isolab.studies.results.store import utc_now
     from isolab.studies.run.costs import estimate_seconds_per_case
     from isolab.studies.run.fanout import choose_chunk_size, plan_chunks, run_chunks
 
-    goals: Goals = study.goals
+    goals = study.goals
+    if goals is None:
+        raise ValueError(f"study {study_id}: its design is not optimize (no goals)")
     store.update(study_id, n_cases=goals.budget, generations=planned_generations(goals))
     base = {k: v for k, v in json.loads(run_json).items() if k not in ("design", "design_spec")}
     checks = study.design()
     first = study_from_json(json.dumps({**base, "design": _list_design(checks.values, checks.names)}))
     seconds_per_case = estimate_seconds_per_case(first)
-    iso_names, point_names = isolator_names(study.scene), [str(p) for p in study.scene.points]
+    iso_names, point_names = study_labels(study)
     counts = {"done": 0, "failed": 0}
     key_prefix = f"isolab-{study_id}"
 

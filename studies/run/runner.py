@@ -39,34 +39,30 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from isolab.studies.inputs.study import isolator_names, study_from_json
+from isolab.studies.inputs.study import Study, study_from_json, study_labels
 from isolab.studies.questions.criteria import add_criteria
-from isolab.studies.results.dataset import (
-    add_error_estimate,
-    failures,
-    from_chunks,
-    streamed_dataset,
-    to_dataset,
-)
-from isolab.studies.results.store import Store, StoreFull, copy_atomic, is_no_space, utc_now
+from isolab.studies.results.dataset import add_error_estimate, from_chunks, streamed_dataset, to_dataset
+from isolab.studies.results.store import Store, StoreFull, copy_atomic, failures, is_no_space, utc_now
 from isolab.studies.run.accuracy import (
+    Choice,
+    cached_choice,
+    choose,
+    choose_from_json,
+    remember_choice,
+    resolved_definition,
+)
+from isolab.studies.run.costs import estimate_seconds_per_case
+from isolab.studies.run.error_estimate import (
     ESTIMATED_OUTPUTS,
     OUTPUT_MEANING,
     OUTPUT_UNITS,
     REFERENCE_PAIR,
-    Choice,
     ErrorEstimate,
-    cached_choice,
-    choose,
-    choose_from_json,
     error_sample,
     estimate_errors,
     exact_estimate,
-    remember_choice,
-    resolved_definition,
     sample_arrays,
 )
-from isolab.studies.run.costs import estimate_seconds_per_case
 from isolab.studies.run.fanout import TASK_RETRIES, choose_chunk_size, plan_chunks, run_chunks, worker_threads
 from isolab.studies.run.optimisation import run_optimisation
 
@@ -75,36 +71,8 @@ log = logging.getLogger(__name__)
 Progress = Callable[[int, int], None]
 
 
-def study_labels(study: Any) -> tuple[list[str], list[str]]:
-    """(isolator names, point names) of a study's scene: :func:`studies.study.isolator_names` and the
-    points' own names."""
-    scene = study.scene
-    return isolator_names(scene), [str(p) for p in scene.points]
-
-
-def isolator_types(study: Any) -> list[str]:
-    """Isolator types (presets) a study involves: the values of every varied preset, plus the scene's
-    own group and per-mount presets where no parameter replaces them."""
-    design = study.design()
-    iso = study.scene.isolators
-    varied = {t.path: name for t, name in zip(study.targets, design.names, strict=True)}
-    types = {
-        str(v)
-        for path, name in varied.items()
-        if path.endswith("preset")
-        for v in np.unique(design.values[name])
-    }
-    group_used = iso.mounts is None or any(m.preset is None for m in iso.mounts)
-    if group_used and "isolators.preset" not in varied:
-        types.add(str(iso.preset))
-    for j, mount in enumerate(iso.mounts or []):
-        if mount.preset is not None and f"isolators.list.{j}.preset" not in varied:
-            types.add(str(mount.preset))
-    return sorted(types)
-
-
 def run_study(
-    study: Any,
+    study: Study,
     store: Store,
     client: Any,
     study_id: str | None = None,
@@ -139,23 +107,13 @@ def run_study(
     definition = study.model_dump(mode="json")
     # keys keep their order: the order of points in the definition is the order of the point labels
     definition_json = json.dumps(definition)
-    design = study.design()
     n_cases = int(study.planned_cases)  # an optimize design: its budget
     sim = study.simulation
     if study_id is None:
-        study_id = store.create(
-            definition,
-            name=study.name,
-            n_cases=n_cases,
-            parameters=list(design.names),
-            isolator_types=isolator_types(study),
-            fidelity=sim.fidelity,
-            integrator=sim.integrator,
-            dt=sim.dt,
-        )
-    row = store.get(study_id)  # exists, and the id is valid
+        study_id = store.register(study)
+    record = store.get(study_id)  # exists, and the id is valid
     store.restore_reserve()  # room to record a failure should the disk fill (see Store.release_reserve)
-    store.update(study_id, status="running", started=row["started"] or utc_now(), finished=None, error=None)
+    store.update(study_id, status="running", started=record.started or utc_now(), finished=None, error=None)
     try:
         # an accuracy request is resolved before the fan-out: the chunks run the chosen model
         choice = _choice(client, study, definition_json, cancel, f"isolab-{study_id}")
@@ -362,7 +320,7 @@ def _wait(client: Any, future: Any, cancel: threading.Event | None) -> Any:
 
 
 def _choice(
-    client: Any, study: Any, definition_json: str, cancel: threading.Event | None, key_prefix: str
+    client: Any, study: Study, definition_json: str, cancel: threading.Event | None, key_prefix: str
 ) -> Choice | None:
     """The fidelity, integrator and step to run with: the study's own, or measured for its accuracy
     request on a worker (:func:`studies.accuracy.choose`); None when cancelled meanwhile."""
@@ -380,7 +338,7 @@ def _choice(
     return choice
 
 
-def _submit_samples(client: Any, study: Any, run_json: str, key_prefix: str) -> tuple[list[int], list[Any]]:
+def _submit_samples(client: Any, study: Study, run_json: str, key_prefix: str) -> tuple[list[int], list[Any]]:
     """The error estimate's seeded sample of cases and the Dask futures of their
     :func:`studies.accuracy.sample_arrays` (none for a study that runs at the reference level itself)."""
     cases = error_sample(study)
@@ -397,12 +355,13 @@ def _submit_samples(client: Any, study: Any, run_json: str, key_prefix: str) -> 
 
 
 def _error_estimate(
-    client: Any, study: Any, samples: tuple[list[int], list[Any]], cancel: threading.Event | None
+    client: Any, study: Study, samples: tuple[list[int], list[Any]], cancel: threading.Event | None
 ) -> ErrorEstimate | None:
     """The largest error per output over the sampled cases (see :func:`_submit_samples`); None when
     ``cancel`` is set while waiting for them."""
     cases, futures = samples
-    outputs = [o for o in ESTIMATED_OUTPUTS if o != "peak_point_displacement" or len(study.scene.points) > 0]
+    _, points = study_labels(study)
+    outputs = [o for o in ESTIMATED_OUTPUTS if o != "peak_point_displacement" or len(points) > 0]
     if not futures:
         return exact_estimate(cases, outputs)
     try:
@@ -432,7 +391,7 @@ def _counts(arrays: dict[str, np.ndarray]) -> tuple[int, int]:
     return int(status.size), int(np.count_nonzero(status != 0))
 
 
-def _design_extra(study: Any) -> dict[str, Any]:
+def _design_extra(study: Study) -> dict[str, Any]:
     """What the design summary adds from the study's ``design:`` block (type, samples, seed; saltelli:
     second_order, which the sensitivity analysis reads)."""
     dump = study.design_spec.model_dump(mode="json")
@@ -467,7 +426,7 @@ def make_client(
 
 
 def run_local(
-    source: str | Path | dict | Any,
+    source: str | Path | dict[str, Any] | Study,
     out_path: str | Path,
     workers: int = 2,
     progress: Progress | None = None,
@@ -480,7 +439,7 @@ def run_local(
     in memory)."""
     from dask.distributed import Client, LocalCluster
 
-    from isolab.studies.inputs.study import Study, load_study
+    from isolab.studies.inputs.study import load_study
 
     if int(workers) < 1:
         raise ValueError(f"workers: {workers} must be at least 1")

@@ -2,21 +2,17 @@
 Python (``playwright install`` is never run: it downloads browsers, which this network does not allow).
 
 Shared by the browser tests and ``python -m tests.browser.screenshots``: start a real ``isolab serve``
-(:class:`ServiceProcess` of tests/reliability/live_service.py), open pages, walk the flows a person would.
+(:class:`benchmarks.live_service.ServiceProcess`), open pages, walk the flows a person would.
 """
 
 from __future__ import annotations
 
-import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent / "reliability"))
-
-from live_service import ServiceProcess  # noqa: E402
+from benchmarks.live_service import ServiceProcess
 
 CHROMIUM = Path("/usr/bin/chromium")
 """Debian's chromium package (``make browser`` installs it)."""

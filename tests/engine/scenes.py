@@ -152,9 +152,10 @@ def run_unguarded(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Run an integrator's kernel directly on the LTI level (no stability guard) at per-case ``steps`` (s):
     (status, peak |u| m)."""
-    from isolab.engine import model, peaks
-    from isolab.engine.dynamics import LTI
+    from isolab.engine import model
     from isolab.engine.integrators import INTEGRATORS
+    from isolab.engine.kernels import peaks
+    from isolab.engine.kernels.params import LTI
 
     C = b.n_cases
     P, W = model.params(b), model.work(b)

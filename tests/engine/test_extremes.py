@@ -311,7 +311,7 @@ def test_the_bound_is_tight_enough_to_catch_a_blow_up() -> None:
     # too large would fail it
     import yaml
 
-    data = yaml.safe_load(open(Path(schema.__file__).parents[1] / "examples" / "article-scriber.yaml"))
+    data = yaml.safe_load(open(Path(schema.__file__).parents[2] / "examples" / "article-scriber.yaml"))
     data["simulation"].update({"fidelity": "lti", "integrator": "exact", "duration": 6.0})
     ratios: list[float] = []
     assert check(data, ratios) == "ok"

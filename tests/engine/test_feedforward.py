@@ -14,7 +14,9 @@ import pytest
 from scenes import mount, scene, y_stage
 
 from isolab.engine import GRAVITY, model, simulate
-from isolab.engine.dynamics import advance_pieces, feedforward_forces, kernel_struct, stage_state
+from isolab.engine.kernels.excitation import advance_pieces, stage_state
+from isolab.engine.kernels.feedforward import feedforward_forces
+from isolab.engine.kernels.structs import kernel_struct
 from isolab.engine.scene import SceneError
 
 M, M_STAGE, A_STAGE = 10_000.0, 1000.0, 2 * GRAVITY

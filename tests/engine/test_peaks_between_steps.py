@@ -6,21 +6,21 @@ import numpy as np
 import pytest
 
 from isolab.engine import simulate
-from isolab.engine.peaks import _cubic_extremes, _hermite
+from isolab.engine.kernels.peaks import cubic_extremes, hermite
 from tests.engine.scenes import ONE_MODE_BASE, ONE_MODE_PUSH, ONE_MODE_W, one_mode
 
 
 def test_the_hermite_cubic_finds_the_extremum_of_a_sine_between_two_samples() -> None:
     # sin(w t) sampled at t0 = 0.6 and t1 = 1.8 rad / w (peak 1 at pi/2 between them), with its slopes
     w, t0, t1 = 1.0, 0.6, 1.8
-    c = _hermite(np.sin(w * t0), w * np.cos(w * t0), np.sin(w * t1), w * np.cos(w * t1), t1 - t0)
-    lo, hi = _cubic_extremes(*c)
+    c = hermite(np.sin(w * t0), w * np.cos(w * t0), np.sin(w * t1), w * np.cos(w * t1), t1 - t0)
+    lo, hi = cubic_extremes(*c)
     assert max(np.sin(t0), np.sin(t1)) < 0.98  # the samples alone miss the peak by 2 % and more
     assert hi == pytest.approx(1.0, abs=2e-3) and lo == hi  # one interior maximum
     # a cubic with two stationary points inside (0, 1): s (s - 0.5)(s - 1) has them at 0.5 -+ 0.2887
-    lo, hi = _cubic_extremes(0.0, 0.5, -1.5, 1.0)
+    lo, hi = cubic_extremes(0.0, 0.5, -1.5, 1.0)
     assert hi == pytest.approx(np.sqrt(3) / 36) and lo == pytest.approx(-np.sqrt(3) / 36)
-    assert _cubic_extremes(0.0, 1.0, 0.0, 0.0) == (np.inf, -np.inf)  # monotonic: none inside
+    assert cubic_extremes(0.0, 1.0, 0.0, 0.0) == (np.inf, -np.inf)  # monotonic: none inside
 
 
 @pytest.mark.parametrize("zeta", [0.02, 0.2])

@@ -11,7 +11,9 @@ import pytest
 from scenes import box_inertia, mount, scene, y_stage
 
 from isolab.engine import GRAVITY, model, simulate
-from isolab.engine.dynamics import NONLINEAR, accel, kernel_struct
+from isolab.engine.kernels.dynamics import accel
+from isolab.engine.kernels.params import NONLINEAR
+from isolab.engine.kernels.structs import kernel_struct
 
 M = 10_000.0
 SIZE = (2.6, 4.2, 0.34)

@@ -94,8 +94,8 @@ def test_split_step_maps_compose_to_the_full_step() -> None:
 
 
 def test_linear_output_map_gives_the_general_observers_peaks() -> None:
-    """A recorded case is observed by engine.peaks.observe, the others through the output map: the same
-    case both ways gives the same peaks, loads, deflections, RMS and settling to round-off, at every
+    """A recorded case is observed by engine.kernels.peaks.observe, the others through the output map: the
+    same case both ways gives the same peaks, loads, deflections, RMS and settling to round-off, at every
     linear level and method."""
     b, _ = scene_batch(load_scene(ARTICLE))
     b.duration[:] = 3.0

@@ -7,7 +7,10 @@ import pytest
 from scenes import scene, y_stage
 
 from isolab.engine import model
-from isolab.engine.dynamics import FIDELITIES, NONLINEAR, advance_pieces, derivative, kernel_struct
+from isolab.engine.kernels.dynamics import derivative
+from isolab.engine.kernels.excitation import advance_pieces
+from isolab.engine.kernels.params import FIDELITIES, NONLINEAR
+from isolab.engine.kernels.structs import kernel_struct
 
 
 def _batch():

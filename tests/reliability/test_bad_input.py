@@ -18,8 +18,8 @@ from typing import Any
 
 import httpx
 import pytest
-from live_service import quick_scene, thread_server
 
+from benchmarks.live_service import quick_scene, thread_server
 from isolab.service.api.app import create_app
 from isolab.service.api.request_limits import MAX_JSON_DEPTH
 from isolab.service.settings import Settings

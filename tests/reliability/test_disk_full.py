@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 from dask.distributed import WorkerPlugin
 from fastapi.testclient import TestClient
-from live_service import quick_scene, wait_finished
 
+from benchmarks.live_service import quick_scene, wait_finished
 from isolab.service.api.app import create_app
 from isolab.service.settings import Settings
 

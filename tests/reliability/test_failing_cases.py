@@ -12,8 +12,8 @@ from typing import Any
 
 import httpx
 import pytest
-from live_service import quick_scene, thread_server, wait_finished
 
+from benchmarks.live_service import quick_scene, thread_server, wait_finished
 from isolab.service.api.app import create_app
 from isolab.service.settings import Settings
 from isolab.studies.inputs.definitions import DefinitionError, check_definition

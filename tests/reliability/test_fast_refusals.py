@@ -14,8 +14,8 @@ from typing import Any
 
 import httpx
 import pytest
-from live_service import quick_scene, thread_server
 
+from benchmarks.live_service import quick_scene, thread_server
 from benchmarks.refusals import post_and_probe
 from isolab.service.api.app import create_app
 from isolab.service.settings import Settings

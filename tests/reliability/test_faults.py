@@ -18,8 +18,8 @@ import pytest
 import xarray as xr
 from dask.distributed import WorkerPlugin
 from fastapi.testclient import TestClient
-from live_service import ServiceProcess, quick_scene, wait_finished
 
+from benchmarks.live_service import ServiceProcess, quick_scene, wait_finished
 from isolab.engine import simulate
 from isolab.service.api.app import create_app
 from isolab.service.settings import Settings

@@ -25,10 +25,10 @@ import pytest
 import schemathesis
 from fastapi.testclient import TestClient
 from hypothesis import HealthCheck, settings
-from live_service import quick_scene
 from schemathesis.config import SchemathesisConfig
 from starlette.types import Receive, Scope, Send
 
+from benchmarks.live_service import quick_scene
 from isolab.service.api.app import create_app
 from isolab.service.settings import Settings
 

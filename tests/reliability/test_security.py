@@ -12,8 +12,8 @@ from typing import Any
 
 import httpx
 import pytest
-from live_service import quick_scene, thread_server
 
+from benchmarks.live_service import quick_scene, thread_server
 from isolab.service.api.app import create_app
 from isolab.service.api.schemas import EXAMPLE_CALIBRATION, EXAMPLE_COMPARISON, EXAMPLE_STUDY_TEXT
 from isolab.service.settings import Settings

@@ -14,8 +14,8 @@ from pathlib import Path
 import httpx
 import pytest
 from fastapi.testclient import TestClient
-from live_service import ISOLAB, ServiceProcess, free_port
 
+from benchmarks.live_service import ServiceProcess, free_port, serve_command
 from isolab.service.api.app import create_app
 from isolab.service.settings import Settings
 from isolab.studies.results.store import StoreInUse, StoreLock
@@ -55,9 +55,13 @@ def test_the_store_lock_is_one_process_at_a_time_and_dies_with_its_holder(tmp_pa
 
 
 def serve(data: Path) -> subprocess.Popen:
-    cmd = [str(ISOLAB), "serve", "--port", str(free_port()), "--workers", "1", "--data", str(data)]
+    """``isolab serve`` on ``data`` with its output to read (it is expected to refuse to start)."""
     return subprocess.Popen(
-        cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True
+        serve_command(free_port(), data, workers=1),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
     )
 
 

@@ -6,18 +6,15 @@ The server runs in a thread on 127.0.0.1 (a free port) with a 2-worker LocalClus
 from __future__ import annotations
 
 import copy
-import socket
-import threading
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-import uvicorn
 import xarray as xr
 import yaml
 from typer.testing import CliRunner
 
+from benchmarks.live_service import free_port, thread_server
 from isolab.engine import simulate
 from isolab.service.api.app import create_app
 from isolab.service.api.schemas import EXAMPLE_SCENE
@@ -31,28 +28,10 @@ pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `
 G = 9.80665
 
 
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @pytest.fixture(scope="module")
 def url(tmp_path_factory: pytest.TempPathFactory):
-    port = free_port()
-    app = create_app(Settings(data_dir=tmp_path_factory.mktemp("data"), workers=2))
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
-    thread = threading.Thread(target=server.run, name="uvicorn", daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 90
-    while not server.started:
-        assert thread.is_alive(), "the server stopped while starting"
-        assert time.monotonic() < deadline, "the server did not start"
-        time.sleep(0.1)
-    yield f"http://127.0.0.1:{port}"
-    server.should_exit = True
-    thread.join(60)
-    assert not thread.is_alive()
+    with thread_server(create_app(Settings(data_dir=tmp_path_factory.mktemp("data"), workers=2))) as url:
+        yield url
 
 
 @pytest.fixture(scope="module")
@@ -81,7 +60,9 @@ def study_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def done(url: str, study_file: Path) -> dict:
     with Client(url) as api:
         accepted = api.submit(study_file)
-        final = api.wait(accepted["id"], progress=True, poll=0.2, timeout=60)
+        polled: list[dict] = []
+        final = api.wait(accepted["id"], progress=polled.append, poll=0.2, timeout=60)
+    assert polled[-1] == final and all(p["progress"]["total"] == 6 for p in polled)
     return {"id": accepted["id"], "accepted": accepted, "final": final}
 
 
@@ -178,7 +159,7 @@ def test_delete_through_the_client(url: str, study_file: Path) -> None:
     definition["name"] = "client-delete"
     with Client(url) as api:
         sid = api.submit(definition)["id"]
-        api.wait(sid, progress=False, poll=0.1, timeout=60)
+        api.wait(sid, poll=0.1, timeout=60)
         api.delete(sid)
         with pytest.raises(ClientError) as err:
             api.status(sid)

@@ -14,13 +14,13 @@ import pytest
 from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
+from benchmarks.live_service import wait_finished
 from isolab.service.api.app import create_app
 from isolab.service.api.schemas import EXAMPLE_SCENE
 from isolab.service.cli import app as cli_app
 from isolab.service.client import Client, sensitivity_frame
 from isolab.service.settings import Settings
 from isolab.studies.answers import sensitivity as sensitivity_module
-from tests.reliability.live_service import wait_finished
 
 pytestmark = pytest.mark.slow  # a cluster of its own
 

@@ -20,17 +20,9 @@ from isolab.studies.inputs.study import Study, load_scene, load_study, scene_bat
 from isolab.studies.results.dataset import error_estimate
 from isolab.studies.results.store import Store
 from isolab.studies.run import accuracy
-from isolab.studies.run.accuracy import (
-    ESTIMATED_OUTPUTS,
-    choose,
-    choose_for_batch,
-    error_sample,
-    output_errors,
-    pilot_cases,
-    resolved_simulation,
-    sizing_error,
-)
+from isolab.studies.run.accuracy import choose, choose_for_batch, pilot_cases, resolved_simulation
 from isolab.studies.run.costs import STEP_COST
+from isolab.studies.run.error_estimate import ESTIMATED_OUTPUTS, error_sample, output_errors, sizing_error
 
 STEPS = (5e-4, 1e-3, 2e-3, 5e-3)  # a short ladder: the truth at 0.5 ms keeps the tests fast
 

@@ -13,12 +13,8 @@ from isolab.engine import simulate
 from isolab.studies.inputs.schema import Simulation
 from isolab.studies.inputs.study import load_scene, scene_batch
 from isolab.studies.results.dataset import result_arrays
-from isolab.studies.run.accuracy import (
-    choose_for_batch,
-    component_errors,
-    estimate_errors,
-    request_output_tolerances,
-)
+from isolab.studies.run.accuracy import choose_for_batch, request_output_tolerances
+from isolab.studies.run.error_estimate import component_errors, estimate_errors
 
 PEAKS = (
     "peak_displacement",

@@ -13,11 +13,10 @@ from isolab.engine import simulate
 from isolab.service.api.schemas import EXAMPLE_SCENE
 from isolab.studies.answers.comparisons import COST_ORDER, compare, comparison_frame, recommend
 from isolab.studies.inputs.schema import error_messages
-from isolab.studies.inputs.study import load_scene, scene_batch, validate_study
+from isolab.studies.inputs.study import load_scene, scene_batch, study_labels, validate_study
 from isolab.studies.questions.criteria import Criteria, add_criteria, criterion_margin, margins
 from isolab.studies.results.cases import case_table, filter_mask, parse_filter
 from isolab.studies.results.dataset import to_dataset
-from isolab.studies.run.runner import study_labels
 
 
 def scene(**criteria) -> dict:
@@ -186,7 +185,7 @@ def test_meets_criteria_is_a_case_table_column_to_filter_on(grid_dataset) -> Non
 def test_criteria_round_trip_through_netcdf(grid_dataset, tmp_path) -> None:
     import xarray as xr
 
-    from isolab.studies.results.dataset import netcdf_encoding
+    from isolab.studies.results.store import netcdf_encoding
 
     ds, _ = grid_dataset
     path = tmp_path / "c.nc"

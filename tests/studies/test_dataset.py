@@ -184,6 +184,32 @@ def test_settling_per_point_mount_deflection_and_largest_load_are_stored_and_tab
     assert "max_isolator_load_max" not in old.data and "point_settling_time_tool" not in old.data
 
 
+def test_the_output_catalogue_describes_every_stored_output_and_its_columns() -> None:
+    from isolab.engine.results import OUTPUTS
+    from isolab.studies.answers.comparisons import criterion
+    from isolab.studies.results.cases import NOT_TABULATED, case_table
+
+    design, t, m = grid_design()
+    ds = to_dataset(fake_result(t, m), design, isolator_names=ISOLATORS, point_names=POINTS, attrs={})
+    stored = [str(v) for v in ds.data_vars if v not in ("status", "message")]
+    assert stored == list(OUTPUTS)  # the catalogue's order, the step last
+    for name, spec in OUTPUTS.items():
+        assert ds[name].dims[2:] == spec.dims
+        assert (ds[name].attrs["units"], ds[name].attrs["long_name"]) == (spec.unit, spec.long_name)
+        assert (ds[name].encoding.get("dtype") == "int8") == spec.flag
+    table = case_table(ds)
+    tabled = set(table.outputs.values())
+    assert tabled == set(OUTPUTS) - NOT_TABULATED
+    for column, name in table.outputs.items():
+        assert table.units[column] == OUTPUTS[name].unit
+        assert table.kinds[column] == ("bool" if OUTPUTS[name].flag else "number")
+    # a comparison judges each output's summary columns as the catalogue judges the output
+    assert criterion(table, "min_isolator_load_min") == "highest"
+    assert criterion(table, "liftoff_any") == "false"
+    assert criterion(table, "peak_isolator_force_z") == "lowest"
+    assert criterion(table, "settled") is None and criterion(table, "status") is None
+
+
 def test_sampled_design_has_a_case_dimension_with_parameter_coordinates() -> None:
     rng = np.random.default_rng(3)
     masses = rng.uniform(200.0, 2000.0, 7)

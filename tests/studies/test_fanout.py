@@ -19,10 +19,10 @@ from distributed import Client, LocalCluster
 from isolab.engine import __version__ as engine_version
 from isolab.engine import simulate
 from isolab.engine.results import FAILED, OK, UNSTABLE
-from isolab.studies.run import fanout, runner
-from isolab.studies.inputs.study import load_study
+from isolab.studies.inputs.study import load_study, study_labels
 from isolab.studies.results.dataset import to_dataset
 from isolab.studies.results.store import Store
+from isolab.studies.run import fanout, runner
 from isolab.studies.run.fanout import (
     CHUNKS_PER_WORKER,
     FanoutError,
@@ -35,7 +35,7 @@ from isolab.studies.run.fanout import (
     run_chunk,
     run_chunks,
 )
-from isolab.studies.run.runner import finish_study, make_client, run_local, run_study, study_labels
+from isolab.studies.run.runner import finish_study, make_client, run_local, run_study
 
 pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
 

@@ -22,16 +22,16 @@ from isolab.studies.answers.tuning import TUNING_RANGES
 from isolab.studies.inputs.definitions import DefinitionError, check_definition, stored_definition
 from isolab.studies.inputs.study import load_study, validate_study
 from isolab.studies.quantities import output_values
-from isolab.studies.questions.designs import Factor
+from isolab.studies.questions.designs import Design, Factor
 from isolab.studies.questions.goals import (
     PENALTY,
     Constraint,
     Goals,
     Objective,
     goal_values,
-    template_dataset,
 )
 from isolab.studies.results.cases import case_table, filter_mask, parse_filter
+from isolab.studies.results.dataset import failed_arrays, from_chunks, to_dataset
 from isolab.studies.results.store import Store
 from isolab.studies.run.optimisation import GENERATION_FILE, Journal, non_dominated, optimise
 from isolab.studies.run.runner import run_study
@@ -427,7 +427,17 @@ def test_an_optimisation_through_rest_reports_generations_and_filters_its_front(
 def test_a_failed_case_is_infeasible_with_the_penalty_never_nan() -> None:
     study = check_definition(optimize_study(), 1000)
     g = study.goals
-    ds = template_dataset(list(g.factors), ["m0", "m1", "m2", "m3"], ["tool", "camera"])  # its case failed
+    failed = from_chunks({0: failed_arrays(1, "failed")}, [np.arange(1)], n_isolators=4, n_points=2)
+    factors = list(g.factors)
+    design = Design(
+        "sampled",
+        [f.name for f in factors],
+        {f.name: np.array([f.low]) for f in factors},
+        {},
+        {f.name: f.path for f in factors},
+        {f.name: f.unit for f in factors},
+    )
+    ds = to_dataset(failed, design, isolator_names=["m0", "m1", "m2", "m3"], point_names=["tool", "camera"])
     F, G = goal_values(ds, g)
     assert F.shape == (1, 1) and G.shape == (1, 2)
     assert (F == PENALTY).all() and (G == PENALTY).all()
@@ -442,3 +452,20 @@ def test_constraint_values_are_relative_to_their_bound(whole) -> None:
     np.testing.assert_allclose(F[:, 0], output_values(ds, "settling_time.tool").values)
     np.testing.assert_allclose(G[:, 0], 0.0)  # every case ran ok
     np.testing.assert_allclose(G[:, 1], (tool_y - 4e-3) / 4e-3)
+
+
+def test_goals_read_the_quantities_a_dataset_will_hold_from_the_catalogue() -> None:
+    from isolab.studies.quantities import quantity_names
+    from isolab.studies.questions.criteria import Criteria, add_criteria
+    from isolab.studies.questions.goals import quantity_layout
+
+    criteria = Criteria.model_validate({"tool": {"displacement": "10 um"}, "isolators": {"no_liftoff": True}})
+    failed = from_chunks({0: failed_arrays(1, "failed")}, [np.arange(1)], n_isolators=2, n_points=1)
+    design = Design("sampled", ["x"], {"x": np.array([0.0])}, {}, {"x": "stages.y.mass"}, {"x": "kg"})
+    ds = add_criteria(to_dataset(failed, design, isolator_names=["m0", "m1"], point_names=["tool"]), criteria)
+    layout = quantity_layout(["m0", "m1"], ["tool"], criteria)
+    assert list(layout) == quantity_names(ds)
+    for name, dims in layout.items():
+        assert list(dims) == [str(d) for d in ds[name].dims if d != "case"]
+        for dim, labels in dims.items():
+            assert labels == [str(v) for v in ds[dim].values]

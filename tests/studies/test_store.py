@@ -17,7 +17,7 @@ import xarray as xr
 from isolab.engine.results import OK, UNSTABLE, SimulationResult
 from isolab.studies.questions.designs import Design
 from isolab.studies.results.dataset import to_dataset
-from isolab.studies.results.store import Store, StudyNotFound, check_id, write_netcdf
+from isolab.studies.results.store import Store, StudyFilter, StudyNotFound, check_id, write_netcdf
 
 ISOLATORS = ["a", "b", "c", "d"]
 POINTS = ["tool"]
@@ -272,27 +272,36 @@ def test_catalog_list_filters_in_sql(store: Store) -> None:
         ("alpha", "failed"),
         ("alpha", "done"),
     ]  # newest first
-    assert names(store.list(name="alpha")) == [("alpha", "failed"), ("alpha", "done")]
-    assert names(store.list(status="done")) == [("beta", "done"), ("alpha", "done")]
-    assert names(store.list(isolator_type="active")) == [("beta", "running"), ("alpha", "failed")]
-    assert names(store.list(isolator_type="air", status="done")) == [("alpha", "done")]
-    assert names(store.list(created_after=t0 + dt.timedelta(days=2))) == [
+    assert names(store.list(StudyFilter(name="alpha"))) == [("alpha", "failed"), ("alpha", "done")]
+    assert names(store.list(StudyFilter(status="done"))) == [("beta", "done"), ("alpha", "done")]
+    assert names(store.list(StudyFilter(isolator_type="active"))) == [
+        ("beta", "running"),
+        ("alpha", "failed"),
+    ]
+    assert names(store.list(StudyFilter(isolator_type="air", status="done"))) == [("alpha", "done")]
+    assert names(store.list(StudyFilter(created_after=t0 + dt.timedelta(days=2)))) == [
         ("gamma", "queued"),
         ("beta", "running"),
         ("beta", "done"),
     ]
-    assert names(store.list(created_after="2030-05-02T00:00:00Z", created_before="2030-05-03T12:00:00")) == [
+    assert names(
+        store.list(StudyFilter(created_after="2030-05-02T00:00:00Z", created_before="2030-05-03T12:00:00"))
+    ) == [
         ("beta", "done"),
         ("alpha", "failed"),
     ]
     assert names(store.list(limit=2)) == [("gamma", "queued"), ("beta", "running")]
     assert names(store.list(limit=2, offset=2)) == [("beta", "done"), ("alpha", "failed")]
     assert names(store.list(limit=2, offset=4)) == [("alpha", "done")]
-    assert store.count() == 5 and store.count(isolator_type="air") == 2 and store.count(name="nope") == 0
+    assert (
+        store.count() == 5
+        and store.count(StudyFilter(isolator_type="air")) == 2
+        and store.count(StudyFilter(name="nope")) == 0
+    )
     with pytest.raises(ValueError, match="status"):
-        store.list(status="nope")
+        store.list(StudyFilter(status="nope"))
     with pytest.raises(ValueError, match="created_after"):
-        store.list(created_after="yesterday")
+        store.list(StudyFilter(created_after="yesterday"))
     with pytest.raises(ValueError, match="limit"):
         store.list(limit=0)
 
@@ -306,7 +315,7 @@ def test_listing_never_opens_netcdf(store: Store, monkeypatch) -> None:
 
     monkeypatch.setattr(xr, "open_dataset", forbidden)
     monkeypatch.setattr(netCDF4, "Dataset", forbidden)
-    assert [r["id"] for r in store.list(isolator_type="air")] == [sid]
+    assert [r["id"] for r in store.list(StudyFilter(isolator_type="air"))] == [sid]
 
 
 def test_delete_removes_row_file_and_chunks(store: Store) -> None:
@@ -341,7 +350,7 @@ def test_concurrent_writers_from_threads(store: Store) -> None:
     for t in threads:
         t.join()
     assert errors == []
-    assert store.count() == 61 and store.count(name="t3") == 10
+    assert store.count() == 61 and store.count(StudyFilter(name="t3")) == 10
 
 
 # ----------------------------------------------------------------------------------------- ids
@@ -439,3 +448,25 @@ def test_a_catalog_from_before_the_step_column_is_migrated(tmp_path: Path) -> No
     sid = s.create({}, name="new", n_cases=1, fidelity="lti", integrator="exact", dt=0.002)
     s.update("a" * 32, dt=0.001)
     assert s.get(sid)["dt"] == 0.002 and s.get("a" * 32)["dt"] == 0.001
+
+
+def test_a_study_registers_as_a_typed_record_that_reads_as_its_row(store: Store) -> None:
+    from isolab.studies.inputs.study import load_study
+    from isolab.studies.results.records import COLUMNS, StudyRecord
+
+    study = load_study(Path(__file__).parents[2] / "studies" / "examples" / "isolator-comparison.yaml")
+    sid = store.register(study)
+    record = store.get(sid)
+    assert isinstance(record, StudyRecord) and record.id == sid and record.status == "queued"
+    assert record.name == "isolator-comparison" and record.n_cases == 12 and record.n_done == 0
+    assert record.parameters == ["isolator_type", "stage_y_acceleration"]
+    assert record.isolator_types == ["active", "air", "elastomer"]
+    assert (record.fidelity, record.integrator, record.dt) == ("ltv", "rk4", 0.001)
+    assert record.definition["name"] == "isolator-comparison" and record.generation is None
+    # the record reads as the catalog row it is
+    assert record["n_cases"] == 12 and record.get("generations") is None and list(record) == list(COLUMNS)
+    assert dict(record)["isolator_types"] == ["active", "air", "elastomer"]
+    with pytest.raises(KeyError):
+        record["nope"]
+    listed = store.list(StudyFilter(isolator_type="elastomer", status="queued"))
+    assert listed == [record] and store.count(StudyFilter(isolator_type="air")) == 1

@@ -19,13 +19,12 @@ from isolab.studies.questions.designs import Design
 from isolab.studies.results.dataset import (
     add_error_estimate,
     failed_arrays,
-    failures,
     from_chunks,
     result_arrays,
     streamed_dataset,
     to_dataset,
 )
-from isolab.studies.results.store import Store, write_netcdf
+from isolab.studies.results.store import Store, failures, write_netcdf
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_dataset import ISOLATORS, POINTS, fake_result, grid_design  # noqa: E402

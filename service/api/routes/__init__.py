@@ -1,23 +1,26 @@
 """HTTP routers of the isolab service and the dependencies they share.
 
 Each module in this package defines one ``router = APIRouter(...)``; :func:`service.app.create_app`
-includes them. Handlers reach the application's state through the dependencies below.
+includes them. Handlers reach the application's state through the typed dependencies below
+(``store: StoreDep``, ``settings: SettingsDep``, ``jobs: JobsDep``...), never through ``request.app.state``.
+The studies layer's refusals (a definition, a case query) are answered by :mod:`isolab.service.api.errors`:
+handlers let them rise.
 """
 
 from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Annotated, Any, TypeVar
 
 from anyio import CapacityLimiter, to_thread
 from distributed import Client
-from fastapi import HTTPException, Request
+from fastapi import Depends, HTTPException, Request
 
 from isolab.service.api.jobs import JobQueue
 from isolab.service.api.schemas import MessageBody, ValidationErrorBody
 from isolab.service.settings import Settings
-from isolab.studies.results.store import Store, StudyNotFound
+from isolab.studies.results.store import Store, StudyNotFound, StudyRecord
 
 T = TypeVar("T")
 
@@ -43,9 +46,14 @@ async def app_settings(request: Request) -> Settings:
     return request.app.state.settings
 
 
+async def dask_client_if_running(request: Request) -> Client | None:
+    """FastAPI dependency: the app's Dask client, or None while the app's lifespan does not run."""
+    return getattr(request.app.state, "dask", None)
+
+
 async def dask_client(request: Request) -> Client:
     """FastAPI dependency: the app's Dask client (one per app, opened by its lifespan)."""
-    client = getattr(request.app.state, "dask", None)
+    client = await dask_client_if_running(request)
     if client is None:
         raise RuntimeError(
             "the Dask client is not running: serve the app made by create_app() with its lifespan"
@@ -74,7 +82,19 @@ def _jobs(request: Request) -> JobQueue:
     return jobs
 
 
-# ------------------------------------------------------------------------------ domain errors -> HTTP
+SettingsDep = Annotated[Settings, Depends(app_settings)]
+"""A handler's parameter: the app's settings."""
+StoreDep = Annotated[Store, Depends(study_store)]
+"""A handler's parameter: the app's study store."""
+JobsDep = Annotated[JobQueue, Depends(job_queue)]
+"""A handler's parameter: the app's study queue."""
+DaskDep = Annotated[Client, Depends(dask_client)]
+"""A handler's parameter: the app's Dask client (500 when the app runs without its lifespan)."""
+DaskIfRunningDep = Annotated[Client | None, Depends(dask_client_if_running)]
+"""A handler's parameter: the app's Dask client, or None (what ``/health`` reports on)."""
+
+
+# ------------------------------------------------------------------------------------ HTTP answers
 Responses = dict[int | str, dict[str, Any]]
 NOT_FOUND: Responses = {
     404: {"model": MessageBody, "description": "no study with this id (or a malformed id)"}
@@ -91,20 +111,15 @@ def invalid(loc: list[str | int], msg: str, kind: str = "value_error") -> HTTPEx
     return HTTPException(status_code=422, detail=[{"loc": loc, "msg": msg, "type": kind}])
 
 
-def unprocessable(details: list[dict[str, Any]]) -> HTTPException:
-    """A 422 carrying the details of a :class:`~isolab.studies.inputs.definitions.DefinitionError`."""
-    return HTTPException(status_code=422, detail=details)
-
-
-def study_row(store: Store, study_id: str) -> dict[str, Any]:
-    """The catalog row of a study; 404 when there is none (or the id is malformed)."""
+def study_row(store: Store, study_id: str) -> StudyRecord:
+    """The catalog record of a study; 404 when there is none (or the id is malformed)."""
     try:
         return store.get(study_id)
     except (StudyNotFound, ValueError):
         raise HTTPException(status_code=404, detail=f"no study with id {study_id!r}") from None
 
 
-def require_done(row: dict[str, Any]) -> None:
+def require_done(row: StudyRecord) -> None:
     """409 unless the study is done, saying where it is."""
     if row["status"] != "done":
         detail = f"study {row['id']} is {row['status']}"

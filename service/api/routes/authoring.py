@@ -8,17 +8,17 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Body, Depends, HTTPException, Request, Response
+from fastapi import APIRouter, Body, HTTPException, Request, Response
 from fastapi import Path as PathParam
 
 from isolab.service.api.routes import (
     NOT_DONE,
     NOT_FOUND,
-    app_settings,
+    SettingsDep,
+    StoreDep,
     require_done,
     run_heavy,
     study_row,
-    study_store,
 )
 from isolab.service.api.routes.studies import StudyId
 from isolab.service.api.schemas import (
@@ -32,9 +32,7 @@ from isolab.service.api.schemas import (
     StudyText,
     TextValidationErrorBody,
 )
-from isolab.service.settings import Settings
 from isolab.studies.authoring.authoring import (
-    ExampleNotFound,
     check_text,
     definition_yaml,
     design_summary,
@@ -42,8 +40,6 @@ from isolab.studies.authoring.authoring import (
     example_text,
     stored_error_estimate,
 )
-from isolab.studies.inputs.definitions import DefinitionError
-from isolab.studies.results.store import Store
 
 router = APIRouter(tags=["authoring"])
 
@@ -62,10 +58,7 @@ def list_examples() -> ExampleList:
 )
 def get_example(name: Annotated[str, PathParam(description="example name, e.g. isolator-comparison")]):
     """The example as YAML text with its scene file inlined under ``scene:``, ready to check and submit."""
-    try:
-        return ExampleStudy(name=name, text=example_text(name))
-    except ExampleNotFound as err:
-        raise HTTPException(status_code=404, detail=str(err)) from None
+    return ExampleStudy(name=name, text=example_text(name))
 
 
 @router.post(
@@ -81,6 +74,7 @@ def get_example(name: Annotated[str, PathParam(description="example name, e.g. i
 )
 async def validate_study_text(
     request: Request,
+    settings: SettingsDep,
     body: StudyText = Body(
         openapi_examples={
             "grid": {
@@ -89,15 +83,11 @@ async def validate_study_text(
             }
         }
     ),
-    settings: Settings = Depends(app_settings),
 ) -> StudyCheck:
     """Check the study as ``POST /studies`` would (nothing is stored or run): answer the definition as
     data (submit it as it is), the case count and a rough run time; or 422 with one detail per problem,
     each placed at its line of the text."""
-    try:
-        answer = await run_heavy(request, check_text, body.text, settings.max_cases, settings.workers)
-    except DefinitionError as err:
-        raise HTTPException(status_code=422, detail=err.details) from None
+    answer = await run_heavy(request, check_text, body.text, settings.max_cases, settings.workers)
     return StudyCheck(**answer)
 
 
@@ -107,7 +97,7 @@ async def validate_study_text(
     responses={**NOT_FOUND, 200: {"content": {"application/yaml": {}}, "description": "YAML text"}},
     summary="A study's stored definition as YAML",
 )
-def get_definition_yaml(study_id: StudyId, store: Store = Depends(study_store)) -> Response:
+def get_definition_yaml(study_id: StudyId, store: StoreDep) -> Response:
     """The definition as stored (parameters as written, the scene in SI with defaults filled in)."""
     row = study_row(store, study_id)
     return Response(definition_yaml(row["definition"]), media_type="application/yaml; charset=utf-8")
@@ -119,7 +109,7 @@ def get_definition_yaml(study_id: StudyId, store: Store = Depends(study_store)) 
     responses=NOT_FOUND,
     summary="A study's parameters in the units its author wrote",
 )
-async def get_design(request: Request, study_id: StudyId, store: Store = Depends(study_store)) -> StudyDesign:
+async def get_design(request: Request, study_id: StudyId, store: StoreDep) -> StudyDesign:
     """Each varied parameter with its case-table column, its values or range as written, its scale
     (linear or log) and the unit its author wrote it in; the design type."""
     row = study_row(store, study_id)
@@ -132,9 +122,7 @@ async def get_design(request: Request, study_id: StudyId, store: Store = Depends
     responses={**NOT_FOUND, **NOT_DONE},
     summary="A done study's measured error and the model it ran with",
 )
-async def get_error_estimate(
-    request: Request, study_id: StudyId, store: Store = Depends(study_store)
-) -> ErrorEstimate:
+async def get_error_estimate(request: Request, study_id: StudyId, store: StoreDep) -> ErrorEstimate:
     """The fidelity, integrator and step the cases ran with, and the largest error of each output over
     the sampled cases against the reference level."""
     row = study_row(store, study_id)

@@ -12,11 +12,10 @@ import base64
 
 from fastapi import APIRouter, Body, Request
 
-from isolab.service.api.routes import INVALID, run_heavy, unprocessable
+from isolab.service.api.routes import INVALID, run_heavy
 from isolab.service.api.schemas import EXAMPLE_CALIBRATION, Calibration, CalibrationRequest
 from isolab.service.plots.calibration import calibration_notes, calibration_png
 from isolab.studies.answers.calibration import calibrate_request
-from isolab.studies.inputs.definitions import DefinitionError
 
 router = APIRouter(prefix="/calibrations", tags=["calibrations"])
 
@@ -40,10 +39,7 @@ async def calibrate(
     (or "not determined by this measurement"), the misfit per channel before and after, and the
     calibrated scene as YAML. Acceleration channels are fitted in acceleration, measured and simulated
     alike detrended and band-passed (``highpass``, ``lowpass``)."""
-    try:
-        result = await run_heavy(http, calibrate_request, request.model_dump(exclude_none=True))
-    except DefinitionError as err:
-        raise unprocessable(err.details) from None
+    result = await run_heavy(http, calibrate_request, request.model_dump(exclude_none=True))
     answer = result.to_json()
     if request.plot:
         png = await run_heavy(http, calibration_png, result.traces, "calibration", calibration_notes(answer))

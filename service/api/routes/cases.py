@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
+from fastapi import APIRouter, HTTPException, Query, Request, Response
 from fastapi import Path as PathParam
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
@@ -19,18 +19,16 @@ from isolab.service.api.routes import (
     NOT_DONE,
     NOT_FOUND,
     PNG,
+    StoreDep,
     invalid,
     require_done,
     run_heavy,
     study_row,
-    study_store,
 )
 from isolab.service.api.routes.studies import MAX_OFFSET, StudyId
 from isolab.service.api.schemas import CaseTable, Timeseries
 from isolab.service.plots import studies as plots
 from isolab.studies.answers.history import (
-    CaseHistory,
-    CaseNotFound,
     case_history,
     case_study,
     history_dataset,
@@ -41,7 +39,6 @@ from isolab.studies.inputs.study import Study
 from isolab.studies.results.cases import (
     MAX_CASE_ROWS,
     CaseColumns,
-    CaseQueryError,
     cases_csv,
     check_page_size,
     json_values,
@@ -61,18 +58,9 @@ def case_table_of(store: Store, study_id: str) -> CaseColumns:
         raise HTTPException(status_code=404, detail=str(err)) from None
 
 
-def _case_study(store: Store, study_id: str, case: int) -> Study:
-    try:
-        return case_study(study_row(store, study_id), case)
-    except CaseNotFound as err:
-        raise HTTPException(status_code=404, detail=str(err)) from None
-
-
-def _history(study: Study, case: int, every: int) -> CaseHistory:
-    try:
-        return case_history(study, case, every)
-    except CaseQueryError as err:
-        raise invalid([err.where, err.param], str(err)) from None
+def stored_case_study(store: Store, study_id: str, case: int) -> Study:
+    """The study of one case of a stored study; 404 when there is no such study or case."""
+    return case_study(study_row(store, study_id), case)
 
 
 @router.get(
@@ -88,6 +76,7 @@ def _history(study: Study, case: int, every: int) -> CaseHistory:
 )
 def get_cases(
     study_id: StudyId,
+    store: StoreDep,
     filter: Annotated[
         str | None,
         Query(
@@ -116,7 +105,6 @@ def get_cases(
     limit: Annotated[int, Query(ge=1, le=MAX_CASE_ROWS)] = 1000,
     offset: Annotated[int, Query(ge=0, le=MAX_OFFSET)] = 0,
     format: Annotated[Literal["json", "csv"], Query(description="json (default) or csv")] = "json",
-    store: Store = Depends(study_store),
 ) -> Any:
     """One row per case: the varied parameters and the outputs flattened to columns
     (``peak_displacement_y``, ``min_isolator_load_min``, ``liftoff_any``, ``natural_frequency_1``...).
@@ -124,11 +112,8 @@ def get_cases(
     row = study_row(store, study_id)
     require_done(row)
     table = case_table_of(store, study_id)
-    try:
-        cols, rows, matched = select_cases(table, filter, sort, columns, limit, offset)
-        check_page_size(rows.size, len(cols))
-    except CaseQueryError as err:
-        raise invalid([err.where, err.param], str(err)) from None
+    cols, rows, matched = select_cases(table, filter, sort, columns, limit, offset)
+    check_page_size(rows.size, len(cols))
     if format == "csv":
         return Response(
             cases_csv(table, cols, rows),
@@ -164,14 +149,14 @@ async def get_timeseries(
     request: Request,
     study_id: StudyId,
     case: Annotated[int, PathParam(description="case number (the `case` column of the table)")],
+    store: StoreDep,
     format: Annotated[Literal["json", "netcdf"], Query()] = "json",
     every: Annotated[int, Query(ge=1, le=10_000, description="keep every n-th sample")] = 1,
-    store: Store = Depends(study_store),
 ) -> Any:
     """Recompute one case from the stored definition with its histories recorded: time, c.g.
     displacement, base rotation, isolator forces and point displacements (SI, units in the answer)."""
-    study = await run_heavy(request, _case_study, store, study_id, case)
-    h = await run_heavy(request, _history, study, case, every)
+    study = await run_heavy(request, stored_case_study, store, study_id, case)
+    h = await run_heavy(request, case_history, study, case, every)
     if format == "netcdf":
         data = await run_heavy(request, netcdf_bytes, history_dataset(study_id, case, h, every))
         return Response(
@@ -193,12 +178,12 @@ async def get_case_plot(
     request: Request,
     study_id: StudyId,
     case: Annotated[int, PathParam(description="case number")],
-    store: Store = Depends(study_store),
+    store: StoreDep,
 ) -> Response:
     """C.g. translation, base rotation and isolator forces per axis against time, stacked (mm or um, mrad,
     N or kN as the magnitude reads best); the title gives the case's parameters in the study's units."""
-    study = await run_heavy(request, _case_study, store, study_id, case)
-    h = await run_heavy(request, _history, study, case, 1)
+    study = await run_heavy(request, stored_case_study, store, study_id, case)
+    h = await run_heavy(request, case_history, study, case, 1)
     params = plots.parameters_text(h.parameters, study.design())
     title = f"{study.name} case {case}" + (f" ({params})" if params else "")
     png = await run_heavy(
@@ -216,6 +201,7 @@ async def get_case_plot(
 async def get_study_plot(
     request: Request,
     study_id: StudyId,
+    store: StoreDep,
     y: Annotated[
         str, Query(min_length=1, description="output column of the case table, e.g. peak_displacement_y")
     ],
@@ -230,7 +216,6 @@ async def get_study_plot(
             "columns, else max: the worst case)"
         ),
     ] = None,
-    store: Store = Depends(study_store),
 ) -> Response:
     """A line per isolator type when the study varies it (one line otherwise) of ``y`` against ``x``;
     with ``x2`` a heat map per isolator type. Sampled studies give scatter plots. Parameters are drawn in

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from fastapi import APIRouter, Body, Request, Response
 
-from isolab.service.api.routes import INVALID, PNG, invalid, run_heavy, unprocessable
+from isolab.service.api.routes import INVALID, PNG, invalid, run_heavy
 from isolab.service.api.schemas import (
     EXAMPLE_COMPARISON,
     EXAMPLE_FLOOR_PLOT,
@@ -21,7 +21,6 @@ from isolab.service.api.schemas import (
 from isolab.service.plots.studies import floor_velocity_png
 from isolab.studies.answers.comparisons import compare as run_compare
 from isolab.studies.answers.floor_response import velocity_spectra
-from isolab.studies.inputs.definitions import DefinitionError
 
 router = APIRouter(prefix="/comparisons", tags=["comparisons"])
 
@@ -43,18 +42,15 @@ async def compare(
     settling time and natural frequencies, with the best type per column in ``best``; with design criteria
     in the scene, each type's margin to each and ``meets_criteria``, and the one ``recommendation``: the
     cheapest type (``cost_order``) that meets them all."""
-    try:
-        answer = await run_heavy(
-            http,
-            run_compare,
-            request.scene,
-            request.isolator_types,
-            request.simulation,
-            request.cost_order,
-            request.tune,
-        )
-    except DefinitionError as err:
-        raise unprocessable(err.details) from None
+    answer = await run_heavy(
+        http,
+        run_compare,
+        request.scene,
+        request.isolator_types,
+        request.simulation,
+        request.cost_order,
+        request.tune,
+    )
     if len(answer["isolator_types"]) != len(set(request.isolator_types)):
         raise invalid(["body", "isolator_types"], "the comparison did not produce one case per isolator type")
     return Comparison(**answer)
@@ -87,15 +83,12 @@ async def floor_png(
             "the floor plot draws the isolators as the scene gives them; tune them with POST /comparisons "
             "and write the tuning into the scene",
         )
-    try:
-        spectra = await run_heavy(
-            http,
-            velocity_spectra,
-            request.scene,
-            request.isolator_types,
-            request.point,
-            simulation=request.simulation,
-        )
-    except DefinitionError as err:
-        raise unprocessable(err.details) from None
+    spectra = await run_heavy(
+        http,
+        velocity_spectra,
+        request.scene,
+        request.isolator_types,
+        request.point,
+        simulation=request.simulation,
+    )
     return Response(await run_heavy(http, floor_velocity_png, spectra), media_type="image/png")

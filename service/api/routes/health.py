@@ -7,12 +7,11 @@ from pathlib import Path
 from typing import Any, Literal
 
 from distributed import Client
-from fastapi import APIRouter, Depends, Request, Response
+from fastapi import APIRouter, Request, Response
 from fastapi.security.utils import get_authorization_scheme_param
 from pydantic import BaseModel, Field
 
-from isolab.service.api.routes import app_settings
-from isolab.service.settings import Settings
+from isolab.service.api.routes import DaskIfRunningDep, SettingsDep
 from isolab.studies.results.store import check_writable
 
 #: Longest wait for the Dask scheduler to answer the health probe, in seconds.
@@ -101,14 +100,12 @@ def has_token(request: Request, token: str | None) -> bool:
     },
 )
 def health(
-    request: Request,
-    response: Response,
-    settings: Settings = Depends(app_settings),
+    request: Request, response: Response, settings: SettingsDep, dask_client: DaskIfRunningDep
 ) -> HealthReport | HealthStatus:
     """Report the service version, the store and the Dask cluster; 503 when the service cannot work.
     With an API token set, a request without it gets the status only (no paths, no addresses)."""
     store = probe_store(settings.data_dir)
-    dask = probe_dask(getattr(request.app.state, "dask", None))
+    dask = probe_dask(dask_client)
     healthy = store.writable and dask.n_workers > 0
     if not healthy:
         response.status_code = 503

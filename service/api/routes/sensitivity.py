@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
+from fastapi import APIRouter, HTTPException, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel, Field
 
@@ -18,11 +18,11 @@ from isolab.service.api.routes import (
     NOT_DONE,
     NOT_FOUND,
     PNG,
+    StoreDep,
     invalid,
     require_done,
     run_heavy,
     study_row,
-    study_store,
 )
 from isolab.service.api.routes.studies import StudyId
 from isolab.service.plots.sensitivity import sensitivity_png
@@ -100,9 +100,7 @@ async def _answer(request: Request, store: Store, study_id: str, output: str) ->
     responses={**NOT_FOUND, **NOT_DONE, **INVALID},
     summary="Sensitivity indices of one output",
 )
-async def get_sensitivity(
-    request: Request, study_id: StudyId, output: OutputQuery, store: Store = Depends(study_store)
-) -> Any:
+async def get_sensitivity(request: Request, study_id: StudyId, output: OutputQuery, store: StoreDep) -> Any:
     """Global sensitivity of ``output`` to each varied parameter: Sobol' S1 and ST with 95 % confidence
     intervals for a saltelli design; Borgonovo's delta and S1 from the given data for lhs, sobol, random
     and grid designs. Cases that are not ok are left out and counted. Computed once per output and
@@ -119,7 +117,7 @@ async def get_sensitivity(
     summary="Sensitivity indices of one output (PNG)",
 )
 async def get_sensitivity_plot(
-    request: Request, study_id: StudyId, output: OutputQuery, store: Store = Depends(study_store)
+    request: Request, study_id: StudyId, output: OutputQuery, store: StoreDep
 ) -> Response:
     """Bars of each index per parameter with their confidence intervals (see ``/sensitivity``)."""
     answer = await _answer(request, store, study_id, output)

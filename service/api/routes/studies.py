@@ -12,7 +12,7 @@ import re
 from datetime import UTC, datetime
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, Depends, HTTPException, Query, Request, Response
+from fastapi import APIRouter, Body, HTTPException, Query, Request, Response
 from fastapi import Path as PathParam
 from fastapi.responses import FileResponse
 
@@ -21,14 +21,13 @@ from isolab.service.api.routes import (
     INVALID,
     NOT_DONE,
     NOT_FOUND,
-    app_settings,
+    JobsDep,
+    SettingsDep,
+    StoreDep,
     invalid,
-    job_queue,
     require_done,
     run_heavy,
     study_row,
-    study_store,
-    unprocessable,
 )
 from isolab.service.api.schemas import (
     EXAMPLE_LHS_STUDY,
@@ -43,9 +42,8 @@ from isolab.service.api.schemas import (
     StudySummary,
 )
 from isolab.service.settings import Settings
-from isolab.studies.inputs.definitions import DefinitionError, check_definition, stored_definition
-from isolab.studies.results.store import Store, utc_now
-from isolab.studies.run.runner import isolator_types
+from isolab.studies.inputs.definitions import check_definition
+from isolab.studies.results.store import Store, StudyFilter, StudyRecord, utc_now
 
 router = APIRouter(prefix="/studies", tags=["studies"])
 
@@ -90,37 +88,37 @@ def links(study_id: str) -> StudyLinks:
     return StudyLinks(self=base, dataset=f"{base}/dataset", cases=f"{base}/cases")
 
 
-def summary(row: dict[str, Any]) -> dict[str, Any]:
-    """The catalog row as the fields of :class:`StudySummary`."""
+def summary(record: StudyRecord) -> dict[str, Any]:
+    """The catalog record as the fields of :class:`StudySummary`."""
     return {
-        "id": row["id"],
-        "name": row["name"],
-        "status": row["status"],
-        "progress": StudyProgress(done=row["n_done"], total=row["n_cases"], failed=row["n_failed"]),
-        "created": row["created"],
-        "started": row["started"],
-        "finished": row["finished"],
-        "error": row["error"],
-        "failures": failure_note(row),
-        "parameters": row["parameters"] or [],
-        "isolator_types": row["isolator_types"] or [],
-        "fidelity": row["fidelity"],
-        "integrator": row["integrator"],
-        "dt": row["dt"],
-        "generation": row.get("generation"),
-        "generations": row.get("generations"),
-        "links": links(row["id"]),
+        "id": record.id,
+        "name": record.name,
+        "status": record.status,
+        "progress": StudyProgress(done=record.n_done, total=record.n_cases, failed=record.n_failed),
+        "created": record.created,
+        "started": record.started,
+        "finished": record.finished,
+        "error": record.error,
+        "failures": failure_note(record),
+        "parameters": record.parameters,
+        "isolator_types": record.isolator_types,
+        "fidelity": record.fidelity,
+        "integrator": record.integrator,
+        "dt": record.dt,
+        "generation": record.generation,
+        "generations": record.generations,
+        "links": links(record.id),
     }
 
 
-def failure_note(row: dict[str, Any]) -> str | None:
+def failure_note(record: StudyRecord) -> str | None:
     """``"3 of 12 cases failed ..."`` when cases have failed so far, else None."""
-    n_failed = int(row["n_failed"] or 0)
+    n_failed = int(record.n_failed or 0)
     if not n_failed:
         return None
     return (
-        f"{n_failed} of {row['n_cases']} cases failed (status not ok); each one's status and message are "
-        f"in its row of /studies/{row['id']}/cases and in the dataset"
+        f"{n_failed} of {record.n_cases} cases failed (status not ok); each one's status and message are "
+        f"in its row of /studies/{record.id}/cases and in the dataset"
     )
 
 
@@ -169,9 +167,9 @@ async def submit_study(
             },
         ),
     ],
-    settings: Settings = Depends(app_settings),
-    store: Store = Depends(study_store),
-    jobs: JobQueue = Depends(job_queue),
+    settings: SettingsDep,
+    store: StoreDep,
+    jobs: JobsDep,
 ) -> StudyAccepted:
     """Validate the study, store it in the catalog (status queued) and queue it. 202 with its links."""
     accepted = await run_heavy(request, accept_study, definition, settings, store, jobs)
@@ -182,23 +180,11 @@ async def submit_study(
 def accept_study(
     definition: dict[str, Any], settings: Settings, store: Store, jobs: JobQueue
 ) -> StudyAccepted:
-    """Check a study, store it in the catalog (status queued) and queue it (runs in a worker thread)."""
-    try:
-        study = check_definition(definition, settings.max_cases)
-    except DefinitionError as err:
-        raise unprocessable(err.details) from None
+    """Check a study, store it in the catalog (status queued) and queue it (runs in a worker thread); a
+    refused definition raises :class:`~isolab.studies.inputs.definitions.DefinitionError` (422)."""
+    study = check_definition(definition, settings.max_cases)
     n_cases = int(study.planned_cases)  # an optimize design: its budget
-    sim = study.simulation
-    study_id = store.create(
-        stored_definition(study),
-        name=study.name,
-        n_cases=n_cases,
-        parameters=list(study.design().names),
-        isolator_types=isolator_types(study),
-        fidelity=sim.fidelity,
-        integrator=sim.integrator,
-        dt=sim.dt,
-    )
+    study_id = store.register(study)
     try:
         jobs.submit(study_id)
     except RuntimeError as err:  # shutting down: the study stays queued and runs at the next start
@@ -208,6 +194,7 @@ def accept_study(
 
 @router.get("", response_model=StudyList, responses=INVALID, summary="List studies")
 def list_studies(
+    store: StoreDep,
     name: Annotated[str | None, Query(description="exact study name")] = None,
     status: Annotated[StudyStatusName | None, Query(description="study status")] = None,
     isolator_type: Annotated[str | None, Query(description="studies involving this isolator type")] = None,
@@ -215,38 +202,35 @@ def list_studies(
     created_before: Annotated[str | None, TimeQuery] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
     offset: Annotated[int, Query(ge=0, le=MAX_OFFSET)] = 0,
-    store: Store = Depends(study_store),
 ) -> StudyList:
     """Studies in the catalog, newest first, filtered (all filters must hold)."""
     try:
-        filters = dict(
+        where = StudyFilter(
             name=name,
             status=status,
             isolator_type=isolator_type,
             created_after=query_time(created_after, "created_after"),
             created_before=query_time(created_before, "created_before"),
         )
-        rows = store.list(**filters, limit=limit, offset=offset)
-        total = store.count(**filters)
+        records = store.list(where, limit=limit, offset=offset)
+        total = store.count(where)
     except ValueError as err:
         field_name = str(err).split(":", 1)[0]
         raise invalid(["query", field_name], str(err)) from None
     return StudyList(
-        items=[StudySummary(**summary(r)) for r in rows], total=total, limit=limit, offset=offset
+        items=[StudySummary(**summary(r)) for r in records], total=total, limit=limit, offset=offset
     )
 
 
 @router.get("/{study_id}", response_model=StudyDetail, responses=NOT_FOUND, summary="A study's status")
-def get_study(study_id: StudyId, store: Store = Depends(study_store)) -> StudyDetail:
+def get_study(study_id: StudyId, store: StoreDep) -> StudyDetail:
     """Status, progress, times, error and the definition of one study."""
     row = study_row(store, study_id)
     return StudyDetail(**summary(row), definition=row["definition"])
 
 
 @router.delete("/{study_id}", status_code=204, responses=NOT_FOUND, summary="Cancel or delete a study")
-def delete_study(
-    study_id: StudyId, store: Store = Depends(study_store), jobs: JobQueue = Depends(job_queue)
-) -> Response:
+def delete_study(study_id: StudyId, store: StoreDep, jobs: JobsDep) -> Response:
     """A queued or running study is cancelled (status cancelled, kept in the catalog); a finished,
     failed or cancelled one is removed with its files."""
     row = study_row(store, study_id)
@@ -268,7 +252,7 @@ def delete_study(
     },
     summary="A study's dataset (netCDF)",
 )
-def get_dataset(study_id: StudyId, store: Store = Depends(study_store)) -> FileResponse:
+def get_dataset(study_id: StudyId, store: StoreDep) -> FileResponse:
     """The study's labelled dataset as a netCDF4 file (streamed); 409 until the study is done."""
     row = study_row(store, study_id)
     require_done(row)

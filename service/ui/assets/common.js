@@ -22,14 +22,18 @@ function askToken(wrong) {
   tokenPrompt = new Promise((resolve) => {
     const dialog = document.createElement("dialog");
     dialog.id = "token-dialog";
-    dialog.innerHTML = `
-      <form method="dialog">
-        <h2>API token</h2>
-        <p>This isolab service wants a token (ISOLAB_API_TOKEN). It is kept in this tab only.</p>
-        ${wrong ? '<p class="error">That token was refused.</p>' : ""}
-        <input id="token-input" type="password" autocomplete="off" required size="40">
-        <button id="token-ok" type="submit">Use token</button>
-      </form>`;
+    const input = el("input", { id: "token-input", type: "password", autocomplete: "off", required: true, size: "40" });
+    dialog.appendChild(
+      el(
+        "form",
+        { method: "dialog" },
+        el("h2", {}, "API token"),
+        el("p", {}, "This isolab service wants a token (ISOLAB_API_TOKEN). It is kept in this tab only."),
+        wrong ? el("p", { class: "error" }, "That token was refused.") : null,
+        input,
+        el("button", { id: "token-ok", type: "submit" }, "Use token")
+      )
+    );
     document.body.appendChild(dialog);
     dialog.addEventListener("close", () => {
       sessionStorage.setItem(TOKEN_KEY, dialog.querySelector("#token-input").value.trim());

@@ -10,26 +10,28 @@ let problemLines = new Map(); // line -> [messages]
 
 const text = () => $("#text");
 
-function escapeHtml(s) {
-  return s.replace(/&/g, "&amp;").replace(/</g, "&lt;").replace(/>/g, "&gt;");
-}
-
+// The gutter and the backdrop behind the text area are built from DOM nodes: every text (the study's
+// own lines and the service's messages about them) goes in as a text node, never as markup.
 function paint() {
   const lines = text().value.split("\n");
-  $("#gutter").innerHTML = lines
-    .map((_, i) => {
-      const msgs = problemLines.get(i + 1);
-      return msgs ? `<span class="bad" title="${escapeHtml(msgs.join("\n"))}">⚠ ${i + 1}</span>` : String(i + 1);
-    })
-    .join("\n");
-  $("#backdrop").innerHTML =
-    lines
-      .map((l, i) => {
-        const msgs = problemLines.get(i + 1);
-        if (!msgs) return escapeHtml(l);
-        return `<span class="bad">${escapeHtml(l) || " "}</span><span class="note">   ◀ ${escapeHtml(msgs.join("; "))}</span>`;
-      })
-      .join("\n") + "\n";
+  const gutter = [];
+  const backdrop = [];
+  lines.forEach((l, i) => {
+    const msgs = problemLines.get(i + 1);
+    if (i) {
+      gutter.push("\n");
+      backdrop.push("\n");
+    }
+    if (msgs) {
+      gutter.push(el("span", { class: "bad", title: msgs.join("\n") }, `⚠ ${i + 1}`));
+      backdrop.push(el("span", { class: "bad" }, l || " "), el("span", { class: "note" }, `   ◀ ${msgs.join("; ")}`));
+    } else {
+      gutter.push(String(i + 1));
+      backdrop.push(l);
+    }
+  });
+  fill($("#gutter"), gutter);
+  fill($("#backdrop"), backdrop, "\n");
   syncScroll();
 }
 
@@ -130,7 +132,7 @@ async function loadSource() {
     if (kind === "example") {
       text().value = (await apiJson(`/examples/${encodeURIComponent(key)}`)).text;
     } else {
-      const r = await api(`/studies/${key}/definition.yaml`);
+      const r = await api(`/studies/${encodeURIComponent(key)}/definition.yaml`);
       if (!r.ok) throw new ApiError(r.status, await r.json().catch(() => null));
       text().value = await r.text();
     }

@@ -5,11 +5,11 @@ the c.g. displacement ``u``, the rotation ``theta``, each point's displacement `
 mount's deflection (the same with the mount's arm, minus the floor's motion). One matrix ``G`` (6, m) per
 case maps the positions ``x[:6]`` to those ``m = 6 + 3 p + 3 n`` values and the velocities ``x[6:]`` to
 their rates; the isolator forces follow from the deflections, ``-k delta - c delta'``. :func:`observe`
-does what ``engine.peaks.observe`` does for a case without floor motion (the floor still under the
+does what ``engine.kernels.peaks.observe`` does for a case without floor motion (the floor still under the
 mounts), with every output in one contiguous vector, so its loops run over the outputs and vectorise, and
 the closed-form solve for an extremum between output times runs only for the outputs whose Bernstein
 control points flag one. The running peaks are kept in per-case scratch (:func:`start`) and written back
-to the ``engine.peaks.Peaks`` accumulators when the case ends (:func:`finish`).
+to the ``engine.kernels.peaks.Peaks`` accumulators when the case ends (:func:`finish`).
 
 Layout of the output vector: ``[u (3), theta (3), points (p, 3), mount deflections (n, 3)]``.
 """
@@ -21,7 +21,14 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from isolab.engine.peaks import _THIRD, DIVERGED_DISPLACEMENT, DIVERGED_ROTATION, _cubic_extremes, _hermite
+from isolab.engine.kernels.params import Params
+from isolab.engine.kernels.peaks import (
+    DIVERGED_DISPLACEMENT,
+    DIVERGED_ROTATION,
+    ONE_THIRD,
+    cubic_extremes,
+    hermite,
+)
 
 Map = namedtuple("Map", ["G", "KF", "target", "rest_target"])
 """``G`` (C, 6, m): positions (m, rad) to outputs (m); ``KF`` (C, 2, 3 n) each mount's stiffness (N/m) and
@@ -29,7 +36,7 @@ damping (N s/m) per axis; ``target`` (C, m) the outputs at the final static stat
 (C, K, m) at the static state of each rest interval."""
 
 
-def still_floor(P) -> np.ndarray:
+def still_floor(P: Params) -> np.ndarray:
     """Per case (C,), True where the floor does not move in time under it (no sine, no recorded floor
     motion): where the output map observes it. Decided per case, so a case's results do not depend on
     the batch it runs in."""
@@ -54,7 +61,7 @@ def _arm_rows(d: np.ndarray) -> np.ndarray:
     return out
 
 
-def build(P, target: np.ndarray, rest_target: np.ndarray) -> Map:
+def build(P: Params, target: np.ndarray, rest_target: np.ndarray) -> Map:
     """The output map of a batch (see the module's docstring) from its kernel parameters ``P``, the final
     static offset ``target`` (C, 6) (m, rad) and each rest interval's ``rest_target`` (C, K, 6)."""
     pts = np.asarray(P.pts, dtype=float)
@@ -146,15 +153,15 @@ def finish(O, c, S, Q):
 @njit(cache=True, inline="always")
 def observe(c, t, x, step, G, KF, F0, tgt, rtgt, rest, ptol, S, V, Q):
     """Update case ``c``'s peaks with the linear-level state ``x`` (12,) at time ``t`` (s), output sample
-    ``step``, the floor at rest, as ``engine.peaks.observe`` does.
+    ``step``, the floor at rest, as ``engine.kernels.peaks.observe`` does.
 
     ``G``, ``KF``, ``tgt``, ``rtgt`` are the output map (:func:`build`), ``F0`` (C, n) the static loads
     (N), ``rest`` (C, K, 2) the rest intervals (s) and ``ptol`` (C, p) the points' settling tolerances (m)
-    of ``engine.peaks.Peaks``. The case's running state lives in ``S`` (10, m): rows 0 the peaks, 1 and 2
-    the previous values and rates, 3 the force peaks and 4 the previous forces (3 n), 5 and 6 the smallest
-    and largest loads (n), 7 a flag, 8 and 9 each point's last violation and worst settling time (p); and
-    ``Q`` (13,): the last move's end, the settling tolerance, the longest interpolated interval, the last
-    output time, the rest-interval cursor and count, the last output time inside a rest interval, the
+    of ``engine.kernels.peaks.Peaks``. The case's running state lives in ``S`` (10, m): rows 0 the peaks,
+    1 and 2 the previous values and rates, 3 the force peaks and 4 the previous forces (3 n), 5 and 6 the
+    smallest and largest loads (n), 7 a flag, 8 and 9 each point's last violation and worst settling time
+    (p); and ``Q`` (13,): the last move's end, the settling tolerance, the longest interpolated interval, the
+    last output time, the rest-interval cursor and count, the last output time inside a rest interval, the
     last violation, the sums of squares (3), the number of outputs and the divergence time.
     (:func:`start` and :func:`finish` move them in and out of the accumulators.) ``V`` (9, m) is scratch.
     Rows are indexed, not sliced: a view per call costs more than the arithmetic. Returns False (and
@@ -202,7 +209,7 @@ def observe(c, t, x, step, G, KF, F0, tgt, rtgt, rest, ptol, S, V, Q):
         V[1, r] = g0 * v0 + g1 * v1 + g2 * v2 + g3 * v3 + g4 * v4 + g5 * v5
     # peaks at the output times, and a flag on the outputs whose cubic's inner Bernstein control points
     # reach past them (the cubic stays in their hull: only those can peak between the output times)
-    hth = h * _THIRD
+    hth = h * ONE_THIRD
     for r in range(m):
         a = max(abs(V[0, r]), S[0, r])
         S[0, r] = a
@@ -210,7 +217,7 @@ def observe(c, t, x, step, G, KF, F0, tgt, rtgt, rest, ptol, S, V, Q):
         b2 = V[0, r] - hth * V[1, r]
         S[7, r] = max(abs(b1), abs(b2)) - a
     # isolator forces -k delta - c delta' and their cubics: the deflection's Hermite cubic through the force
-    # law, shifted linearly to meet the forces at both ends (as engine.peaks.observe)
+    # law, shifted linearly to meet the forces at both ends (as engine.kernels.peaks.observe)
     nf = 3 * n
     inv_h = 1.0 / h if between else 0.0
     for r in range(nf):
@@ -238,21 +245,21 @@ def observe(c, t, x, step, G, KF, F0, tgt, rtgt, rest, ptol, S, V, Q):
         V[4, r] = a1
         V[5, r] = a2
         V[6, r] = a3
-        b1 = a0 + a1 * _THIRD
-        b2 = b1 + (a1 + a2) * _THIRD
+        b1 = a0 + a1 * ONE_THIRD
+        b2 = b1 + (a1 + a2) * ONE_THIRD
         V[7, r] = b1
         V[8, r] = b2
         S[3, r] = max(abs(f), S[3, r])
     if between:
         for r in range(m):
             if S[7, r] > 0.0:
-                c0, c1, c2, c3 = _hermite(S[1, r], S[2, r], V[0, r], V[1, r], h)
-                lo, hi = _cubic_extremes(c0, c1, c2, c3)
+                c0, c1, c2, c3 = hermite(S[1, r], S[2, r], V[0, r], V[1, r], h)
+                lo, hi = cubic_extremes(c0, c1, c2, c3)
                 if hi >= lo:
                     S[0, r] = max(S[0, r], abs(lo), abs(hi))
         for r in range(nf):
             if max(abs(V[7, r]), abs(V[8, r])) > S[3, r]:
-                lo, hi = _cubic_extremes(V[3, r], V[4, r], V[5, r], V[6, r])
+                lo, hi = cubic_extremes(V[3, r], V[4, r], V[5, r], V[6, r])
                 if hi >= lo:
                     S[3, r] = max(S[3, r], abs(lo), abs(hi))
     # the loads on the mounts: static plus the vertical force, their extremes between output times too
@@ -263,7 +270,7 @@ def observe(c, t, x, step, G, KF, F0, tgt, rtgt, rest, ptol, S, V, Q):
         lo = min(S[5, j], load)
         hi = max(S[6, j], load)
         if between and (f0j + min(V[7, r], V[8, r]) < lo or f0j + max(V[7, r], V[8, r]) > hi):
-            glo, ghi = _cubic_extremes(V[3, r], V[4, r], V[5, r], V[6, r])
+            glo, ghi = cubic_extremes(V[3, r], V[4, r], V[5, r], V[6, r])
             lo = min(lo, f0j + glo)
             hi = max(hi, f0j + ghi)
         S[5, j] = lo

@@ -24,19 +24,11 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit
-from numba.experimental import structref
 
-from isolab.engine.dynamics import (
-    NONLINEAR,
-    KernelPeaks,
-    PeaksType,
-    _cross,
-    floor_motion,
-    isolator_forces,
-    mount_offset,
-    quat_to_matrix,
-    quat_to_rotvec,
-)
+from isolab.engine.kernels.excitation import floor_motion
+from isolab.engine.kernels.mounts import isolator_forces, mount_offset
+from isolab.engine.kernels.params import NONLINEAR
+from isolab.engine.kernels.rotations import cross, quat_to_matrix, quat_to_rotvec
 
 Peaks = namedtuple(
     "Peaks",
@@ -79,9 +71,8 @@ Peaks = namedtuple(
         "last_force",
     ],
 )
-structref.define_proxy(KernelPeaks, PeaksType, list(Peaks._fields))
 
-_THIRD = 1.0 / 3.0
+ONE_THIRD = 1.0 / 3.0
 
 DIVERGED_DISPLACEMENT = 1.0
 """A c.g. or point displacement beyond this (m) can only come from a diverging integration."""
@@ -333,13 +324,11 @@ def observe(P, c, level, t, x, W, O, step):
                 # the deflection's and the floor's cubics; the force law -k delta - c (delta' + sky x_f')
                 # on them, shifted linearly to meet the computed forces at both ends
                 p0, m0 = O.last_defl[c, j, i, 0], O.last_defl[c, j, i, 1]
-                c0, c1, c2, c3 = _hermite(p0, m0, dl, dd, h)
+                c0, c1, c2, c3 = hermite(p0, m0, dl, dd, h)
                 b = max(b, _beyond(c0, c1, c2, c3, b))  # the deflection's hull: p0, b1, b2, dl
                 f1 = f2 = f3 = 0.0
                 if sky != 0.0:
-                    _, f1, f2, f3 = _hermite(
-                        O.last_floor[c, i, 0], O.last_floor[c, i, 1], W.xf[i], W.vf[i], h
-                    )
+                    _, f1, f2, f3 = hermite(O.last_floor[c, i, 0], O.last_floor[c, i, 1], W.xf[i], W.vf[i], h)
                 kk, cc = P.k[c, j, i], P.cd[c, j, i] * inv_h
                 g0 = -kk * c0 - cc * (c1 + sky * f1)
                 g1 = -kk * c1 - cc * (2.0 * (c2 + sky * f2))
@@ -352,13 +341,13 @@ def observe(P, c, level, t, x, W, O, step):
                 a = max(a, _beyond(g0, g1, g2, g3, a))
                 if i == 2:
                     # the Bernstein control points bound the cubic: solve only if a new extreme may lie inside
-                    b1 = g0 + g1 * _THIRD
-                    b2 = b1 + (g1 + g2) * _THIRD
+                    b1 = g0 + g1 * ONE_THIRD
+                    b2 = b1 + (g1 + g2) * ONE_THIRD
                     f0j = P.f0[c, j]
                     if f0j + min(b1, b2) < min(lo, O.min_load[c, j]) or f0j + max(b1, b2) > max(
                         hi, O.max_load[c, j]
                     ):
-                        glo, ghi = _cubic_extremes(g0, g1, g2, g3)
+                        glo, ghi = cubic_extremes(g0, g1, g2, g3)
                         lo = min(lo, f0j + glo)
                         hi = max(hi, f0j + ghi)
             if a > O.force[c, j, i]:
@@ -382,7 +371,7 @@ def observe(P, c, level, t, x, W, O, step):
 
 
 @njit(cache=True, inline="always")
-def _hermite(p0, m0, p1, m1, h):
+def hermite(p0, m0, p1, m1, h):
     """Coefficients ``(c0, c1, c2, c3)`` of the cubic Hermite interpolant ``c0 + c1 s + c2 s^2 + c3 s^3``,
     ``s = (t - t0) / h`` in [0, 1], of a quantity with values ``p0``, ``p1`` and rates ``m0``, ``m1`` (per
     s) at the ends of an interval of ``h`` s."""
@@ -393,7 +382,7 @@ def _hermite(p0, m0, p1, m1, h):
 
 
 @njit(cache=True, inline="always")
-def _cubic_extremes(c0, c1, c2, c3):
+def cubic_extremes(c0, c1, c2, c3):
     """Smallest and largest value of ``c0 + c1 s + c2 s^2 + c3 s^3`` at its stationary points strictly
     inside 0 < s < 1, in closed form; ``(inf, -inf)`` when it has none there."""
     lo = np.inf
@@ -426,7 +415,7 @@ def _cubic_extremes(c0, c1, c2, c3):
 @njit(cache=True, inline="always")
 def _interior_abs(c0, c1, c2, c3):
     """Largest |value| of the cubic at its stationary points inside (0, 1); 0 when it has none."""
-    lo, hi = _cubic_extremes(c0, c1, c2, c3)
+    lo, hi = cubic_extremes(c0, c1, c2, c3)
     if hi < lo:
         return 0.0
     return max(abs(lo), abs(hi))
@@ -438,8 +427,8 @@ def _beyond(c0, c1, c2, c3, peak):
     there, else 0. Its Bernstein control points ``c0``, ``c0 + c1/3``, ``c0 + (2 c1 + c2)/3``, ``c0 + c1 + c2
     + c3`` bound it (convex hull), so the closed-form solve runs only when an inner one exceeds ``peak``
     (which holds the end values): rarely, once a running peak has been reached."""
-    b1 = c0 + c1 * _THIRD
-    b2 = b1 + (c1 + c2) * _THIRD
+    b1 = c0 + c1 * ONE_THIRD
+    b2 = b1 + (c1 + c2) * ONE_THIRD
     if abs(b1) <= peak and abs(b2) <= peak:
         return 0.0
     return _interior_abs(c0, c1, c2, c3)
@@ -451,11 +440,11 @@ def _between(p0, m0, p1, m1, h, peak):
     rates ``m0``, ``m1`` at its ends (cubic Hermite interpolant) when it may exceed ``peak`` (which holds the
     end values); 0 when it cannot or its extremes are at the ends."""
     # the inner Bernstein control points first: the cubic stays inside the hull of p0, b1, b2, p1
-    b1 = p0 + h * m0 * _THIRD
-    b2 = p1 - h * m1 * _THIRD
+    b1 = p0 + h * m0 * ONE_THIRD
+    b2 = p1 - h * m1 * ONE_THIRD
     if abs(b1) <= peak and abs(b2) <= peak:
         return 0.0
-    c0, c1, c2, c3 = _hermite(p0, m0, p1, m1, h)
+    c0, c1, c2, c3 = hermite(p0, m0, p1, m1, h)
     return _interior_abs(c0, c1, c2, c3)
 
 
@@ -477,5 +466,5 @@ def _arm_rate(level, w0, w1, w2, r0, r1, r2, d0, d1, d2):
     """Velocity (m/s) of a material point at ``d`` (m, from the c.g.) relative to the c.g., the base
     turning at ``w`` (rad/s, floor frame): ``w x (R d)`` (nonlinear; ``R d = d + r``), ``w x d`` (linear)."""
     if level == NONLINEAR:
-        return _cross(w0, w1, w2, d0 + r0, d1 + r1, d2 + r2)
-    return _cross(w0, w1, w2, d0, d1, d2)
+        return cross(w0, w1, w2, d0 + r0, d1 + r1, d2 + r2)
+    return cross(w0, w1, w2, d0, d1, d2)

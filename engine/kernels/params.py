@@ -1,0 +1,150 @@
+"""The kernels' inputs: the fidelity levels' codes and a batch's parameters as one named tuple of arrays.
+
+The kernels work on three named tuples of arrays: ``Params`` (a batch's parameters, filled from a
+``SceneBatch`` by ``engine.model.params``), ``Work`` (one case's scratch, ``engine.model.work``) and the
+running peaks ``engine.kernels.peaks.Peaks``; they take them as structs (``engine.kernels.structs``).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+LTI, LTV, NONLINEAR = 0, 1, 2
+"""Codes of the fidelity levels inside the kernels."""
+FIDELITIES = {"lti": LTI, "ltv": LTV, "nonlinear": NONLINEAR}
+"""The fidelity levels by name."""
+
+
+class Params(NamedTuple):
+    """A batch's parameters, case dimension first (``C`` cases, ``n`` isolators, ``m`` stages, ``K``
+    profile pieces, ``p`` points of interest, ``F`` recorded floor samples, ``B`` feedforward stretches);
+    lengths relative to the machine c.g., in the floor frame at the reference state."""
+
+    mass: np.ndarray
+    """(C,) the base's mass without the stages, kg."""
+    mtot: np.ndarray
+    """(C,) the mass of base and stages, kg."""
+    inertia: np.ndarray
+    """(C, 3, 3) the base's inertia tensor about its c.g., kg m^2."""
+    d: np.ndarray
+    """(C, n, 3) the isolators' lever arms, m."""
+    k: np.ndarray
+    """(C, n, 3) the isolators' stiffness along floor X, Y, Z, N/m."""
+    cd: np.ndarray
+    """(C, n, 3) the isolators' damping, N s/m."""
+    sky: np.ndarray
+    """(C, n) 1 where a mount's damper acts on the absolute velocity (sky-hook), else 0."""
+    f0: np.ndarray
+    """(C, n) the static vertical preload, N."""
+    sm: np.ndarray
+    """(C, m) the stages' masses, kg."""
+    rho_h: np.ndarray
+    """(C, m, 3) the stages' homes, m."""
+    e: np.ndarray
+    """(C, m, 3) the stages' unit travel axes (fixed in the machine)."""
+    parent: np.ndarray
+    """(m,) int64: the stage each stage rides on, -1 for the machine."""
+    pt: np.ndarray
+    """(C, m, K) the profile pieces' start times, s."""
+    ps: np.ndarray
+    """(C, m, K) the position at each piece's start, m."""
+    pv: np.ndarray
+    """(C, m, K) the velocity at each piece's start, m/s."""
+    pa: np.ndarray
+    """(C, m, K) the acceleration at each piece's start, m/s^2."""
+    pj: np.ndarray
+    """(C, m, K) each piece's constant jerk, m/s^3."""
+    pts: np.ndarray
+    """(C, p, 3) the points of interest, m."""
+    famp: np.ndarray
+    """(C, 3) the sine floor motion's amplitude per axis, m."""
+    fomega: np.ndarray
+    """(C, 3) its angular frequency, rad/s."""
+    fphase: np.ndarray
+    """(C, 3) its phase, rad."""
+    ft: np.ndarray
+    """(F,) the recorded floor motion's sample times, s."""
+    fd: np.ndarray
+    """(C, 3, F) the recorded floor displacement per axis, m."""
+    a21: np.ndarray
+    """(C, 6, 6) ``-M^-1 K`` of the linear model with the stages at home, 1/s^2."""
+    a22: np.ndarray
+    """(C, 6, 6) ``-M^-1 C``, 1/s."""
+    minv: np.ndarray
+    """(C, 6, 6) the inverse mass matrix with the stages at home (1/kg, 1/(kg m), 1/(kg m^2))."""
+    g: float
+    """Gravity, m/s^2."""
+    gstiff: bool
+    """The linear levels include the rocking stiffness of the weights that tilt with the base."""
+    ffon: bool
+    """Some mount feeds the stages' wrench forward (and there is a stage)."""
+    ffg: np.ndarray
+    """(C, n) each mount's feedforward gain (0: none)."""
+    ffw: np.ndarray
+    """(C, n) its low-pass corner, rad/s."""
+    fflim: np.ndarray
+    """(C, n) its actuator's force limit per axis, N."""
+    ffD: np.ndarray
+    """(C, n, 3, 6) its share of a wrench ``[F, M]``: actuator force (N) per N and per N m."""
+    fftb: np.ndarray
+    """(C, B) the start times of the stretches between the profiles' breakpoints, s, padded with +inf."""
+    ffA: np.ndarray
+    """(C, n, B, 6) the low-pass's free-response amplitude per mount and stretch, N and N m
+    (``engine.kernels.feedforward.feedforward_transients``)."""
+    ffwt: np.ndarray
+    """(C, n) 1 where a mount also feeds the change of the stages' weight moment forward, else 0."""
+    pbase: bool
+    """The nonlinear level's preloads turn with the base (else they stay vertical)."""
+
+
+class Work(NamedTuple):
+    """Scratch arrays for one case at a time (``m`` stages, ``n`` isolators, ``K`` profile pieces). They keep
+    terms of the ``Params`` they serve (packed per case, per time: ``engine.kernels.cached_terms``), so one
+    ``Work`` serves one ``Params``."""
+
+    rho: np.ndarray
+    """(m, 3) the stages' positions relative to the c.g., m (``engine.kernels.excitation.stage_state``)."""
+    vr: np.ndarray
+    """(m, 3) their velocities relative to the machine, m/s."""
+    ar: np.ndarray
+    """(m, 3) their relative accelerations, m/s^2."""
+    jr: np.ndarray
+    """(m, 3) their relative jerks, m/s^3."""
+    xf: np.ndarray
+    """(3,) the floor's displacement, m."""
+    vf: np.ndarray
+    """(3,) the floor's velocity, m/s."""
+    acc: np.ndarray
+    """(6,) the base's accelerations, m/s^2 and rad/s^2 (the rotation, rad, while the peaks are observed)."""
+    f: np.ndarray
+    """(6,) the LTI level's generalised force, N and N m."""
+    R: np.ndarray
+    """(3, 3) the base's rotation matrix, body to floor."""
+    F: np.ndarray
+    """(n, 3) the isolators' dynamic forces, N."""
+    Fa: np.ndarray
+    """(n, 3) the feedforward actuators' forces, N."""
+    ffx: np.ndarray
+    """(8, 6) the stages' reversed inertial wrench and weight moment, with their time derivatives
+    (``engine.kernels.feedforward.stage_wrench``)."""
+    ffy: np.ndarray
+    """(6,) the low-passed wrench, N and N m."""
+    ffs: np.ndarray
+    """(24,) the exact integrator's feedforward ramp and the forcing it saves."""
+    key: np.ndarray
+    """(4 + m,) the key of the time-only terms in ``tc``: case, level, time, mass matrix positive definite,
+    pieces (case -1: none yet)."""
+    tc: np.ndarray
+    """(21, 3) the time-only terms (``engine.kernels.cached_terms``)."""
+    cc: np.ndarray
+    """(22,) the packed case: its index first (-1: none yet)."""
+    cs: np.ndarray
+    """(m, 8 + 5 K) the packed stages."""
+    cm: np.ndarray
+    """(n, 11) the packed mounts."""
+    cK: np.ndarray
+    """(12, 6) the LTV level's mount operator: the mounts' generalised force per unit state."""
+    sw: np.ndarray
+    """(m, 9) the stages' positions, velocities and accelerations relative to the c.g."""

@@ -1,0 +1,72 @@
+"""Vector and rotation maths of the kernels: the cross product of vectors given by their components, and
+unit quaternions.
+
+A quaternion ``q = (w, x, y, z)`` turns the body frame into the floor frame; angular rates are body-frame,
+rad/s. Numba functions for the equations of motion and the peaks.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, inline="always")
+def cross(a0, a1, a2, b0, b1, b2):
+    """The cross product ``a x b`` of ``a = (a0, a1, a2)`` and ``b = (b0, b1, b2)`` (its unit the product of
+    theirs: rad/s x m gives m/s), as three numbers."""
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@njit(cache=True)
+def quat_to_matrix(q, R):
+    """Rotation matrix (body to floor) of the unit quaternion ``q = (w, x, y, z)`` into ``R`` (3, 3)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    R[0, 0] = 1 - 2 * (y * y + z * z)
+    R[0, 1] = 2 * (x * y - w * z)
+    R[0, 2] = 2 * (x * z + w * y)
+    R[1, 0] = 2 * (x * y + w * z)
+    R[1, 1] = 1 - 2 * (x * x + z * z)
+    R[1, 2] = 2 * (y * z - w * x)
+    R[2, 0] = 2 * (x * z - w * y)
+    R[2, 1] = 2 * (y * z + w * x)
+    R[2, 2] = 1 - 2 * (x * x + y * y)
+
+
+@njit(cache=True)
+def quat_to_rotvec(q, out):
+    """Rotation vector (axis times angle, rad) of the unit quaternion ``q`` into ``out`` (3,)."""
+    w = q[0]
+    s = np.sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    if w < 0.0:
+        w = -w
+        sign = -1.0
+    else:
+        sign = 1.0
+    if s < 1e-12:
+        f = 2.0 * sign
+    else:
+        f = sign * 2.0 * np.arctan2(s, w) / s
+    out[0] = f * q[1]
+    out[1] = f * q[2]
+    out[2] = f * q[3]
+
+
+@njit(cache=True)
+def quat_step(q, w0, w1, w2, h):
+    """Advance ``q`` in place by a constant body rate ``w`` (rad/s) over ``h`` s (exact increment)."""
+    wn = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    half = 0.5 * wn * h
+    if wn * h < 1e-12:
+        dw, dx, dy, dz = 1.0, 0.5 * w0 * h, 0.5 * w1 * h, 0.5 * w2 * h
+    else:
+        s = np.sin(half) / wn
+        dw, dx, dy, dz = np.cos(half), s * w0, s * w1, s * w2
+    a0, a1, a2, a3 = q[0], q[1], q[2], q[3]
+    q[0] = a0 * dw - a1 * dx - a2 * dy - a3 * dz
+    q[1] = a0 * dx + a1 * dw + a2 * dz - a3 * dy
+    q[2] = a0 * dy - a1 * dz + a2 * dw + a3 * dx
+    q[3] = a0 * dz + a1 * dy - a2 * dx + a3 * dw
+    n = np.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2 + q[3] ** 2)
+    for i in range(4):
+        q[i] /= n

@@ -1,0 +1,302 @@
+"""The model a calibration fits: a scene's simulated channels on the measurement's times.
+
+:class:`ChannelModel` runs the base case and its perturbed cases in one engine batch, turns the recorded
+displacement into each channel's quantity (velocity and acceleration as central first and second
+differences over +- ``dt``), interpolates it linearly onto the measurement's times shifted by the time
+offset (at rest before the motion starts) and filters acceleration channels like the measurement
+(detrended, zero-phase Butterworth band-pass). :func:`simulation_choice` sets the fidelity, integrator and
+step it runs with; :func:`synthetic_measurement` uses it to make what sensors would record of a scene.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.signal import butter, detrend, sosfiltfilt
+
+from isolab.engine import STATUS_NAMES, SceneError, simulate
+from isolab.studies.answers.calibration.measurements import (
+    AXIS_NAMES,
+    LOCATION_CG,
+    Measurement,
+    parse_channel,
+)
+from isolab.studies.answers.calibration.parameters import BoundedParameter, to_si_loc
+from isolab.studies.inputs.definitions import DefinitionError, Loc, detail
+from isolab.studies.inputs.scenes import build_batch
+from isolab.studies.inputs.schema import Scene
+from isolab.studies.inputs.study import validate_scene
+
+
+@dataclass
+class SimulationChoice:
+    """The fidelity, integrator and step (``dt``, s) the fit simulates with, and whether the engine's
+    stability guard may shorten the step."""
+
+    fidelity: str
+    integrator: str
+    dt: float
+    auto_step: bool
+
+
+class ChannelModel:
+    """Simulated channels of a scene on the measurement's times, as the parameters and offset vary.
+
+    Args:
+        scene: the validated scene the parameters are written into.
+        params: the fitted parameters (their targets are overridden per case).
+        meas: the measurement whose times and channels are simulated.
+        choice: the model and step the engine runs.
+        offset_bounds: bounds of the time offset, s (the lower one sets how long the simulation runs).
+        highpass: corner of the acceleration channels' high-pass filter, Hz (0: none).
+        lowpass: corner of their low-pass filter, Hz (None: the default, 0: none).
+        prefix: where the request's fields live, for error locations.
+        check_signal: refuse a measured channel without usable signal.
+
+    Raises:
+        DefinitionError: filters the measurement cannot take, or a channel without signal.
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        params: list[BoundedParameter],
+        meas: Measurement,
+        choice: SimulationChoice,
+        offset_bounds: tuple[float, float],
+        highpass: float,
+        lowpass: float | None,
+        prefix: Loc,
+        check_signal: bool = True,
+    ):
+        self.scene = scene
+        self.params = params
+        self.meas = meas
+        self.choice = choice
+        self.t = meas.time
+        self.duration = max(float(meas.time[-1] - offset_bounds[0]) + 3 * choice.dt, 10 * choice.dt)
+        self.points = list(scene.points)
+        self.sos: np.ndarray | None = None
+        self.highpass = 0.0
+        self.lowpass = 0.0
+        self.accel = [k for k, c in enumerate(meas.channels) if c.order == 2]
+        self.gain = np.ones(len(meas.channels))
+        if self.accel:
+            step = np.diff(self.t)
+            fs = 1.0 / float(step.mean())
+            lp = min(0.2 * fs, 0.03 / choice.dt) if lowpass is None else lowpass
+            if lp >= 0.45 * fs:
+                raise DefinitionError(
+                    [detail([*prefix, "lowpass"], f"must be below half the sample rate ({fs / 2:g} Hz)")]
+                )
+            if highpass > 0 and lp > 0 and not highpass < lp:
+                raise DefinitionError([detail([*prefix, "highpass"], f"must be below lowpass ({lp:g} Hz)")])
+            if highpass >= 0.45 * fs:
+                raise DefinitionError(
+                    [detail([*prefix, "highpass"], f"must be below half the sample rate ({fs / 2:g} Hz)")]
+                )
+            if (highpass > 0 or lp > 0) and np.max(np.abs(step - step.mean())) > 0.01 * step.mean():
+                raise DefinitionError(
+                    [
+                        detail(
+                            [*prefix, "measurement", "time"],
+                            "acceleration channels are filtered, which needs evenly spaced samples (within "
+                            "1 %); resample them, or switch the filters off (highpass 0, lowpass 0)",
+                        )
+                    ]
+                )
+            if highpass > 0 and lp > 0:
+                self.sos = butter(2, [highpass, lp], btype="bandpass", fs=fs, output="sos")
+            elif highpass > 0:
+                self.sos = butter(2, highpass, btype="highpass", fs=fs, output="sos")
+            elif lp > 0:
+                self.sos = butter(2, lp, btype="lowpass", fs=fs, output="sos")
+            self.highpass, self.lowpass = float(highpass), float(lp)
+            if self.sos is not None:
+                if self.t.size <= 3 * (2 * len(self.sos) + 1):
+                    raise DefinitionError(
+                        [
+                            detail(
+                                [*prefix, "measurement", "time"],
+                                f"{self.t.size} samples are too few to filter the acceleration channels; "
+                                "give more, or switch the filters off (highpass 0, lowpass 0)",
+                            )
+                        ]
+                    )
+                self.gain[self.accel] = _noise_gain(self.sos, self.t.size)
+        self.cases = 0
+        self.calls = 0
+        self.measured = self.filtered(np.stack([c.values for c in meas.channels], axis=1))
+        rms = np.sqrt(np.mean(self.measured**2, axis=0))
+        for k, c in enumerate(meas.channels if check_signal else []):
+            if not (np.isfinite(rms[k]) and rms[k] > 1e-30 and rms[k] < 1e30):
+                raise DefinitionError(
+                    [
+                        detail(
+                            [*prefix, "measurement", "channels", k],
+                            f"channel {c.name!r} has no usable signal (RMS {rms[k]:.3g} in SI"
+                            + (", after the acceleration filters)" if c.order == 2 else ")"),
+                        )
+                    ]
+                )
+
+    def filtered(self, y: np.ndarray) -> np.ndarray:
+        """(N, ch) with the acceleration channels detrended (a straight line fitted and removed: the
+        sensor's bias and linear drift) and band-passed (zero phase)."""
+        if self.sos is None:
+            return y
+        y = np.array(y, dtype=np.float64, copy=True)
+        y[:, self.accel] = sosfiltfilt(self.sos, detrend(y[:, self.accel], axis=0), axis=0)
+        return y
+
+    def histories(self, values: np.ndarray) -> list[tuple[np.ndarray, np.ndarray] | None]:
+        """Per row of ``values`` (SI parameter values, shape (k, P)), from ONE engine call: the engine's
+        times (from one step before the motion) and each channel's quantity there (finite differences of
+        the recorded displacement); None for a case that failed."""
+        k = values.shape[0]
+        overrides: dict[str, np.ndarray] = {"simulation.duration": np.full(k, self.duration)}
+        for j, p in enumerate(self.params):
+            for leaf in p.target.writes:
+                overrides[leaf] = values[:, j]
+        try:
+            batch = build_batch([self.scene], overrides, n_cases=k)
+        except ValueError:
+            return [None] * k
+        c = self.choice
+        result = simulate(batch, c.fidelity, c.integrator, c.dt, auto_step=c.auto_step, record=list(range(k)))
+        self.cases += k
+        self.calls += 1
+        h = result.history
+        assert h is not None
+        out: list[tuple[np.ndarray, np.ndarray] | None] = []
+        for i in range(k):
+            if STATUS_NAMES[int(result.status[i])] != "ok":
+                out.append(None)
+                continue
+            n = int(h["n_samples"][i])
+            t = np.asarray(h["time"][i, :n])
+            cols = []
+            for ch in self.meas.channels:
+                a = AXIS_NAMES.index(ch.axis)
+                if a >= 3:
+                    cols.append(h["rotation"][i, :n, a - 3])
+                elif ch.location == LOCATION_CG:
+                    cols.append(h["displacement"][i, :n, a])
+                else:
+                    cols.append(h["point_displacement"][i, :n, self.points.index(ch.location), a])
+            y = np.stack(cols, axis=1)
+            if not np.all(np.isfinite(y)) or t.size < 3:
+                out.append(None)
+                continue
+            dt = float(t[1] - t[0])
+            # at rest before the motion: one sample of zeros at -dt, and the last sample held
+            yp = np.concatenate([np.zeros((1, y.shape[1])), y, y[-1:]])
+            q = np.empty((t.size + 1, y.shape[1]))
+            q[0] = 0.0
+            for kk, ch in enumerate(self.meas.channels):
+                if ch.order == 0:
+                    q[1:, kk] = y[:, kk]
+                elif ch.order == 1:  # central difference: the mean velocity over +- dt
+                    q[1:, kk] = (yp[2:, kk] - yp[:-2, kk]) / (2 * dt)
+                else:  # second difference: the acceleration averaged over +- dt
+                    q[1:, kk] = (yp[2:, kk] - 2 * yp[1:-1, kk] + yp[:-2, kk]) / dt**2
+            out.append((np.concatenate([[-dt], t]), q))
+        return out
+
+    def sample(self, hist: tuple[np.ndarray, np.ndarray], offset: float) -> np.ndarray:
+        """(N, ch) simulated channels at the measurement's times (interpolated linearly; zero before the
+        motion starts), unfiltered."""
+        tg, q = hist
+        ts = self.t - offset
+        out = np.empty((ts.size, q.shape[1]))
+        for k in range(q.shape[1]):
+            out[:, k] = np.interp(ts, tg, q[:, k], left=0.0, right=q[-1, k])
+        return out
+
+    def predict(self, hist: tuple[np.ndarray, np.ndarray], offset: float) -> np.ndarray:
+        """(N, ch) simulated channels at the measurement's times, filtered like the measurement."""
+        return self.filtered(self.sample(hist, offset))
+
+
+def _noise_gain(sos: np.ndarray, n: int) -> float:
+    """Variance of white noise of unit variance after the zero-phase filter ``sos`` (sum of the squared
+    impulse response): the fraction of a filtered channel's samples that count as independent."""
+    m = min(n, 20_000)
+    x = np.zeros(m)
+    x[m // 2] = 1.0
+    return float(np.clip(np.sum(sosfiltfilt(sos, x) ** 2), 1e-6, 1.0))
+
+
+def simulation_choice(scene: Scene, simulation: Mapping[str, Any] | None, prefix: Loc) -> SimulationChoice:
+    """The model the fit simulates with: the scene's simulation block, with ``simulation``'s fidelity,
+    integrator, dt (s or text with units) and auto_step over it; ltv with rk4 at 1 ms where the scene has
+    an accuracy request instead.
+
+    Raises:
+        DefinitionError: another field, a step that is not positive or a pair the engine refuses.
+    """
+    sim = scene.simulation
+    data = {k: getattr(sim, k) for k in ("fidelity", "integrator", "dt", "auto_step")}
+    for k, v in (simulation or {}).items():
+        if k not in ("fidelity", "integrator", "dt", "auto_step"):
+            raise DefinitionError(
+                [
+                    detail(
+                        [*prefix, "simulation", k],
+                        "a calibration chooses only fidelity, integrator, dt, auto_step",
+                    )
+                ]
+            )
+        data[k] = v
+    if data["dt"] is not None:
+        data["dt"] = to_si_loc(data["dt"], "time", [*prefix, "simulation", "dt"])
+    fidelity = data["fidelity"] or "ltv"
+    integrator = data["integrator"] or ("exact" if fidelity == "lti" else "rk4")
+    dt = float(data["dt"] or 1e-3)
+    if not (math.isfinite(dt) and dt > 0):
+        raise DefinitionError([detail([*prefix, "simulation", "dt"], "must be a positive step in s")])
+    from isolab.engine import check_choice
+
+    try:
+        check_choice(fidelity, integrator)
+    except SceneError as err:
+        raise DefinitionError([detail([*prefix, "simulation", err.field], err.reason)]) from None
+    return SimulationChoice(fidelity, integrator, dt, bool(data["auto_step"]))
+
+
+def synthetic_measurement(
+    scene: Mapping[str, Any] | Scene,
+    channels: Sequence[tuple[str, str]],
+    time: np.ndarray,
+    offset: float = 0.0,
+    noise: float = 0.0,
+    bias: float = 0.0,
+    drift: float = 0.0,
+    seed: int = 0,
+    simulation: Mapping[str, Any] | None = None,
+) -> Measurement:
+    """What sensors would record of ``scene``: each channel ``(name, unit)`` at ``time`` (s), the motion
+    starting at ``offset`` on that clock, plus white noise of ``noise`` times the channel's RMS and, on
+    acceleration channels, a bias (m/s^2 or rad/s^2) and a linear drift (per s). For tests and examples.
+    """
+    sc = scene if isinstance(scene, Scene) else validate_scene(dict(scene))
+    t = np.asarray(time, dtype=np.float64)
+    chans = [parse_channel(n, u, np.zeros(t.size), [n]) for n, u in channels]
+    meas = Measurement(t, chans, "synthetic")
+    choice = simulation_choice(sc, simulation, [])
+    model = ChannelModel(sc, [], meas, choice, (offset, offset), 0.0, 0.0, [], check_signal=False)
+    hist = model.histories(np.zeros((1, 0)))[0]
+    if hist is None:
+        raise ValueError("the scene does not simulate")
+    clean = model.sample(hist, offset)
+    rng = np.random.default_rng(seed)
+    for k, ch in enumerate(chans):
+        v = clean[:, k] + noise * float(np.sqrt(np.mean(clean[:, k] ** 2))) * rng.standard_normal(t.size)
+        if ch.order == 2:
+            v = v + bias + drift * (t - t[0])
+        ch.values = v
+    return meas

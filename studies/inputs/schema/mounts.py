@@ -1,0 +1,214 @@
+"""The isolators: a type (preset) with overrides, placed by a layout of four mounts around the c.g. or by
+an explicit list, per-axis stiffness and damping, and the feedforward of an active mount."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Annotated, Any
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from isolab.studies.inputs.isolators import (
+    PRESETS,
+    CollinearIsolatorsError,
+    Feedforward,
+    IsolatorPreset,
+    load_share,
+)
+from isolab.studies.inputs.schema.fields import (
+    MAX_MOUNT_HEIGHT,
+    DampingRatio,
+    InputModel,
+    MountFrequency,
+    NonNegativeDamping,
+    NonNegativeStiffness,
+    Position,
+    PresetName,
+    Span,
+    tested_range,
+    within,
+)
+from isolab.studies.inputs.schema.scene_paths import AXIS_ALIASES
+from isolab.studies.units import Dimensionless, Force, Frequency, Length
+
+
+def _axis_aliases(value: Any) -> Any:
+    """Accept ``horizontal`` (X and Y) and ``vertical`` (Z) for per-axis isolator values."""
+    if not isinstance(value, dict):
+        return value
+    out = {k: v for k, v in value.items() if k not in AXIS_ALIASES}
+    for alias, axes in AXIS_ALIASES.items():
+        if alias in value:
+            clash = [a for a in axes if a in out]
+            if clash:
+                raise ValueError(f"give {alias} or {'/'.join(clash)}, not both")
+            out.update({a: value[alias] for a in axes})
+    return out
+
+
+class AxisStiffness(InputModel):
+    """Explicit stiffness per floor axis for every mount, N/m.
+
+    ``horizontal`` sets x and y, ``vertical`` sets z."""
+
+    x: NonNegativeStiffness | None = None
+    y: NonNegativeStiffness | None = None
+    z: NonNegativeStiffness | None = None
+
+    @model_validator(mode="before")
+    @classmethod
+    def _aliases(cls, value: Any) -> Any:
+        return _axis_aliases(value)
+
+
+class AxisDamping(InputModel):
+    """Explicit damping per floor axis for every mount, N s/m.
+
+    ``horizontal`` sets x and y, ``vertical`` sets z."""
+
+    x: NonNegativeDamping | None = None
+    y: NonNegativeDamping | None = None
+    z: NonNegativeDamping | None = None
+
+    @model_validator(mode="before")
+    @classmethod
+    def _aliases(cls, value: Any) -> Any:
+        return _axis_aliases(value)
+
+
+class Layout(InputModel):
+    """Four mounts at (cg_x +- span_x/2, cg_y +- span_y/2, cg_z - height) around the machine's c.g."""
+
+    span_x: Span = Field(description="distance between the mounts along X, m")
+    span_y: Span = Field(description="distance between the mounts along Y, m")
+    height: Annotated[Length, tested_range(-MAX_MOUNT_HEIGHT, MAX_MOUNT_HEIGHT, "length")] = Field(
+        description="how far the machine's c.g. sits above the mounts, m"
+    )
+
+    def positions(self, cg: np.ndarray) -> np.ndarray:
+        """(4, 3) mount positions, m, for a machine c.g. at ``cg`` (m)."""
+        sx = np.array([-1.0, 1.0, 1.0, -1.0]) * self.span_x / 2.0
+        sy = np.array([-1.0, -1.0, 1.0, 1.0]) * self.span_y / 2.0
+        return np.stack([cg[0] + sx, cg[1] + sy, np.full(4, cg[2] - self.height)], axis=-1)
+
+
+LAYOUT_ORDER = "(-x,-y), (+x,-y), (+x,+y), (-x,+y)"
+"""Order of the four mounts of a layout around the c.g."""
+
+
+class FeedforwardSpec(InputModel):
+    """Feedforward of the stages' inertial wrench to an active mount's actuators (docs/physics.md, "Active
+    mounts with feedforward"): ``gain`` times the opposite of the stages' reaction, low-passed at
+    ``bandwidth``, clipped to ``force_limit`` per mount and axis. ``gain: 0`` turns it off."""
+
+    gain: Annotated[
+        Dimensionless, within(0.0, 1.5, "dimensionless", "0 (off) to a 50 % over-compensation")
+    ] = Field(1.0, description="fraction of the stages' inertial wrench fed forward, 1")
+    bandwidth: Annotated[
+        Frequency, within(1.0, 1000.0, "frequency", "the corner of an isolation controller's feedforward")
+    ] = Field(50.0, description="corner frequency of the first-order low-pass, Hz")
+    force_limit: (
+        Annotated[Force, within(1.0, 1e6, "force", "an actuator of 1 N to 1 MN per mount and axis")] | None
+    ) = Field(None, description="largest actuator force per mount and axis, N (none: unlimited)")
+    weight: bool = Field(
+        False,
+        description="also feed forward the change of the stages' weight moment (a stage that has travelled); "
+        "false: the inertial wrench only",
+    )
+
+    def figures(self) -> Feedforward:
+        """The engine's figures (SI; an unlimited actuator as ``inf``)."""
+        return Feedforward(
+            gain=float(self.gain),
+            bandwidth=float(self.bandwidth),
+            force_limit=float("inf") if self.force_limit is None else float(self.force_limit),
+            weight=bool(self.weight),
+        )
+
+
+class Mount(InputModel):
+    """One isolator of an explicit list. Its own values win over the group's: explicit ``k``/``c`` first,
+    then its overrides, then its own ``preset``; without a preset of its own it takes the group's
+    overrides and preset."""
+
+    position: Position = Field(description="point of action, m")
+    preset: PresetName | None = None
+    f_vertical: MountFrequency | None = None
+    f_horizontal: MountFrequency | None = None
+    zeta: DampingRatio | None = None
+    skyhook: bool | None = None
+    feedforward: FeedforwardSpec | None = None
+    k: tuple[NonNegativeStiffness, NonNegativeStiffness, NonNegativeStiffness] | None = Field(
+        None, description="[kx, ky, kz], N/m"
+    )
+    c: tuple[NonNegativeDamping, NonNegativeDamping, NonNegativeDamping] | None = Field(
+        None, description="[cx, cy, cz], N s/m"
+    )
+
+
+class PresetTuning(InputModel):
+    """The figures of the model of one isolator type this machine would use (vendor data)."""
+
+    f_vertical: MountFrequency | None = None
+    f_horizontal: MountFrequency | None = None
+    zeta: DampingRatio | None = None
+    skyhook: bool | None = None
+    feedforward: FeedforwardSpec | None = None
+
+
+class Isolators(InputModel):
+    """The isolators: a type (``preset``) with optional overrides, placed by a ``layout`` or a ``list``.
+
+    Stiffness and damping of a mount along each floor axis come, in order of precedence, from the mount's
+    explicit ``k``/``c``, the group's ``k``/``c`` for that axis, or the preset frequency (X, Y from
+    ``f_horizontal``, Z from ``f_vertical``) and ``zeta`` applied to the static load the mount carries.
+    ``tuning`` replaces a type's preset figures by those of the model this machine would use, whenever
+    that type is chosen: a study that varies ``preset`` then compares those models, where the group's
+    overrides would apply to every type alike. ``feedforward`` (active mounts: the stages' inertial wrench
+    fed to the actuators) comes as a whole from the mount's own, its preset's, the group's, or the group
+    preset's (on for ``active``, off for ``air`` and ``elastomer``).
+    """
+
+    preset: PresetName = "air"
+    tuning: dict[PresetName, PresetTuning] = Field(default_factory=dict)
+    f_vertical: MountFrequency | None = None
+    f_horizontal: MountFrequency | None = None
+    zeta: DampingRatio | None = None
+    skyhook: bool | None = None
+    feedforward: FeedforwardSpec | None = None
+    k: AxisStiffness | None = None
+    c: AxisDamping | None = None
+    layout: Layout | None = None
+    mounts: list[Mount] | None = Field(None, alias="list")
+
+    @model_validator(mode="after")
+    def _placement(self) -> Isolators:
+        if (self.layout is None) == (self.mounts is None):
+            raise ValueError("isolators: give either layout (four mounts around the c.g.) or list, not both")
+        if self.mounts is not None:
+            if len(self.mounts) < 3:
+                raise ValueError(
+                    f"isolators: at least 3 are needed to carry a rigid base, got {len(self.mounts)}"
+                )
+            xy = np.array([m.position[:2] for m in self.mounts])
+            try:
+                load_share(xy, xy.mean(axis=0), 1.0)
+            except CollinearIsolatorsError as err:
+                raise ValueError(str(err)) from None
+        return self
+
+    @property
+    def count(self) -> int:
+        return 4 if self.mounts is None else len(self.mounts)
+
+    def preset_of(self, name: str) -> IsolatorPreset:
+        """The figures of type ``name``: the preset, with this machine's ``tuning`` of it applied."""
+        base = PRESETS[name]
+        tune = self.tuning.get(name)
+        if tune is None:
+            return base
+        given = {k: getattr(tune, k) for k, v in tune.model_dump().items() if v is not None}
+        if "feedforward" in given:
+            given["feedforward"] = given["feedforward"].figures()
+        return replace(base, **given)

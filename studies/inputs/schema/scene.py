@@ -1,0 +1,108 @@
+"""The scene: a machine base on isolators with its stages, points of interest, floor motion, simulation
+and criteria; the checks that involve several of its blocks (the stage tree, travels, the stages' weight)."""
+
+from __future__ import annotations
+
+from pydantic import Field, ValidationInfo, field_validator, model_validator
+
+from isolab.studies.inputs.block import MAX_TRAVEL, beyond_travel, travel_bound
+from isolab.studies.inputs.schema.fields import MAX_STAGE_MASS_RATIO, InputModel, Name, Position
+from isolab.studies.inputs.schema.floor_motion import Floor
+from isolab.studies.inputs.schema.machine import Machine
+from isolab.studies.inputs.schema.mounts import Isolators
+from isolab.studies.inputs.schema.scene_paths import stage_entry
+from isolab.studies.inputs.schema.simulation import Simulation
+from isolab.studies.inputs.schema.stages import Stage, profile_excursion
+from isolab.studies.questions.criteria import Criteria
+
+
+class Scene(InputModel):
+    """A machine base on isolators with its stages, points of interest, floor motion and simulation."""
+
+    machine: Machine
+    isolators: Isolators
+    stages: list[Stage] = Field(default_factory=list)
+    points: dict[Name, Position] = Field(
+        default_factory=dict, description="material points of the machine, m"
+    )
+    floor: Floor | None = None
+    simulation: Simulation = Field(default_factory=Simulation)
+    criteria: Criteria | None = Field(
+        None, description="limits at the points of interest and on the mounts (studies.criteria)"
+    )
+
+    @field_validator("stages")
+    @classmethod
+    def _stage_tree_and_travel(cls, stages: list[Stage], info: ValidationInfo) -> list[Stage]:
+        names = [s.name for s in stages]
+        index = {}
+        for i, s in enumerate(stages):
+            if s.name in index:
+                raise ValueError(
+                    f"{stage_entry(i)}.name: {s.name!r} is already the name of {stage_entry(index[s.name])}"
+                )
+            index[s.name] = i
+        for i, s in enumerate(stages):
+            if s.parent is None:
+                continue
+            if s.parent == s.name:
+                raise ValueError(f"{stage_entry(i)}.parent: stage {s.name!r} cannot ride on itself")
+            if s.parent not in index:
+                raise ValueError(
+                    f"{stage_entry(i)}.parent: no stage named {s.parent!r} (stages: {', '.join(names)})"
+                )
+            if index[s.parent] > i:
+                chain, cur = [s.name], s.parent
+                while cur is not None and cur not in chain:
+                    chain.append(cur)
+                    cur = stages[index[cur]].parent
+                if cur is not None:
+                    raise ValueError(f"{stage_entry(i)}.parent: cycle {' -> '.join([*chain, cur])}")
+                raise ValueError(
+                    f"{stage_entry(i)}.parent: {s.parent!r} must be listed before {s.name!r} "
+                    "(parents come first)"
+                )
+        machine = info.data.get("machine")
+        block = machine.block if machine is not None else None
+        for i, s in enumerate(stages):
+            bound = float(travel_bound(s.axis, block.size if block is not None else None))
+            if block is not None:
+                where = f"the base's {bound:.6g} m extent along the stage axis"
+            else:
+                where = f"{MAX_TRAVEL:g} m"
+            far = profile_excursion(s.profile)
+            if beyond_travel(far, bound):
+                raise ValueError(
+                    f"{stage_entry(i)}.profile.travel: the stage would travel {far:.6g} m from home, "
+                    f"more than {where}"
+                )
+        return stages
+
+    @model_validator(mode="after")
+    def _stage_mass(self) -> Scene:
+        """Stages heavier than the base are refused. What only the assembled scene shows (mounts that
+        cannot carry the weight, moves off the base) is the check step's, :func:`studies.scenes.check_scene`:
+        parsing builds nothing."""
+        stages = sum(s.mass for s in self.stages)
+        base = self.machine.properties()[0]
+        if stages > MAX_STAGE_MASS_RATIO * base * (1.0 + 1e-12):
+            raise ValueError(
+                f"stages: together they weigh {stages:.6g} kg, more than {MAX_STAGE_MASS_RATIO:g} times the "
+                f"machine base ({base:.6g} kg); stages are point masses, and a base lighter than its stages "
+                "leaves the machine almost without rotational inertia"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _criteria_points(self) -> Scene:
+        if self.criteria is not None:
+            self.criteria.check_points(self.points, self.has_floor_spectrum())
+        return self
+
+    def has_floor_spectrum(self) -> bool:
+        """Whether the floor's vibration is given as a spectrum (what a velocity criterion judges)."""
+        return self.floor is not None and getattr(self.floor, "spectrum", None) is not None
+
+    def total_mass(self) -> float:
+        """Machine plus all stages, kg."""
+        return float(self.machine.properties()[0] + sum(s.mass for s in self.stages))

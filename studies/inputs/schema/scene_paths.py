@@ -1,0 +1,92 @@
+"""The dotted paths of a scene's inputs, written once.
+
+A path follows the scene file's own keys, with stage and point names and list indices as segments
+(``stages.y.profile.acceleration``, ``isolators.list.2.position``); the components of a vector input are
+``<path>.0`` to ``<path>.2``. The parameter paths a study may vary (:mod:`studies.inputs.parameters`), the
+per-case overrides the batch builder reads (:mod:`studies.inputs.scenes`) and the errors that name an input
+(here and in the models) are all spelled from the names below. In an error, the ``i``-th entry of the
+stage list is :func:`stage_entry` (``stages[1].parent``).
+"""
+
+from __future__ import annotations
+
+MACHINE_MASS = "machine.mass"
+MACHINE_CG = "machine.cg"
+MACHINE_INERTIA = "machine.inertia"
+MACHINE_INERTIA_DIAGONAL = "machine.inertia_diagonal"
+MACHINE_BLOCK = "machine.block"
+BLOCK_SIZE = f"{MACHINE_BLOCK}.size"
+BLOCK_DENSITY = f"{MACHINE_BLOCK}.density"
+BLOCK_CORNER = f"{MACHINE_BLOCK}.corner"
+"""The machine base: given by mass, c.g. and inertia, or as a block (size, density, corner)."""
+
+ISOLATORS = "isolators"
+ISOLATOR_PRESET = f"{ISOLATORS}.preset"
+MOUNT_FIGURES = ("f_vertical", "f_horizontal", "zeta")
+"""The preset figures the isolator group and each listed mount may override (``isolators.zeta``,
+``isolators.list.2.zeta``)."""
+EXPLICIT_VALUES = ("k", "c")
+"""Explicit stiffness and damping: per floor axis for every mount (``isolators.k.z``), or a vector of one
+listed mount (``isolators.list.2.k.2``)."""
+AXIS_ALIASES: dict[str, tuple[str, ...]] = {"horizontal": ("x", "y"), "vertical": ("z",)}
+"""Keys that stand for several floor axes in the per-axis values of the isolator group."""
+LAYOUT_SPAN_X = f"{ISOLATORS}.layout.span_x"
+LAYOUT_SPAN_Y = f"{ISOLATORS}.layout.span_y"
+LAYOUT_HEIGHT = f"{ISOLATORS}.layout.height"
+
+FLOOR_SINE_KEYS = ("amplitude", "frequency", "phase")
+"""The vectors of a sine floor (``floor.sine.amplitude``)."""
+SIMULATION_DURATION = "simulation.duration"
+SIMULATION_SETTLE_TOLERANCE = "simulation.settle_tolerance"
+"""The only inputs of the simulation block a study may vary (the rest is shared by every case)."""
+
+
+def components(vector: str) -> list[str]:
+    """The paths of the three components of a vector input: ``machine.cg`` -> ``machine.cg.0`` .. ``.2``."""
+    return [f"{vector}.{i}" for i in range(3)]
+
+
+def isolator_group(key: str) -> str:
+    """A value the isolator group sets for every mount: ``isolators.<key>`` (``isolators.f_vertical``)."""
+    return f"{ISOLATORS}.{key}"
+
+
+def group_axis(kind: str, axis: str) -> str:
+    """Explicit stiffness or damping (``kind`` k or c) of every mount along ``axis`` (x, y, z or an
+    alias): ``isolators.k.z``."""
+    return f"{ISOLATORS}.{kind}.{axis}"
+
+
+def mount(j: int) -> str:
+    """Mount ``j`` of an explicit list: ``isolators.list.<j>``."""
+    return f"{ISOLATORS}.list.{j}"
+
+
+def stage(name: str) -> str:
+    """The stage called ``name``: ``stages.<name>``."""
+    return f"stages.{name}"
+
+
+def stage_profile(name: str) -> str:
+    """The motion profile of the stage called ``name``: ``stages.<name>.profile``."""
+    return f"{stage(name)}.profile"
+
+
+def profile_segment(name: str, k: int) -> str:
+    """Segment ``k`` of a sequence profile: ``stages.<name>.profile.segments.<k>``."""
+    return f"{stage_profile(name)}.segments.{k}"
+
+
+def point(name: str) -> str:
+    """The point of interest called ``name`` (a position vector): ``points.<name>``."""
+    return f"points.{name}"
+
+
+def floor_sine(key: str) -> str:
+    """A vector of the sine floor (one of :data:`FLOOR_SINE_KEYS`): ``floor.sine.<key>``."""
+    return f"floor.sine.{key}"
+
+
+def stage_entry(i: int) -> str:
+    """The ``i``-th entry of the scene's stage list as errors name it: ``stages[<i>]``."""
+    return f"stages[{i}]"

@@ -1,0 +1,121 @@
+"""The stages: moving masses on the machine, each travelling along its axis by a motion profile
+(trapezoid, S-curve, scan or a sequence of moves and dwells)."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import Discriminator, Field, Tag, field_validator
+
+from isolab.studies.inputs.schema.fields import (
+    InputModel,
+    Name,
+    NonNegativeTime,
+    Position,
+    StageAcceleration,
+    StageJerk,
+    StageMass,
+    StageVelocity,
+)
+from isolab.studies.units import Dimensionless, Length
+
+
+class TrapezoidProfile(InputModel):
+    """One trapezoidal move by ``travel`` from home (triangular when too short to reach the velocity)."""
+
+    type: Literal["trapezoid"]
+    travel: Length = Field(description="signed distance along the stage axis, m")
+    velocity: StageVelocity
+    acceleration: StageAcceleration
+    start: NonNegativeTime = 0.0
+
+
+class SCurveProfile(InputModel):
+    """One jerk-limited (S-curve) move by ``travel`` from home."""
+
+    type: Literal["scurve"]
+    travel: Length
+    velocity: StageVelocity
+    acceleration: StageAcceleration
+    jerk: StageJerk
+    start: NonNegativeTime = 0.0
+
+
+class ScanProfile(InputModel):
+    """Out by ``travel``, dwell, back home, dwell; ``repeats`` times (S-curves when ``jerk`` is given)."""
+
+    type: Literal["scan"]
+    travel: Length
+    velocity: StageVelocity
+    acceleration: StageAcceleration
+    jerk: StageJerk | None = None
+    dwell: NonNegativeTime = 0.0
+    repeats: int = Field(1, ge=1, le=1000)
+    start: NonNegativeTime = 0.0
+
+
+class MoveSegment(InputModel):
+    move: Length = Field(description="signed distance, m")
+    velocity: StageVelocity
+    acceleration: StageAcceleration
+    jerk: StageJerk | None = None
+
+
+class DwellSegment(InputModel):
+    dwell: NonNegativeTime
+
+
+def _segment_kind(value: Any) -> str:
+    if isinstance(value, dict):
+        return "dwell" if "dwell" in value and "move" not in value else "move"
+    return "dwell" if isinstance(value, DwellSegment) else "move"
+
+
+Segment = Annotated[
+    Annotated[MoveSegment, Tag("move")] | Annotated[DwellSegment, Tag("dwell")], Discriminator(_segment_kind)
+]
+
+
+class SequenceProfile(InputModel):
+    """Moves and dwells one after the other, from home."""
+
+    type: Literal["sequence"]
+    segments: list[Segment] = Field(min_length=1)
+    start: NonNegativeTime = 0.0
+
+
+Profile = Annotated[
+    TrapezoidProfile | SCurveProfile | ScanProfile | SequenceProfile, Field(discriminator="type")
+]
+
+
+def profile_excursion(profile: Any) -> float:
+    """Largest distance from home the profile takes its stage to, m."""
+    if isinstance(profile, SequenceProfile):
+        pos, far = 0.0, 0.0
+        for seg in profile.segments:
+            if isinstance(seg, MoveSegment):
+                pos += seg.move
+                far = max(far, abs(pos))
+        return far
+    return abs(profile.travel)
+
+
+class Stage(InputModel):
+    """A moving mass that travels along a unit axis fixed in the machine (or in its parent stage)."""
+
+    name: Name
+    mass: StageMass = Field(description="moving mass, kg")
+    home: Position = Field(description="the stage's c.g. at home, floor frame, m")
+    axis: tuple[Dimensionless, Dimensionless, Dimensionless] = Field(description="travel direction")
+    parent: Name | None = Field(None, description="the stage this one rides on (listed earlier)")
+    profile: Profile
+
+    @field_validator("axis")
+    @classmethod
+    def _unit_axis(cls, value: tuple[float, float, float]) -> tuple[float, float, float]:
+        norm = float(np.linalg.norm(value))
+        if not norm > 0.0:
+            raise ValueError("axis: the zero vector has no direction")
+        return tuple(float(x) / norm for x in value)

@@ -1,0 +1,76 @@
+"""What a study file adds to its scene: the parameters it varies (their values or ranges) and the design
+that draws its cases. The study model itself is :class:`studies.inputs.study.Study`."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, StrictFloat, StrictInt, StrictStr, model_validator
+
+from isolab.studies.inputs.schema.fields import InputModel, Name
+
+Value = StrictFloat | StrictInt | StrictStr
+MAX_LIST_ENTRIES = 10_000_000
+"""Most entries of a parameter's ``values`` or a list design's ``cases``: the most cases a design holds
+(:data:`studies.designs.GRID_LIMIT`). A service refuses lists longer than its case limit
+(``ISOLAB_MAX_CASES``) before parsing (:func:`studies.definitions.long_lists`)."""
+
+
+class RangeSpec(InputModel):
+    """A continuous range; ``num`` levels for a grid (sampled designs draw from it)."""
+
+    start: Value
+    stop: Value
+    num: int | None = Field(None, ge=1, le=100_000)
+    scale: Literal["linear", "log"] = "linear"
+
+
+class ParameterSpec(InputModel):
+    """One varied input: a path into the scene and its ``values`` or ``range`` (units allowed)."""
+
+    name: Name | None = None
+    path: str = Field(min_length=1, max_length=200)
+    values: list[Value] | None = Field(None, min_length=1, max_length=MAX_LIST_ENTRIES)
+    range: RangeSpec | None = None
+
+    @model_validator(mode="after")
+    def _values_or_range(self) -> ParameterSpec:
+        if self.values is not None and self.range is not None:
+            raise ValueError("give values or range, not both")
+        return self
+
+
+class DesignSpec(InputModel):
+    """How cases are drawn: full factorial ``grid``, ``lhs``, ``sobol``, ``random``, ``saltelli`` (Sobol'
+    indices: ``samples`` is the base sample N and the study runs N (D + 2) cases, N (2D + 2) with
+    ``second_order``), explicit ``list``, or ``optimize`` (a pymoo optimiser picks the cases generation
+    by generation within ``budget``: :mod:`studies.optimisation`)."""
+
+    type: Literal["grid", "lhs", "sobol", "random", "saltelli", "list", "optimize"] = "grid"
+    samples: int | None = Field(None, ge=1, le=10_000_000)
+    seed: int = Field(0, ge=0)
+    second_order: bool | None = Field(
+        None, description="saltelli only: also run the cases pairwise (second-order) indices need; default no"
+    )
+    cases: list[dict[str, Value]] | None = Field(None, max_length=MAX_LIST_ENTRIES)
+    # optimize only (see studies.optimisation and studies.goals, which check them against the outputs)
+    objective: str | list[str] | None = Field(
+        None,
+        description="optimize: 'minimize <quantity>' or 'maximize <quantity>', or a list of them "
+        "(multi-objective), e.g. 'minimize settling_time.tool'",
+    )
+    constraints: list[str] | None = Field(
+        None,
+        max_length=100,
+        description="optimize: 'criteria' (every criterion of the study's criteria block is met) or "
+        "'<quantity> <= <value>' / '<quantity> >= <value>' with units, e.g. 'min_isolator_load >= 0 N'",
+    )
+    algorithm: str | None = Field(
+        None,
+        description="optimize: a pymoo algorithm (ga, de, pso, nelder-mead, pattern, nsga2); default "
+        "ga for one objective, nsga2 for several",
+    )
+    budget: int | None = Field(None, ge=1, le=1_000_000, description="optimize: total cases to evaluate")
+    population: int | None = Field(
+        None, ge=2, le=10_000, description="optimize: cases per generation (default 40, at most the budget)"
+    )
