@@ -8,11 +8,11 @@ STAMP := $(VENV)/.installed
 TEST_STAMP := $(VENV)/.installed-test
 CODE := engine studies service tests benchmarks
 
-# numba caches each compiled kernel beside its source, but notices an edit only in the kernel's own file:
-# a kernel that inlines code from another engine module would run stale after that module changes. The
-# make targets keep the caches in a folder named for the engine's sources, so any engine edit starts fresh.
-ENGINE_HASH := $(shell cat engine/*.py engine/*/*.py 2>/dev/null | sha1sum | cut -c1-12)
-export NUMBA_CACHE_DIR ?= $(CURDIR)/$(VENV)/numba-cache/$(ENGINE_HASH)
+# The compiled kernels live in one folder per machine and engine version, which isolab.engine chooses
+# itself (`isolab.engine.kernel_cache_folder()`: ~/.cache/isolab/numba/<hash of the engine's sources>, or
+# NUMBA_CACHE_DIR when set): numba notices an edit only in a kernel's own file, and the kernels inline code
+# from each other's modules, so the hash starts a fresh cache after any engine edit. The make targets, the
+# command line run by hand and the service's Dask workers all share it.
 
 HOST ?= 127.0.0.1
 PORT ?= 8000
@@ -48,13 +48,15 @@ docs: $(STAMP)
 	$(PY) -m isolab.studies.authoring.file_reference > docs/study-files.md.part
 	mv docs/study-files.md.part docs/study-files.md
 
-# The whole suite (about 5 minutes on 2 cores).
+# The whole suite in 2 test processes (pytest-xdist; a test file stays in one process, so its module
+# fixtures, services among them, start once). Both use the one kernel cache of the machine (above).
+TEST_PROCESSES ?= 2
 test: $(TEST_STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(TEST_PROCESSES) --dist loadfile
 
 # Everything not marked slow (services in subprocesses, fault injection, the wheel build): under a minute.
 test-fast: $(TEST_STAMP)
-	$(PY) -m pytest -q -m "not slow"
+	$(PY) -m pytest -q -n $(TEST_PROCESSES) --dist loadfile -m "not slow"
 
 # The performance figures (docs/performance.md): the engine on one core against a numpy loop and solve_ivp,
 # then 10,000- and 100,000-case studies through a real `isolab serve` (about 15 minutes on an idle machine).
@@ -62,6 +64,7 @@ bench: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m benchmarks kernels
 	$(PY) -m benchmarks endtoend
 	$(PY) -m benchmarks million
+	$(PY) -m benchmarks startup
 
 # Load on a real `isolab serve`: 50 clients and a 100,000-case study on loopback; stops within 2 minutes.
 load: $(STAMP)

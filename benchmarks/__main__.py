@@ -1,8 +1,8 @@
-"""``python -m benchmarks [pairs|kernels|accuracy|endtoend|million] ...``: run the benchmarks and print their figures."""
+"""``python -m benchmarks [pairs|kernels|accuracy|endtoend|million|first_study|startup] ...``: run the benchmarks and print their figures."""
 
 import sys
 
-from benchmarks import accuracy, endtoend, kernels, million, pairs
+from benchmarks import accuracy, endtoend, first_study, kernels, million, pairs, startup
 
 COMMANDS = {
     "pairs": pairs.main,
@@ -10,6 +10,8 @@ COMMANDS = {
     "accuracy": accuracy.main,
     "endtoend": endtoend.main,
     "million": million.main,
+    "first_study": first_study.main,
+    "startup": startup.main,
 }
 
 if __name__ == "__main__":

@@ -7,7 +7,7 @@ For each scene the truth is the nonlinear level with the reference integrator (D
 finest step (0.1 ms). Each pair runs at each step; the table gives the relative error of the peak c.g.
 displacement (largest error over the axes, relative to the reference's largest peak), of the peak isolator
 force (likewise over isolators and axes), the largest relative error of any sizing output (what
-:mod:`studies.accuracy` checks a tolerance against), the settling-time error (absolute, s), and the engine
+:mod:`studies.run.accuracy` checks a tolerance against), the settling-time error (absolute, s), and the engine
 time per case (a batch of up to 50 copies, median of 3 runs; the reference integrator loops over cases in
 Python, so it runs one case). ``--write`` puts the tables into ``docs/accuracy.md`` (between the
 generated-section markers) and the plot into ``docs/accuracy.png``.
@@ -236,7 +236,7 @@ EXAMPLE_STUDIES = ("article-scriber", "isolator-comparison", "lhs-10000")
 
 
 def chooser_rows() -> list[dict]:
-    """What :func:`studies.accuracy.choose` picks for fast, balanced and reference on the example
+    """What :func:`studies.run.accuracy.choose` picks for fast, balanced and reference on the example
     studies (their own fidelity, integrator and step left out), and how long it took."""
     import yaml
 
@@ -472,7 +472,7 @@ def markdown(results: dict[str, list[Row]], command: str, elapsed: float, choice
         "### Engine time per step",
         "",
         "The chooser ranks candidates with a fixed cost table "
-        "(`studies.costs.STEP_COST`); measured on the article scene:",
+        "(`studies.run.costs.STEP_COST`); measured on the article scene:",
         "",
         step_costs(results.get("article", next(iter(results.values())))),
         "",

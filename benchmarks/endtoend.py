@@ -3,7 +3,7 @@
 Run: ``python -m benchmarks endtoend [--cases 10000 100000] [--rk4-cases 10000] [--duration 3]``.
 
 Starts ``isolab serve`` as a subprocess on a free loopback port with a temporary data directory and the
-default 2 Dask workers, and the timing journal on (``ISOLAB_TIMINGS``, see :mod:`studies.fanout`). It runs
+default 2 Dask workers, and the timing journal on (``ISOLAB_TIMINGS``, see :mod:`studies.run.fanout`). It runs
 a small warm-up study first (the workers load the compiled kernels), then Latin hypercube studies based on
 ``studies/examples/lhs-10000.yaml`` (scene inlined; lti/exact at every size in ``--cases``, lti/rk4 at
 ``--rk4-cases``), each submitted over REST and polled until done. Per study it prints:

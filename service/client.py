@@ -16,6 +16,7 @@ reads files). Every failed request raises :class:`ClientError` carrying the serv
 from __future__ import annotations
 
 import builtins
+import contextlib
 import json
 import os
 import tempfile
@@ -320,12 +321,18 @@ class Client:
         highpass: float | str | None = None,
         lowpass: float | str | None = None,
         plot: bool = False,
+        progress: Callable[[dict[str, Any]], object] | None = None,
+        poll: float = 0.5,
+        timeout: float | None = None,
     ) -> dict[str, Any]:
         """Fit ``fit``'s parameters of ``scene`` (a dict, or a YAML/JSON scene file) to ``measurement``: a
         CSV or netCDF file (read here: CSV is sent as text, netCDF as columns), or the request's form
         (``{"csv": text}`` or ``{"time", "channels"}``). ``fit``: ``"isolators.f_vertical=1:6"`` strings or
-        ``{"path", "lower", "upper"}`` dicts. Answers fitted values +- 1 sigma (SI), the misfit per channel
-        before and after and the calibrated scene (``scene_yaml``); ``plot=True`` adds a base64 PNG."""
+        ``{"path", "lower", "upper"}`` dicts. Submits the calibration job (:meth:`calibration_submit`) and
+        waits for it (:meth:`calibration_wait`: ``progress``, ``poll``, ``timeout`` in s, None for ever;
+        on a timeout the job is cancelled). Answers fitted values +- 1 sigma (SI), the misfit per channel
+        before and after and the calibrated scene (``scene_yaml``); ``plot=True`` adds a base64 PNG.
+        A refused request or a failed fit raises :class:`ClientError`."""
         from isolab.studies.answers.calibration import parse_fit, read_measurement
 
         if not isinstance(scene, Mapping):
@@ -363,7 +370,49 @@ class Client:
         for key, corner in (("highpass", highpass), ("lowpass", lowpass)):
             if corner is not None:
                 body[key] = corner
-        return self._request("POST", "/calibrations", json=body).json()
+        job = self.calibration_submit(body)
+        try:
+            done = self.calibration_wait(job["id"], progress=progress, poll=poll, timeout=timeout)
+        except BaseException:  # a timeout, or the caller interrupted: the fit stops on the service too
+            with contextlib.suppress(ClientError):
+                self.calibration_cancel(job["id"])
+            raise
+        if done["status"] != "done":
+            raise ClientError(f"calibration {job['id']} failed: {done.get('error')}", None, done)
+        return done["result"]
+
+    def calibration_submit(self, body: Mapping[str, Any]) -> dict[str, Any]:
+        """Submit a calibration request body (``POST /calibrations``); its job: ``{id, status, estimate,
+        progress}``."""
+        return self._request("POST", "/calibrations", json=dict(body)).json()
+
+    def calibration_status(self, calibration_id: str) -> dict[str, Any]:
+        """A calibration job: ``status``, ``estimate``, ``progress``, ``error`` and, once done, ``result``."""
+        return self._request("GET", f"/calibrations/{calibration_id}").json()
+
+    def calibration_wait(
+        self,
+        calibration_id: str,
+        progress: Callable[[dict[str, Any]], object] | None = None,
+        poll: float = 0.5,
+        timeout: float | None = None,
+    ) -> dict[str, Any]:
+        """Poll until the calibration is done or failed; its final job (see :meth:`calibration_status`).
+        ``timeout``: give up after this many seconds (ClientError); None waits for ever."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            info = self.calibration_status(calibration_id)
+            if progress is not None:
+                progress(info)
+            if info["status"] in ("done", "failed"):
+                return info
+            if deadline is not None and time.monotonic() > deadline:
+                raise ClientError(f"calibration {calibration_id} is still {info['status']} after {timeout} s")
+            time.sleep(poll)
+
+    def calibration_cancel(self, calibration_id: str) -> None:
+        """Stop a calibration and remove it (``DELETE /calibrations/{id}``)."""
+        self._request("DELETE", f"/calibrations/{calibration_id}")
 
 
 def sensitivity_frame(answer: Mapping[str, Any]) -> pd.DataFrame:

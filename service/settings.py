@@ -12,6 +12,7 @@ ISOLAB_API_TOKEN           (unset)             bearer token required by the API;
 ISOLAB_MAX_CASES           1000000             largest number of cases one study may hold
 ISOLAB_MAX_BODY_BYTES      10485760 (10 MiB)   largest accepted request body, in bytes
 ISOLAB_CORS_ORIGINS        (empty)             comma-separated allowed origins; empty -> none
+ISOLAB_DASHBOARD_PORT      (unset)             Dask dashboard on 127.0.0.1:PORT; unset -> off
 =========================  ==================  ===========================================
 
 An empty variable counts as unset. A bad value raises :class:`SettingsError` naming the variable.
@@ -36,6 +37,7 @@ ENV_VARS: dict[str, str] = {
     "max_cases": "ISOLAB_MAX_CASES",
     "max_body_bytes": "ISOLAB_MAX_BODY_BYTES",
     "cors_origins": "ISOLAB_CORS_ORIGINS",
+    "dashboard_port": "ISOLAB_DASHBOARD_PORT",
 }
 
 
@@ -56,6 +58,8 @@ class Settings:
         max_cases: largest number of cases accepted in one study.
         max_body_bytes: largest accepted request body, in bytes.
         cors_origins: origins allowed by CORS; empty means no cross-origin access.
+        dashboard_port: TCP port of the Dask dashboard of the in-process LocalCluster, served on the
+            loopback interface (``127.0.0.1``) alone; ``None`` (the default) serves no dashboard.
     """
 
     data_dir: Path = Path("./data")
@@ -65,6 +69,7 @@ class Settings:
     max_cases: int = 1_000_000
     max_body_bytes: int = 10 * MIB
     cors_origins: tuple[str, ...] = field(default_factory=tuple)
+    dashboard_port: int | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.data_dir, Path):
@@ -93,6 +98,12 @@ class Settings:
                     f"{ENV_VARS['cors_origins']} (cors_origins) entries must be '*' or start with "
                     f"http:// or https://, got {origin!r}"
                 )
+        port = self.dashboard_port
+        if port is not None and (isinstance(port, bool) or not isinstance(port, int) or not 0 < port < 65536):
+            raise SettingsError(
+                f"{ENV_VARS['dashboard_port']} (dashboard_port) must be a TCP port 1 to 65535 or unset, "
+                f"got {port!r}"
+            )
 
 
 def _split_origins(raw: str) -> tuple[str, ...]:
@@ -112,7 +123,7 @@ def _from_environ(environ: Mapping[str, str]) -> dict[str, Any]:
         raw = environ.get(variable, "")
         if raw.strip() == "":
             continue
-        if name in ("workers", "max_cases", "max_body_bytes"):
+        if name in ("workers", "max_cases", "max_body_bytes", "dashboard_port"):
             values[name] = _parse_int(variable, raw)
         elif name == "data_dir":
             values[name] = Path(raw.strip())

@@ -12,10 +12,12 @@ point's settling time (``point_settling_time``); the bare ``settling_time`` stay
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-
-import xarray as xr
+from typing import TYPE_CHECKING
 
 from isolab.engine.results import OUTPUTS
+
+if TYPE_CHECKING:  # xarray loads where a dataset is read, not where a scene is
+    import xarray as xr
 
 #: Variables that are not quantities of a case (labels, bookkeeping).
 _NOT_QUANTITIES = frozenset({"status", "message"})

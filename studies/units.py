@@ -15,16 +15,23 @@ from __future__ import annotations
 import functools
 import math
 import re
+import sys
 from dataclasses import dataclass
 from typing import Annotated, Any
 
 import numpy as np
-import pint
 from pydantic import BeforeValidator, GetJsonSchemaHandler, ValidationInfo
 
-UREG: Any = pint.UnitRegistry()
-"""The one unit registry of the product (creating a registry is slow, and quantities of two registries do
-not mix)."""
+
+@functools.cache
+def unit_registry() -> Any:
+    """The one :mod:`pint` unit registry of the product (quantities of two registries do not mix), built on
+    first use: importing pint and building a registry take most of a second, and the units of
+    :data:`COMMON_UNITS` are read without it."""
+    import pint
+
+    return pint.UnitRegistry()
+
 
 STANDARD_GRAVITY = 9.80665
 """Standard gravity, m/s^2."""
@@ -59,7 +66,53 @@ MAX_POWERS = 4
 _POWER = re.compile(r"\*\*|\^")
 _EXPONENT = re.compile(r"\s*[-+]?\s*(\d+(?:\.\d*)?|\.\d+)(?:[eE][-+]?\d+)?")
 _BASE_END = re.compile(r"[A-Za-z0-9_.%µ]\s*$")
-_PINT_DIMENSIONALITY = {name: UREG.get_dimensionality(spec[1]) for name, spec in DIMENSIONS.items()}
+
+
+@functools.cache
+def _pint_dimensionality(dimension: str) -> Any:
+    return unit_registry().get_dimensionality(DIMENSIONS[dimension][1])
+
+
+COMMON_UNITS: dict[tuple[str, str], float] = {
+    ("m", "length"): 1.0,
+    ("mm", "length"): 0.001,
+    ("um", "length"): 1e-06,
+    ("µm", "length"): 1e-06,
+    ("cm", "length"): 0.01,
+    ("kg", "mass"): 1.0,
+    ("t", "mass"): 1000.0,
+    ("s", "time"): 1.0,
+    ("ms", "time"): 0.001,
+    ("m/s", "velocity"): 1.0,
+    ("mm/s", "velocity"): 0.001,
+    ("um/s", "velocity"): 1e-06,
+    ("m/s^2", "acceleration"): 1.0,
+    ("mm/s^2", "acceleration"): 0.001,
+    ("g", "acceleration"): 9.80665,
+    ("gn", "acceleration"): 9.80665,
+    ("m/s^3", "jerk"): 1.0,
+    ("Hz", "frequency"): 1.0,
+    ("kHz", "frequency"): 1000.0,
+    ("N/m", "stiffness"): 1.0,
+    ("kN/m", "stiffness"): 1000.0,
+    ("MN/m", "stiffness"): 1000000.0,
+    ("N/mm", "stiffness"): 1000.0,
+    ("N s/m", "damping"): 1.0,
+    ("kN s/m", "damping"): 1000.0,
+    ("kg/m^3", "density"): 1.0,
+    ("kg m^2", "inertia"): 1.0,
+    ("N", "force"): 1.0,
+    ("kN", "force"): 1000.0,
+    ("m^2/Hz", "displacement_psd"): 1.0,
+    ("m^2/s^2/Hz", "velocity_psd"): 1.0,
+    ("rad", "angle"): 1.0,
+    ("mrad", "angle"): 0.001,
+    ("urad", "angle"): 1e-06,
+    ("%", "dimensionless"): 0.01,
+}
+"""What one of the units engineers write most is in the SI unit of its dimension: exactly the float the
+units parser gives (a test holds each to it), so ``"<number> <unit>"`` of these reads without the parser."""
+_COMMON_UNIT_NAMES = frozenset(unit for unit, _ in COMMON_UNITS)
 
 # "<number> <unit>" with a plain decimal number and a unit made of names, powers and / or *: read as the
 # number times the unit's factor, the factor parsed once per unit (:func:`_unit_factor`). A list of a
@@ -80,8 +133,14 @@ def _simple_quantity(text: str) -> tuple[float, str] | None:
     return (number, m.group(2)) if math.isfinite(number) else None
 
 
-@functools.lru_cache(maxsize=4096)
 def _unit_factor(unit: str, dimension: str) -> float | None:
+    """:func:`parsed_unit_factor`, from :data:`COMMON_UNITS` where the unit is there."""
+    common = COMMON_UNITS.get((unit, dimension))
+    return common if common is not None else parsed_unit_factor(unit, dimension)
+
+
+@functools.lru_cache(maxsize=4096)
+def parsed_unit_factor(unit: str, dimension: str) -> float | None:
     """What one ``unit`` is in the SI unit of ``dimension`` (read by the full :func:`to_si`), or None when
     the unit is not of that dimension, not readable, not a plain multiple (a logarithmic unit) or an
     angular frequency: such text takes the full path, which names the problem (and gives the same float
@@ -163,8 +222,13 @@ def quantity_problem(text: str) -> str | None:
     return quantity_text_problem(text) or _magnitude_problem(text)
 
 
-@functools.lru_cache(maxsize=4096)
 def _unit_problem(unit: str) -> str | None:
+    """:func:`parsed_unit_problem`; None for a unit of :data:`COMMON_UNITS`."""
+    return None if unit in _COMMON_UNIT_NAMES else parsed_unit_problem(unit)
+
+
+@functools.lru_cache(maxsize=4096)
+def parsed_unit_problem(unit: str) -> str | None:
     """:func:`quantity_problem` of ``"<number> <unit>"`` with a moderate number: only the unit's powers and
     size can make it hostile, so the answer is that of ``"1 <unit>"`` (numbers beyond 1e200 aside)."""
     return quantity_text_problem(f"1 {unit}") or _magnitude_problem(f"1e200 {unit}")
@@ -173,7 +237,7 @@ def _unit_problem(unit: str) -> str | None:
 def _magnitude_problem(text: str) -> str | None:
     """The units parser's reading of a screened text: None unless its number overflows a float."""
     try:
-        q = UREG.Quantity(text)
+        q = unit_registry().Quantity(text)
         magnitude = q.magnitude if hasattr(q, "magnitude") else q
         float(np.asarray(magnitude, dtype=float))
         if hasattr(q, "to_base_units"):
@@ -189,7 +253,7 @@ def _magnitude_problem(text: str) -> str | None:
 def _unit_scale(unit: str) -> float:
     """|one ``unit``| in base units, as the units parser reads it (inf when it cannot)."""
     try:
-        return abs(float(UREG.Quantity(f"1 {unit}").to_base_units().magnitude))
+        return abs(float(unit_registry().Quantity(f"1 {unit}").to_base_units().magnitude))
     except Exception:  # unreadable or not a plain multiple: the full check decides
         return math.inf
 
@@ -246,15 +310,15 @@ def _to_si(value: Any, dimension: str, field: str, fast: bool) -> float:
         if dimension in ("acceleration", "jerk"):
             text = _GRAVITY_TOKEN.sub("standard_gravity", text)
         try:
-            q = UREG.Quantity(text)
+            q = unit_registry().Quantity(text)
         except Exception as err:  # pint raises many kinds of errors on text it cannot read
             raise ValueError(f"{field}: cannot read {value!r} as {_describe(dimension)}: {err}") from None
-    elif isinstance(value, pint.Quantity):
+    elif _is_quantity(value):
         q = value
     else:
         raise ValueError(f"{field}: expected {_describe(dimension)}, got {type(value).__name__} {value!r}")
     try:
-        if not isinstance(q, pint.Quantity):  # a bare number such as "2*3"
+        if not _is_quantity(q):  # a bare number such as "2*3"
             return _finite(float(q), field, value)
         magnitude = float(np.asarray(q.magnitude, dtype=float))
         _finite(magnitude, field, value)
@@ -267,7 +331,7 @@ def _to_si(value: Any, dimension: str, field: str, fast: bool) -> float:
             raise
         raise ValueError(f"{field}: {value!r} is not a single number") from None
     angle_power = dict(base.unit_items()).get("radian", 0)
-    expected = _PINT_DIMENSIONALITY[dimension]
+    expected = _pint_dimensionality(dimension)
     if q.dimensionality != expected:
         raise ValueError(
             f"{field}: expected {_describe(dimension)}, got {value!r} which is "
@@ -282,6 +346,12 @@ def _to_si(value: Any, dimension: str, field: str, fast: bool) -> float:
     elif angle_power != 0:
         raise ValueError(f"{field}: expected {_describe(dimension)}, got the angle-bearing {value!r}")
     return _finite(x, field, value)
+
+
+def _is_quantity(value: Any) -> bool:
+    """Whether ``value`` is a pint quantity (never, while pint is not imported)."""
+    pint = sys.modules.get("pint")
+    return pint is not None and isinstance(value, pint.Quantity)
 
 
 def _validator(dimension: str):

@@ -139,11 +139,11 @@ def test_settings_are_frozen() -> None:
 
 def test_dashboard_address_falls_back_to_none_when_port_is_taken() -> None:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as holder:
-        holder.bind(("", 0))
+        holder.bind(("127.0.0.1", 0))
         holder.listen()
         port = holder.getsockname()[1]
         assert free_dashboard_address(port) is None
-    assert free_dashboard_address(port) == f":{port}"
+    assert free_dashboard_address(port) == f"127.0.0.1:{port}"
 
 
 def test_health_with_a_local_cluster_of_two_worker_processes(tmp_path: Path) -> None:
@@ -159,7 +159,9 @@ def test_health_with_a_local_cluster_of_two_worker_processes(tmp_path: Path) -> 
         body = response.json()
         assert body["status"] == "ok"
         assert body["service"]["version"] == app.version
-        assert body["store"] == {"path": str(data_dir.resolve()), "writable": True, "error": None}
+        store = {k: body["store"][k] for k in ("path", "writable", "error")}
+        assert store == {"path": str(data_dir.resolve()), "writable": True, "error": None}
+        assert body["store"]["free_bytes"] > body["store"]["next_write_bytes"] > 0
         assert body["dask"]["scheduler"] == cluster.scheduler_address
         assert body["dask"]["n_workers"] == 2
         workers = body["dask"]["workers"]

@@ -16,7 +16,6 @@ whose samples are breakpoints of their own).
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 from numba import njit
 
 from isolab.engine.integrators.step_maps import maps as structured_maps
@@ -94,6 +93,8 @@ def augmented(P: Params) -> tuple[np.ndarray, int, int]:
 
 def _expm(Z: np.ndarray, h: np.ndarray) -> np.ndarray:
     """``expm(Z h)`` (..., N, N); ``h`` broadcasts over the leading axes."""
+    import scipy.linalg  # on first use: most commands never load scipy
+
     A = Z * np.asarray(h)[..., None, None]
     N = A.shape[-1]
     return scipy.linalg.expm(A.reshape(-1, N, N)).reshape(A.shape)  # one flat batch: much faster than nd

@@ -8,7 +8,6 @@ so restarting there keeps the adaptive method at its full accuracy.
 from __future__ import annotations
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from isolab.engine.kernels.dynamics import derivative
 from isolab.engine.kernels.excitation import advance_pieces
@@ -42,6 +41,8 @@ def run(
     """Integrate every OK case, sampling the outputs every ``dt[c]`` s (``n_steps[c]`` of them); set
     ``status[c]`` (UNSTABLE when the base runs away, FAILED when ``solve_ivp`` fails, with the reason in
     ``messages[c]``). ``rtol`` and ``atol`` are ``solve_ivp``'s tolerances."""
+    from scipy.integrate import solve_ivp  # on first use: most commands never load scipy
+
     C = dt.shape[0]
     m = P.sm.shape[1]
     KP, KO, KW = kernel_struct(P), kernel_struct(O), kernel_struct(W)

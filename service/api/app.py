@@ -34,6 +34,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from isolab.service.api.errors import add_domain_error_handlers
 from isolab.service.api.jobs import RUNNING_STUDIES, JobQueue
+from isolab.service.api.kernel_warmup import KernelWarmup
 from isolab.service.api.openapi import describe_settings
 from isolab.service.api.request_limits import RequestLimits, unreadable_body_is_422, validation_errors_as_json
 from isolab.service.api.routes import (
@@ -51,10 +52,15 @@ from isolab.service.api.routes import (
 from isolab.service.api.unavailable import add_store_handlers
 from isolab.service.api.worker_priority import LowerPriority
 from isolab.service.settings import Settings, load_settings
+from isolab.studies.answers.calibration.jobs import CalibrationJobs
+from isolab.studies.results.calibrations import CalibrationStore
 from isolab.studies.results.store import StoreLock
 
-#: Port of the Dask dashboard of the in-process LocalCluster, when free.
-DASHBOARD_PORT = 8787
+#: The interface the in-process LocalCluster's dashboard listens on, whatever host the API binds to.
+DASHBOARD_HOST = "127.0.0.1"
+#: What the scheduler's HTTP server answers without the dashboard: its health check alone (no task keys,
+#: worker stacks or addresses).
+ROUTES_WITHOUT_DASHBOARD = ("distributed.http.health",)
 #: Tasks the LocalCluster's scheduler gives a worker per thread: 1.0, none waiting in a worker's own queue.
 WORKER_SATURATION = 1.0
 #: Seconds a thread may hold the interpreter lock while another waits (Python's default is 0.005).
@@ -70,15 +76,20 @@ def service_version() -> str:
     return __version__
 
 
-def free_dashboard_address(port: int = DASHBOARD_PORT) -> str | None:
-    """``":<port>"`` when that TCP port can be bound on all interfaces, else ``None`` (no dashboard)."""
+def free_dashboard_address(port: int | None) -> str | None:
+    """``"127.0.0.1:<port>"`` when the dashboard is asked for (``port``, the setting
+    ``ISOLAB_DASHBOARD_PORT``) and that TCP port can be bound on the loopback interface, else ``None``
+    (no dashboard; a port in use is logged, not taken over by another port)."""
+    if port is None:
+        return None
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
         probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
-            probe.bind(("", port))
+            probe.bind((DASHBOARD_HOST, port))
         except OSError:
+            log.info("no Dask dashboard: port %d of %s is in use", port, DASHBOARD_HOST)
             return None
-    return f":{port}"
+    return f"{DASHBOARD_HOST}:{port}"
 
 
 def start_dask(settings: Settings) -> tuple[Client, LocalCluster | None]:
@@ -90,13 +101,21 @@ def start_dask(settings: Settings) -> tuple[Client, LocalCluster | None]:
         log.info("joining Dask scheduler at %s", settings.scheduler_address)
         return Client(settings.scheduler_address), None
     # a worker holds only the chunk it runs: the next one is picked when it is free, by priority, so a
-    # study submitted while a large one runs waits for one chunk (see studies.fanout), not for two
-    with dask.config.set({"distributed.scheduler.worker-saturation": WORKER_SATURATION}):
+    # study submitted while a large one runs waits for one chunk (see studies.run.fanout), not for two
+    config: dict[str, object] = {"distributed.scheduler.worker-saturation": WORKER_SATURATION}
+    dashboard = free_dashboard_address(settings.dashboard_port)
+    if dashboard is None:
+        # the scheduler's HTTP server still runs (Dask has no switch for it): on a free loopback port,
+        # answering its health check alone
+        config["distributed.scheduler.http.routes"] = list(ROUTES_WITHOUT_DASHBOARD)
+    with dask.config.set(config):
         cluster = LocalCluster(
             n_workers=settings.workers,
             threads_per_worker=1,
             processes=True,
-            dashboard_address=free_dashboard_address(),
+            host=DASHBOARD_HOST,
+            dashboard_address=dashboard or f"{DASHBOARD_HOST}:0",
+            scheduler_kwargs={"dashboard": dashboard is not None},
             silence_logs=logging.WARNING,
         )
     try:
@@ -159,6 +178,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             raise
         app.state.dask = client
         app.state.dask_cluster = cluster
+        # the workers load (on a fresh machine: compile, once) the kernels in the background
+        kernels = KernelWarmup()
+        kernels.start(client)
+        app.state.kernels = kernels
         jobs: JobQueue | None = None
         # threads finishing studies, validating submissions and running the Dask scheduler hold the
         # interpreter lock for long stretches: hand it on sooner, so that a status request waits less
@@ -168,11 +191,21 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             jobs = JobQueue(settings.data_dir, client, concurrency=RUNNING_STUDIES)  # store opens when needed
             await to_thread.run_sync(jobs.start)
             app.state.jobs = jobs
+            # calibrations are jobs too, fitted on the workers; a stopped service's resume here
+            calibration_jobs = CalibrationJobs(
+                CalibrationStore(settings.data_dir), client, draw=calibrations.draw_calibration
+            )
+            await to_thread.run_sync(calibration_jobs.start)
+            app.state.calibrations = calibration_jobs
             yield
         finally:
             app.state.jobs = None
+            if app.state.calibrations is not None:
+                await to_thread.run_sync(app.state.calibrations.stop)
+                app.state.calibrations = None
             if jobs is not None:
                 await to_thread.run_sync(jobs.stop)
+            await to_thread.run_sync(kernels.stop)
             app.state.dask = None
             app.state.dask_cluster = None
             await to_thread.run_sync(stop_dask, client, cluster)
@@ -191,6 +224,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.dask = None
     app.state.dask_cluster = None
     app.state.jobs = None
+    app.state.calibrations = None
+    app.state.kernels = None
     app.state.heavy_work = heavy_work_limiter()
     app.add_middleware(RequestLimits, max_bytes=settings.max_body_bytes)
     add_store_handlers(app)  # a full disk or a catalog SQLite refuses: 503 with the reason

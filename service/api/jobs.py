@@ -2,7 +2,7 @@
 
 A :class:`JobQueue` belongs to one app (its lifespan starts and stops it). ``submit(id)`` queues a study
 already in the catalog; a few worker threads take ids in order and run them with
-:func:`studies.runner.run_study`, each with its own cancel event. The catalog is the source of truth:
+:func:`studies.run.runner.run_study`, each with its own cancel event. The catalog is the source of truth:
 
 * at start-up every study whose catalog status is ``queued`` or ``running`` is queued again, oldest
   first; it resumes from the chunks it had finished, so no study is silently lost;
@@ -30,7 +30,7 @@ UNFINISHED = ("queued", "running")
 
 RUNNING_STUDIES = 8
 """Studies the service runs at once (one thread each, mostly waiting for chunks). Their chunks share the
-cluster chunk by chunk (see :mod:`studies.fanout`), so a small study submitted while large ones run waits
+cluster chunk by chunk (see :mod:`studies.run.fanout`), so a small study submitted while large ones run waits
 for one chunk, not for them to finish; more studies than this wait in the queue."""
 
 _PAGE = 1000
@@ -58,8 +58,8 @@ class JobQueue:
         client: the app's ``distributed.Client``.
         concurrency: studies run at the same time (worker threads); their chunks share the cluster.
         runner: ``runner(study, store, client, study_id, cancel)`` runs one study (default
-            :func:`studies.runner.run_study`).
-        loader: turns a catalog definition into a study (default :func:`studies.study.load_study`).
+            :func:`studies.run.runner.run_study`).
+        loader: turns a catalog definition into a study (default :func:`studies.inputs.study.load_study`).
     """
 
     def __init__(
@@ -225,10 +225,23 @@ class JobQueue:
             except Exception:  # one study's failure must not stop the queue
                 log.exception("study %s: unexpected error in the job queue", study_id)
             finally:
+                self._remove_if_deleted(study_id)
                 with self._lock:
                     self._running.pop(study_id, None)
                     self._finished.pop(study_id).set()
                     self._user_cancelled.discard(study_id)
+
+    def _remove_if_deleted(self, study_id: str) -> None:
+        """Remove what a study deleted while it ran wrote after its deletion (chunks, a dataset)."""
+        try:
+            self.store.get(study_id)
+        except StudyNotFound:
+            try:
+                self.store.delete(study_id)
+            except Exception as err:  # leftovers only: the study is gone for every route already
+                log.warning("study %s: files left after its deletion: %s", study_id, err)
+        except Exception as err:  # the catalog cannot answer now: keep the files
+            log.info("study %s: not checked for deletion (%s)", study_id, err)
 
     def _run(self, study_id: str, cancel: threading.Event) -> None:
         try:

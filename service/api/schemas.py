@@ -1,4 +1,5 @@
-"""Request and response bodies of the REST API (the study definition itself is :class:`studies.study.Study`).
+"""Request and response bodies of the REST API (the study definition itself is
+:class:`studies.inputs.study.Study`).
 
 Quantities in responses are SI (m, rad, N, s, Hz); every table says its units. The ``EXAMPLE_*`` dicts are
 the examples the OpenAPI page (``/docs``) shows for each request body.
@@ -111,6 +112,11 @@ class StudySummary(BaseModel):
     started: str | None = None
     finished: str | None = None
     error: str | None = Field(None, description="why the study failed")
+    note: str | None = Field(
+        None,
+        description="why a queued or running study has no cases yet, e.g. \"compiling the engine's kernels "
+        '(first start only)"; null otherwise',
+    )
     failures: str | None = Field(
         None,
         description="how many cases failed (status not ok: unstable, tipping, failed) when any did, and "
@@ -598,3 +604,33 @@ class Calibration(BaseModel):
     evaluations: dict[str, Any]
     message: str
     plot_png: str | None = Field(None, description="base64 PNG of measured against simulated traces")
+
+
+class CalibrationCost(BaseModel):
+    """The estimated engine work of a calibration (rough: a factor of two either way)."""
+
+    seconds: float = Field(description="engine time on one core, s")
+    engine_calls: int = Field(description="engine batches the fit is expected to run")
+    cases: int = Field(description="cases over all batches")
+    steps_per_case: int = Field(description="engine steps of one case")
+    limit_seconds: float = Field(description="the largest estimate accepted, s")
+
+
+class CalibrationProgress(BaseModel):
+    engine_calls: int = Field(description="engine batches run so far")
+    cases: int = Field(description="cases run so far")
+    fraction: float = Field(description="cases run over the estimate's, at most 0.99 until done (1)")
+
+
+class CalibrationJob(BaseModel):
+    """A calibration job: where it is, its cost estimate and progress, and its answer once done."""
+
+    id: str = Field(description="32 hex digits")
+    status: Literal["queued", "running", "done", "failed"]
+    created: str
+    started: str | None = None
+    finished: str | None = None
+    estimate: CalibrationCost
+    progress: CalibrationProgress
+    error: str | None = Field(None, description="why a failed calibration failed")
+    result: Calibration | None = Field(None, description="the answer, once done")

@@ -316,7 +316,8 @@ def run_study_command(
     wall = time.perf_counter() - t0
     n = int(ds.attrs.get("n_cases", 0)) or int(np.prod([ds.sizes[d] for d in ds.status.dims]))
     typer.echo(f"{n} cases in {wall:.1f} s ({n / wall:.1f} cases/s) -> {out}")
+    from isolab.studies.questions.tolerances import described_reliability
     from isolab.studies.run.optimisation import describe_optimum
 
-    for line in describe_optimum(ds):  # an optimize design: its optimum
+    for line in describe_optimum(ds) + described_reliability(ds):  # an optimum; a tolerance study's odds
         typer.echo(line)

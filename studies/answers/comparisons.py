@@ -240,7 +240,8 @@ def compare(
 ) -> dict[str, Any]:
     """Validate, run and tabulate a comparison in one call (see :func:`comparison_table`), with the
     recommended type (:func:`recommend`; ``cost_order`` default :data:`COST_ORDER`). With ``tune``, each
-    type is first tuned to the scene's criteria within its physical range (:func:`studies.tuning.tune`);
+    type is first tuned to the scene's criteria within its physical range
+    (:func:`studies.answers.tuning.tune`);
     the answer's ``tuning`` gives the values found.
 
     Raises:

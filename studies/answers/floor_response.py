@@ -1,5 +1,5 @@
 """The velocity spectra a floor spectrum gives at a point of interest, per isolator type: what the plots
-and the documentation of floor vibration show (:mod:`studies.floor` reads the spectrum; the engine's
+and the documentation of floor vibration show (:mod:`studies.questions.floor` reads the spectrum; the engine's
 :mod:`~isolab.engine.frequency` computes the steady-state response)."""
 
 from __future__ import annotations

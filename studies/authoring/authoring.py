@@ -21,6 +21,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import xarray as xr
 import yaml
 
@@ -39,6 +40,9 @@ MAX_DEPTH = 64
 
 _EXAMPLE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,99}$")
 _SCENE_FILE_LINE = re.compile(r"^scene_file:\s*(?P<file>[^#\s]+)\s*(#.*)?$", re.MULTILINE)
+#: The block-structure prefix of a line: its indentation and the ``- `` / ``? `` indicators that open a
+#: sequence item or a complex key on the same line (``- - - x`` is three levels deep).
+_BLOCK_PREFIX = re.compile(r"^([ ]*)((?:[-?](?:[ \t]+|$))*)(?=[^ \n])", re.MULTILINE)
 _NUMBER_THEN_UNIT = re.compile(r"^\s*[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?\s*(?P<unit>.*?)\s*$")
 
 
@@ -125,6 +129,83 @@ def _depth(node: yaml.Node) -> int:
     return deepest
 
 
+def flow_depth(text: str) -> int:
+    """Deepest nesting of ``[``/``{`` in a text, a running count that never goes below zero (a bracket in
+    a string or comment counts too: an upper bound on the flow nesting, read in milliseconds)."""
+    codes = np.frombuffer(text.encode("utf-8", "replace"), dtype=np.uint8)
+    steps = np.zeros(codes.size, dtype=np.int64)
+    steps[(codes == ord("[")) | (codes == ord("{"))] = 1
+    steps[(codes == ord("]")) | (codes == ord("}"))] = -1
+    if steps.size == 0:
+        return 0
+    walk = np.cumsum(steps)
+    return int((walk - np.minimum(np.minimum.accumulate(walk), 0)).max())
+
+
+def block_depth(text: str, limit: int) -> tuple[int, int | None]:
+    """(deepest block nesting, 1-based line where it first passes ``limit``) of a YAML text, read from
+    indentation and ``- `` indicators alone (no parsing): each line closes the levels opened at its
+    column or to the right of it and opens one at its column, and one more at each indicator."""
+    if not re.search(f"^[-? \t]{{{max(limit, 1)},}}", text, re.MULTILINE):
+        return 0, None  # no prefix as long as the limit: fewer columns than levels, it cannot be passed
+    columns: list[int] = []
+    deepest = 0
+    for m in _BLOCK_PREFIX.finditer(text):
+        indent = len(m.group(1))
+        if text.startswith("#", m.end()):
+            continue  # a comment opens no level
+        while columns and columns[-1] >= indent:
+            columns.pop()
+        column = indent
+        for indicator in re.finditer(r"[-?][ \t]*", m.group(2)):
+            columns.append(column)
+            column += len(indicator.group(0))
+        columns.append(column)
+        if len(columns) > deepest:
+            deepest = len(columns)
+            if deepest > limit:
+                return deepest, text.count("\n", 0, m.start()) + 1
+    return deepest, None
+
+
+def nesting_problem(text: str, prefix: Loc, limit: int = MAX_DEPTH) -> dict[str, Any] | None:
+    """The problem of a YAML or JSON text nested deeper than ``limit`` levels, found on a pre-scan of its
+    characters before any parsing (milliseconds for a megabyte; a parser would take minutes on 8,000
+    levels), else None. The bound it reads may exceed the true depth, never falls short of it."""
+    flow = flow_depth(text)
+    block, line = block_depth(text, max(0, limit - flow))
+    if flow + block <= limit:
+        return None
+    found = detail(
+        prefix,
+        f"the text nests deeper than {limit} levels of mappings and lists (a study needs about 8)",
+        "too_deep",
+    )
+    if line is not None:
+        found["line"] = line
+    return found
+
+
+def duplicate_key(root: yaml.Node | None) -> tuple[str, int, int] | None:
+    """(key, line, first line) of the first key written twice in one mapping of a composed document,
+    else None (YAML would keep the last silently)."""
+    stack = [root] if root is not None else []
+    while stack:
+        node = stack.pop()
+        if isinstance(node, yaml.MappingNode):
+            seen: dict[str, int] = {}
+            for key, value in node.value:
+                name = str(key.value) if isinstance(key, yaml.ScalarNode) else repr(key.value)
+                line = key.start_mark.line + 1
+                if name in seen:
+                    return name, line, seen[name]
+                seen[name] = line
+                stack.append(value)
+        elif isinstance(node, yaml.SequenceNode):
+            stack.extend(node.value)
+    return None
+
+
 def _no_aliases(text: str) -> int | None:
     """Line of the first YAML alias (``*name``) in ``text``, else None: aliases let a few lines expand
     to an exponential amount of data, so a study text may not use them."""
@@ -144,6 +225,9 @@ def parse_text(text: str, prefix: Loc) -> tuple[dict[str, Any], yaml.Node | None
     """
     if len(text) > MAX_TEXT_CHARS:
         raise DefinitionError([detail(prefix, f"the text is longer than {MAX_TEXT_CHARS} characters")])
+    too_deep = nesting_problem(text, prefix)
+    if too_deep is not None:
+        raise DefinitionError([too_deep])
     try:
         alias_line = _no_aliases(text)
         if alias_line is not None:
@@ -153,6 +237,19 @@ def parse_text(text: str, prefix: Loc) -> tuple[dict[str, Any], yaml.Node | None
         root = yaml.compose(text, Loader=yaml.SafeLoader)
         if root is not None and _depth(root) > MAX_DEPTH:
             raise DefinitionError([detail(prefix, f"the text nests deeper than {MAX_DEPTH} levels")])
+        twice = duplicate_key(root)
+        if twice is not None:
+            key, line, first = twice
+            raise DefinitionError(
+                [
+                    {
+                        **detail(
+                            prefix, f"the key {key!r} is written twice in one mapping (lines {first}, {line})"
+                        ),
+                        "line": line,
+                    }
+                ]
+            )
         data = yaml.safe_load(text)
     except DefinitionError:
         raise

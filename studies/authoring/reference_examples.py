@@ -122,6 +122,29 @@ design:
   population: 20
 """,
     ),
+    "monte_carlo": (
+        "`samples` cases drawn from the `tolerances:` block (the study's, else the scene's): each path's "
+        "spread about its nominal value (a parameter's one value, else the scene's). `%` is a share of "
+        "the nominal value; `within` bounds a uniform spread and truncates a normal or lognormal one. "
+        "`sampling: sobol` (default, a scrambled Sobol' sequence) or `random`. The dataset stores "
+        "`probability_meets_criteria` and each criterion's failure probability, with their 95 % "
+        "Clopper-Pearson intervals.",
+        """\
+criteria:
+  isolators: {no_liftoff: true, max_deflection: 10 mm}
+parameters:
+  - {path: isolators.f_vertical, values: [3.5 Hz]}   # the nominal design
+tolerances:
+  isolators.f_vertical: {distribution: normal, sigma: 10 %, within: 20 %}
+  isolators.zeta: {distribution: uniform, within: 20 %}
+  stages.y.mass: {distribution: lognormal, sigma: 5 %}
+  machine.block.density: {distribution: uniform, within: 100 kg/m^3}
+design:
+  type: monte_carlo
+  samples: 256
+  seed: 1
+""",
+    ),
 }
 """Per design type: what it does and a ``parameters:``/``design:`` example (on :data:`EXAMPLE_SCENE`)."""
 
@@ -177,7 +200,7 @@ def variant_scene(base: dict[str, Any]) -> Scene:
 
 
 def design_types() -> list[str]:
-    """The design types :class:`~studies.schema.DesignSpec` accepts, in the order it lists them."""
+    """The design types :class:`~studies.inputs.schema.DesignSpec` accepts, in the order it lists them."""
     node = DesignSpec.model_json_schema()["properties"]["type"]
     return list(node["enum"]) if "enum" in node else [node["const"]]
 

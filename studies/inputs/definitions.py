@@ -24,12 +24,21 @@ from typing import Any
 
 from pydantic import ValidationError
 
+from isolab.studies.inputs.schema.fields import (
+    MAX_CRITERIA,
+    MAX_MOUNTS,
+    MAX_PARAMETERS,
+    MAX_POINTS,
+    MAX_SEGMENTS,
+    MAX_STAGES,
+)
 from isolab.studies.inputs.study import SAMPLED_TYPES, Study, study_from_json, validate_study
 from isolab.studies.questions.designs import saltelli_cases
 from isolab.studies.units import quantity_problem
 
-FREE_TEXT_KEYS = frozenset({"description"})
-"""Keys whose string values are prose, never read as quantities (no length or power rule)."""
+FREE_TEXT_KEYS = frozenset({"description", "name"})
+"""Keys whose string values are prose or names, never read as quantities (no length or power rule; a
+name's own pattern and length are the model's)."""
 
 Loc = list[str | int]
 
@@ -199,6 +208,51 @@ def long_lists(body: Any, max_cases: int, prefix: Loc | None = None) -> list[dic
     ]
 
 
+def _entries(container: Any, key: str) -> Any:
+    return container.get(key) if isinstance(container, dict) else None
+
+
+def over_long_lists(body: Any, prefix: Loc | None = None) -> list[dict[str, Any]]:
+    """Details for every list of a raw study definition (or of its scene) longer than its bound: mounts,
+    stages, points, criteria, a profile's segments, parameters (the ``MAX_*`` of
+    :mod:`isolab.studies.inputs.schema.fields`). Read from lengths alone, before anything is parsed: a
+    100,000-mount scene is refused in microseconds instead of after every mount is read."""
+    pre: Loc = ["body"] if prefix is None else list(prefix)
+    found: list[tuple[Loc, Any, int, str]] = [
+        ([*pre, "parameters"], _entries(body, "parameters"), MAX_PARAMETERS, "parameters"),
+        ([*pre, "criteria"], _entries(body, "criteria"), MAX_CRITERIA, "criteria"),
+    ]
+    for scene_loc, scene in (([*pre, "scene"], _entries(body, "scene")), (pre, body)):
+        if not isinstance(scene, dict) or scene_loc == pre and "machine" not in scene:
+            continue  # the body is a scene itself only when it names a machine
+        stages = _entries(scene, "stages")
+        found += [
+            (
+                [*scene_loc, "isolators", "list"],
+                _entries(_entries(scene, "isolators"), "list"),
+                MAX_MOUNTS,
+                "mounts",
+            ),
+            ([*scene_loc, "stages"], stages, MAX_STAGES, "stages"),
+            ([*scene_loc, "points"], _entries(scene, "points"), MAX_POINTS, "points"),
+            ([*scene_loc, "criteria"], _entries(scene, "criteria"), MAX_CRITERIA, "criteria"),
+        ]
+        for i, stage in enumerate(stages[:MAX_STAGES] if isinstance(stages, list) else []):
+            segments = _entries(_entries(stage, "profile"), "segments")
+            found.append(
+                ([*scene_loc, "stages", i, "profile", "segments"], segments, MAX_SEGMENTS, "segments")
+            )
+    return [
+        detail(
+            loc,
+            f"{dotted(loc[len(pre) :])}: {len(entries)} {what}, more than the {limit} a study may have",
+            "too_long",
+        )
+        for loc, entries, limit, what in found
+        if isinstance(entries, list | dict) and len(entries) > limit
+    ]
+
+
 def case_limit_loc(study: Study, prefix: Loc) -> Loc:
     """Where a validated study's case count is set: its samples, its list of cases or its parameters."""
     spec = study.design_spec
@@ -268,6 +322,9 @@ def check_definition(body: dict[str, Any], max_cases: int | None = None, prefix:
             problems.append(too_many_cases(bound[0], bound[1], max_cases))
         if problems:
             raise DefinitionError(problems)
+    problems = over_long_lists(body, pre)
+    if problems:
+        raise DefinitionError(problems)
     problems = screen_definition(body, pre)
     if problems:
         raise DefinitionError(problems)
@@ -293,7 +350,7 @@ def stored_definition(study: Study) -> dict[str, Any]:
 
 def definition_json(row: Mapping[str, Any]) -> str:
     """The stored definition of a catalog row (a study's record) as canonical JSON (sorted keys): the key
-    that :func:`studies.study.study_from_json` caches a parsed study under."""
+    that :func:`studies.inputs.study.study_from_json` caches a parsed study under."""
     return json.dumps(row["definition"], sort_keys=True)
 
 

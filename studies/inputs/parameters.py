@@ -1,7 +1,7 @@
 """Parameter paths: which input of a scene a study varies, and how to set it.
 
 A path is dotted, with stage and point names and list indices as segments, following the scene's own
-structure (see :mod:`studies.schema`)::
+structure (see :mod:`studies.inputs.schema`)::
 
     machine.mass                    machine.block.density        machine.block.size.y
     isolators.preset                isolators.f_vertical         isolators.zeta
@@ -17,14 +17,14 @@ Vector components may be written 0/1/2 or x/y/z. ``isolators.k.horizontal`` sets
 for an S-curve or a scan).
 
 Categorical parameters (isolator types) are applied to the scene and validated by pydantic; continuous
-ones become per-case arrays that :func:`studies.scenes.build_batch` reads as overrides (``writes``).
+ones become per-case arrays that :func:`studies.inputs.scenes.build_batch` reads as overrides (``writes``).
 """
 
 from __future__ import annotations
 
 import copy
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -65,6 +65,8 @@ from isolab.studies.inputs.schema.scene_paths import (
     stage,
     stage_profile,
 )
+from isolab.studies.questions.designs import Design, Factor
+from isolab.studies.questions.tolerances import Spread, draw, resolve_spread
 from isolab.studies.units import si_unit
 
 CATEGORICAL = "categorical"
@@ -129,6 +131,12 @@ class Target:
     def categorical(self) -> bool:
         return self.dimension == CATEGORICAL
 
+    @property
+    def choices(self) -> tuple[str, ...]:
+        """The allowed values of a categorical parameter (every categorical target has them); none for a
+        continuous one."""
+        return self.levels if self.levels is not None else ()
+
 
 def _leaf_key(path: str) -> str:
     """The key of ``_LEAVES`` a canonical continuous path falls under."""
@@ -185,7 +193,7 @@ def available_paths(scene: Scene) -> list[str]:
     if iso.layout is not None:
         out += [LAYOUT_SPAN_X, LAYOUT_SPAN_Y, LAYOUT_HEIGHT]
     else:
-        for j, listed in enumerate(iso.mounts):
+        for j, listed in enumerate(iso.listed):
             p = mount(j)
             out += components(f"{p}.position")
             out += [f"{p}.preset"] + [f"{p}.{key}" for key in MOUNT_FIGURES]
@@ -198,12 +206,12 @@ def available_paths(scene: Scene) -> list[str]:
         prof = s.profile
         if isinstance(prof, SequenceProfile):
             for k, seg in enumerate(prof.segments):
-                keys = (
+                segment_keys = (
                     ("move", "velocity", "acceleration", "jerk")
                     if isinstance(seg, MoveSegment)
                     else ("dwell",)
                 )
-                out += [f"{profile_segment(s.name, k)}.{key}" for key in keys]
+                out += [f"{profile_segment(s.name, k)}.{key}" for key in segment_keys]
             out.append(f"{stage_profile(s.name)}.start")
             continue
         keys = ["travel", "velocity", "acceleration"]
@@ -337,6 +345,46 @@ def _set(d: dict[str, Any], leaf: str, value: Any) -> None:
         node[last] = value
 
 
+def _get(d: dict[str, Any], leaf: str) -> Any:
+    """The value at ``leaf`` of a scene dict, or None where the scene leaves it unset."""
+    parts = leaf.split(".")
+    node: Any = d
+    for i, part in enumerate(parts):
+        if isinstance(node, list):
+            if i > 0 and parts[i - 1] == "stages":
+                node = next((s for s in node if s.get("name") == part), None)
+            else:
+                node = node[int(part)] if part.isdigit() and int(part) < len(node) else None
+        elif isinstance(node, dict):
+            node = node.get(part)
+        else:
+            return None
+        if node is None:
+            return None
+    return node
+
+
+def nominal_value(scene: Scene, target: Target) -> float:
+    """The value ``scene`` gives the continuous ``target`` (SI): its own, or for the isolator group's
+    figures (``isolators.f_vertical``...) its preset's, with the machine's tuning of it.
+
+    Raises:
+        ValueError: the scene gives no single value there (unset, or several that differ).
+    """
+    data = scene_dict(scene)
+    values = [_get(data, leaf) for leaf in target.writes]
+    parts = target.path.split(".")
+    if values[0] is None and parts[0] == ISOLATORS and len(parts) == 2 and parts[1] in MOUNT_FIGURES:
+        iso = scene.isolators
+        values = [getattr(iso.preset_of(iso.preset), parts[1])]
+    if any(v is None for v in values):
+        raise ValueError(f"{target.path!r}: the scene sets no value there to spread about")
+    numbers = {float(v) for v in values}
+    if len(numbers) != 1:
+        raise ValueError(f"{target.path!r}: the scene sets several values there ({sorted(numbers)})")
+    return numbers.pop()
+
+
 def apply(scene_data: dict[str, Any], targets: list[Target], values: list[Any]) -> dict[str, Any]:
     """A deep copy of ``scene_data`` with each target set to its value (SI floats or level names)."""
     d = copy.deepcopy(scene_data)
@@ -345,3 +393,104 @@ def apply(scene_data: dict[str, Any], targets: list[Target], values: list[Any]) 
         for leaf in target.writes:
             _set(d, leaf, v)
     return d
+
+
+# ---------------------------------------------------------------------------------------------------------
+# cases drawn from tolerances
+
+_NOT_DRAWN = (
+    "objective",
+    "constraints",
+    "algorithm",
+    "budget",
+    "population",
+    "plateau",
+    "stall",
+    "cases",
+    "second_order",
+)
+"""Fields of the design block a monte_carlo design does not take."""
+
+
+def drawn_design(
+    scene: Scene, spec: Any, where: str, targets: list[Target], factors: list[Factor]
+) -> tuple[list[Target], Design, list[Spread]]:
+    """The targets, cases and spreads of a monte_carlo design: ``design.samples`` cases drawn from the
+    tolerances about their nominal values (a parameter's one value, else the scene's), the study's
+    parameters held at their one value each."""
+    block = scene.tolerances or {}
+    if not block:
+        raise ValueError(
+            "tolerances: a monte_carlo design draws its cases from a tolerances block; give one in the study "
+            "or its scene"
+        )
+    given = [k for k in _NOT_DRAWN if getattr(spec, k) is not None]
+    if given:
+        raise ValueError(f"design.{given[0]}: a monte_carlo design does not take it")
+    if spec.samples is None:
+        raise ValueError("design.samples: a monte_carlo design needs the number of cases to draw")
+    n = int(spec.samples)
+    fixed: dict[str, Factor] = {}
+    for i, (f, t) in enumerate(zip(factors, targets, strict=True)):
+        if f.levels is None or len(f.levels) != 1:
+            raise ValueError(
+                f"parameters[{i}]: a monte_carlo design draws its cases from the tolerances; a parameter "
+                "sets a nominal value, with one value (values: [...])"
+            )
+        fixed[t.path] = f
+    all_targets, names = list(targets), [f.name for f in factors]
+    # each factor has one level (checked above)
+    values: dict[str, np.ndarray] = {f.name: np.repeat(cast(np.ndarray, f.levels), n) for f in factors}
+    shown = {f.name: f.display_unit or f.unit for f in factors if not f.categorical}
+    spreads = []
+    for path, tolerance in block.items():
+        loc = f"{where}.{path}"
+        try:
+            t = resolve(path, scene)
+        except ValueError as err:
+            raise ValueError(f"{loc}: {err}") from None
+        if t.categorical or t.path.split(".")[0] == "simulation":
+            raise ValueError(
+                f"{loc}: {t.path} is a choice or a setting, not a built dimension; it has no spread"
+            )
+        if t.path in fixed:
+            name, nominal = fixed[t.path].name, float(cast(np.ndarray, fixed[t.path].levels)[0])
+        else:
+            for other in all_targets:
+                if set(t.writes) & set(other.writes):
+                    raise ValueError(f"{loc}: {t.path} sets what {other.path} already sets")
+            try:
+                nominal = nominal_value(scene, t)
+            except ValueError as err:
+                raise ValueError(f"{loc}: {err}") from None
+            name = t.name
+            if name in names:
+                raise ValueError(f"{loc}: its name {name!r} is already a parameter's")
+            all_targets.append(t)
+            names.append(name)
+            shown[name] = t.unit
+        spreads.append(
+            resolve_spread(
+                tolerance,
+                name=name,
+                path=t.path,
+                unit=t.unit,
+                dimension=t.dimension,
+                nominal=nominal,
+                where=loc,
+            )
+        )
+    x = draw(spreads, n, spec.seed, spec.sampling or "sobol")
+    for j, sp in enumerate(spreads):
+        values[sp.name] = x[:, j]
+    design = Design(
+        "sampled",
+        names,
+        values,
+        {},
+        {name: t.path for name, t in zip(names, all_targets, strict=True)},
+        {name: t.unit for name, t in zip(names, all_targets, strict=True)},
+        display_units=shown,
+        scales={name: "linear" for name in shown},
+    )
+    return all_targets, design, spreads

@@ -3,14 +3,15 @@
 :func:`build_batch` turns ``C`` scenes of one shape (same isolator count and placement, same stages and
 profile kinds, same points and floor kind) into one batch, vectorised over the cases. A study passes a
 single scene plus per-case ``overrides``: arrays of the continuous values its parameters set, keyed by
-canonical leaf path (see :mod:`studies.parameters`), so thousands of cases need no per-case validation.
+canonical leaf path (see :mod:`studies.inputs.parameters`), so thousands of cases need no per-case validation.
 
 What the builder works out:
-- machine mass, inertia and c.g. (from a block: :func:`studies.block.block_properties`);
+- machine mass, inertia and c.g. (from a block: :func:`studies.inputs.block.block_properties`);
 - mount positions (a layout puts four mounts at ``cg_x +- span_x/2, cg_y +- span_y/2, cg_z - height``
-  around the machine's c.g., order :data:`studies.schema.LAYOUT_ORDER`);
+  around the machine's c.g., order :data:`studies.inputs.schema.LAYOUT_ORDER`);
 - the static load of each mount under the total weight of machine and stages at home
-  (:func:`studies.isolators.load_share`, about the composite c.g.), and from it preset stiffness per floor
+  (:func:`studies.inputs.isolators.load_share`, about the composite c.g.), and from it preset stiffness per
+  floor
   axis (X, Y from ``f_horizontal``, Z from ``f_vertical``) and damping from ``zeta``; explicit values win;
 - stage motion profiles (:mod:`engine.profiles`), points, floor motion, duration and settling tolerance.
 """
@@ -18,6 +19,7 @@ What the builder works out:
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from typing import cast
 
 import numpy as np
 
@@ -27,6 +29,7 @@ from isolab.engine.scene import GRAVITY, SceneBatch, SceneError
 from isolab.studies.inputs.block import MAX_TRAVEL, beyond_travel, block_properties, travel_bound
 from isolab.studies.inputs.isolators import (
     CollinearIsolatorsError,
+    Feedforward,
     damping_from_ratio,
     load_share,
     stiffness_from_frequency,
@@ -36,12 +39,17 @@ from isolab.studies.inputs.schema import (
     AUTO_DURATION_CAP,
     AUTO_DURATION_DECAYS,
     AUTO_DURATION_MARGIN,
+    Block,
+    Floor,
+    Layout,
     MoveSegment,
+    RecordedFloor,
     ScanProfile,
     Scene,
     SCurveProfile,
     SequenceProfile,
     Simulation,
+    SineFloor,
     TrapezoidProfile,
 )
 from isolab.studies.inputs.schema.scene_paths import (
@@ -82,11 +90,12 @@ def shape_signature(scene: Scene) -> tuple:
     mounts = (
         ("layout",)
         if iso.layout is not None
-        else ("list", len(iso.mounts), tuple((mt.k is not None, mt.c is not None) for mt in iso.mounts))
+        else ("list", len(iso.listed), tuple((mt.k is not None, mt.c is not None) for mt in iso.listed))
     )
     stages = []
     for s in scene.stages:
         p = s.profile
+        kind: tuple[object, ...]
         if isinstance(p, SequenceProfile):
             kind = (
                 "sequence",
@@ -100,7 +109,7 @@ def shape_signature(scene: Scene) -> tuple:
         else:
             kind = (p.type,)
         stages.append((s.name, s.parent, kind))
-    floor = None  # the time-domain floor motion (a floor spectrum is per case and shapes nothing)
+    floor: tuple[object, ...] | None = None  # the time-domain floor motion (a spectrum shapes nothing)
     if scene.floor is not None and scene.floor.sine is not None:
         floor = ("sine",)
     elif scene.floor is not None and scene.floor.recorded is not None:
@@ -127,13 +136,15 @@ class _Cases:
 
     def vec(self, path: str, read: Callable[[Scene], Sequence[float] | None]) -> np.ndarray:
         """(C, 3) vector leaf, components ``path.0 .. path.2``."""
-        return np.stack(
-            [
-                self.get(f"{path}.{i}", lambda s, i=i: None if read(s) is None else read(s)[i])
-                for i in range(3)
-            ],
-            axis=-1,
-        )
+        columns = []
+        for i in range(3):
+
+            def component(s: Scene, i: int = i) -> float | None:
+                vector = read(s)
+                return None if vector is None else vector[i]
+
+            columns.append(self.get(f"{path}.{i}", component))
+        return np.stack(columns, axis=-1)
 
     def each(self, read: Callable[[Scene], object]) -> list:
         """A non-numeric input of each case (no overrides)."""
@@ -160,9 +171,13 @@ def _machine(cases: _Cases) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndar
     m0 = cases.scenes[0].machine
     c = cases.c
     if m0.block is not None:
-        size = cases.vec(BLOCK_SIZE, lambda s: s.machine.block.size)
-        rho = cases.get(BLOCK_DENSITY, lambda s: s.machine.block.density)
-        corner = cases.vec(BLOCK_CORNER, lambda s: s.machine.block.corner)
+
+        def block(s: Scene) -> Block:  # the batch's scenes share one shape: each base is a block
+            return cast(Block, s.machine.block)
+
+        size = cases.vec(BLOCK_SIZE, lambda s: block(s).size)
+        rho = cases.get(BLOCK_DENSITY, lambda s: block(s).density)
+        corner = cases.vec(BLOCK_CORNER, lambda s: block(s).corner)
         mass, inertia, cg = block_properties(size, rho, corner)
         return mass, inertia, cg, size
     mass = cases.get(MACHINE_MASS, lambda s: s.machine.mass)
@@ -191,24 +206,25 @@ def _mount_values(cases: _Cases, n: int) -> tuple[np.ndarray, np.ndarray, np.nda
     listed = cases.scenes[0].isolators.mounts is not None
     out = {}
     for key in MOUNT_FIGURES:
-        group = cases.get(isolator_group(key), lambda s, key=key: getattr(s.isolators, key))
+
+        def group_figure(s: Scene, key: str = key) -> float | None:
+            return getattr(s.isolators, key)
+
+        group = cases.get(isolator_group(key), group_figure)
         base = np.array([getattr(p, key) for p in group_preset])
         cols = []
         for j in range(n):
             if listed:
-                own = cases.get(
-                    f"{mount(j)}.{key}", lambda s, j=j, key=key: getattr(s.isolators.mounts[j], key)
-                )
-                own_preset = np.array(
-                    cases.each(
-                        lambda s, j=j, key=key: (
-                            np.nan
-                            if s.isolators.mounts[j].preset is None
-                            else getattr(s.isolators.preset_of(s.isolators.mounts[j].preset), key)
-                        )
-                    ),
-                    dtype=np.float64,
-                )
+
+                def own_figure(s: Scene, j: int = j, key: str = key) -> float | None:
+                    return getattr(s.isolators.listed[j], key)
+
+                def own_preset_figure(s: Scene, j: int = j, key: str = key) -> float:
+                    preset = s.isolators.listed[j].preset
+                    return np.nan if preset is None else getattr(s.isolators.preset_of(preset), key)
+
+                own = cases.get(f"{mount(j)}.{key}", own_figure)
+                own_preset = np.array(cases.each(own_preset_figure), dtype=np.float64)
                 cols.append(_first_set(own, own_preset, group, base))
             else:
                 cols.append(_first_set(group, base))
@@ -219,7 +235,7 @@ def _mount_values(cases: _Cases, n: int) -> tuple[np.ndarray, np.ndarray, np.nda
         def flag(s: Scene, j: int = j) -> bool:
             iso = s.isolators
             if listed:
-                mt = iso.mounts[j]
+                mt = iso.listed[j]
                 if mt.skyhook is not None:
                     return mt.skyhook
                 if mt.preset is not None:
@@ -240,10 +256,10 @@ def _mount_feedforward(cases: _Cases, n: int) -> tuple[np.ndarray, np.ndarray, n
     """
     listed = cases.scenes[0].isolators.mounts is not None
 
-    def resolved(s: Scene, j: int):
+    def resolved(s: Scene, j: int) -> Feedforward | None:
         iso = s.isolators
         if listed:
-            mt = iso.mounts[j]
+            mt = iso.listed[j]
             if mt.feedforward is not None:
                 return mt.feedforward.figures()
             if mt.preset is not None:
@@ -255,13 +271,16 @@ def _mount_feedforward(cases: _Cases, n: int) -> tuple[np.ndarray, np.ndarray, n
     keys = ("gain", "bandwidth", "force_limit")
     off = {"gain": 0.0, "bandwidth": 0.0, "force_limit": np.inf}
     out = {k: np.zeros((cases.c, n)) for k in keys}
-    for j in range(n):
-        ff = cases.each(lambda s, j=j: resolved(s, j))
-        for key in keys:
-            out[key][:, j] = [off[key] if f is None else getattr(f, key) for f in ff]
     weight = np.zeros((cases.c, n), dtype=bool)
     for j in range(n):
-        weight[:, j] = [f is not None and f.weight for f in cases.each(lambda s, j=j: resolved(s, j))]
+
+        def of_mount(s: Scene, j: int = j) -> Feedforward | None:
+            return resolved(s, j)
+
+        ff = cases.each(of_mount)
+        for key in keys:
+            out[key][:, j] = [off[key] if f is None else getattr(f, key) for f in ff]
+        weight[:, j] = [f is not None and f.weight for f in ff]
     return out["gain"], out["bandwidth"], out["force_limit"], weight
 
 
@@ -302,8 +321,10 @@ def _profiles(cases: _Cases) -> profiles.Pieces:
                     q = profile_segment(st.name, k)
 
                     def sget(key: str, q: str = q, k: int = k, i: int = i) -> np.ndarray:
+                        # the batch's scenes share one shape: this stage's profile is a sequence in each
                         return cases.get(
-                            f"{q}.{key}", lambda s: getattr(s.stages[i].profile.segments[k], key)
+                            f"{q}.{key}",
+                            lambda s: getattr(cast(SequenceProfile, s.stages[i].profile).segments[k], key),
                         )
 
                     if isinstance(seg, MoveSegment):
@@ -385,8 +406,15 @@ def build_batch(
     stage_mass = np.zeros((c, m))
     stage_home = np.zeros((c, m, 3))
     for i, name in enumerate(names):
-        stage_mass[:, i] = cases.get(f"{stage(name)}.mass", lambda s, i=i: s.stages[i].mass)
-        stage_home[:, i] = cases.vec(f"{stage(name)}.home", lambda s, i=i: s.stages[i].home)
+
+        def moving_mass(s: Scene, i: int = i) -> float:
+            return s.stages[i].mass
+
+        def home(s: Scene, i: int = i) -> Sequence[float]:
+            return s.stages[i].home
+
+        stage_mass[:, i] = cases.get(f"{stage(name)}.mass", moving_mass)
+        stage_home[:, i] = cases.vec(f"{stage(name)}.home", home)
     stage_axis = np.array(cases.each(lambda s: [st.axis for st in s.stages]), dtype=np.float64).reshape(
         c, m, 3
     )
@@ -398,9 +426,13 @@ def build_batch(
     iso0 = s0.isolators
     if iso0.layout is not None:
         n = 4
-        sx = cases.get(LAYOUT_SPAN_X, lambda s: s.isolators.layout.span_x)
-        sy = cases.get(LAYOUT_SPAN_Y, lambda s: s.isolators.layout.span_y)
-        h = cases.get(LAYOUT_HEIGHT, lambda s: s.isolators.layout.height)
+
+        def layout(s: Scene) -> Layout:  # the batch's scenes share one shape: each is placed by a layout
+            return cast(Layout, s.isolators.layout)
+
+        sx = cases.get(LAYOUT_SPAN_X, lambda s: layout(s).span_x)
+        sy = cases.get(LAYOUT_SPAN_Y, lambda s: layout(s).span_y)
+        h = cases.get(LAYOUT_HEIGHT, lambda s: layout(s).height)
         iso_pos = np.stack(
             [
                 cg[:, None, 0] + _LAYOUT_SX * sx[:, None] / 2.0,
@@ -410,14 +442,15 @@ def build_batch(
             axis=-1,
         )
     else:
-        n = len(iso0.mounts)
-        iso_pos = np.stack(
-            [
-                cases.vec(f"{mount(j)}.position", lambda s, j=j: s.isolators.mounts[j].position)
-                for j in range(n)
-            ],
-            axis=1,
-        )
+        n = len(iso0.listed)
+        positions = []
+        for j in range(n):
+
+            def position(s: Scene, j: int = j) -> Sequence[float]:
+                return s.isolators.listed[j].position
+
+            positions.append(cases.vec(f"{mount(j)}.position", position))
+        iso_pos = np.stack(positions, axis=1)
     total_mass = mass + stage_mass.sum(axis=1)
     weight_xy = mass[:, None] * cg[:, :2] + np.einsum("cm,cmi->ci", stage_mass, stage_home[..., :2])
     weight_xy = weight_xy / total_mass[:, None]
@@ -431,20 +464,23 @@ def build_batch(
     k_explicit = np.full((c, n, 3), np.nan)
     c_explicit = np.full((c, n, 3), np.nan)
     for a, axis in enumerate(AXES):
-        k_explicit[:, :, a] = cases.get(
-            group_axis("k", axis), lambda s, axis=axis: _axis(s.isolators.k, axis)
-        )[:, None]
-        c_explicit[:, :, a] = cases.get(
-            group_axis("c", axis), lambda s, axis=axis: _axis(s.isolators.c, axis)
-        )[:, None]
-    if iso0.mounts is not None:
-        for j in range(n):
-            for kc, arr in (("k", k_explicit), ("c", c_explicit)):
-                if getattr(iso0.mounts[j], kc) is not None:
-                    own = cases.vec(
-                        f"{mount(j)}.{kc}", lambda s, j=j, kc=kc: getattr(s.isolators.mounts[j], kc)
-                    )
-                    arr[:, j, :] = own
+
+        def group_k(s: Scene, axis: str = axis) -> float | None:
+            return _axis(s.isolators.k, axis)
+
+        def group_c(s: Scene, axis: str = axis) -> float | None:
+            return _axis(s.isolators.c, axis)
+
+        k_explicit[:, :, a] = cases.get(group_axis("k", axis), group_k)[:, None]
+        c_explicit[:, :, a] = cases.get(group_axis("c", axis), group_c)[:, None]
+    for j, listed in enumerate(iso0.listed):  # none for a layout
+        for kc, explicit in (("k", k_explicit), ("c", c_explicit)):
+            if getattr(listed, kc) is not None:
+
+                def own(s: Scene, j: int = j, kc: str = kc) -> Sequence[float] | None:
+                    return getattr(s.isolators.listed[j], kc)
+
+                explicit[:, j, :] = cases.vec(f"{mount(j)}.{kc}", own)
     freq = np.stack([f_h, f_h, f_v], axis=-1)
     needs_load = np.isnan(k_explicit) | np.isnan(c_explicit)
     bad_load = needs_load.any(axis=-1) & ~(load > 0.0)
@@ -488,22 +524,35 @@ def build_batch(
     point_names = list(s0.points)
     points = np.zeros((c, len(point_names), 3))
     for i, name in enumerate(point_names):
-        points[:, i] = cases.vec(point(name), lambda s, name=name: s.points[name])
+
+        def material_point(s: Scene, name: str = name) -> Sequence[float]:
+            return s.points[name]
+
+        points[:, i] = cases.vec(point(name), material_point)
     floor_amp = np.zeros((c, 3))
     floor_freq = np.zeros((c, 3))
     floor_phase = np.zeros((c, 3))
     floor_t = np.zeros(0)
     floor_disp = None
+    # the batch's scenes share one shape: the floor of each moves as the first one's does
     if s0.floor is not None and s0.floor.sine is not None:
-        floor_amp = cases.vec(floor_sine("amplitude"), lambda s: s.floor.sine.amplitude)
-        floor_freq = cases.vec(floor_sine("frequency"), lambda s: s.floor.sine.frequency)
-        floor_phase = cases.vec(floor_sine("phase"), lambda s: s.floor.sine.phase)
+
+        def sine(s: Scene) -> SineFloor:
+            return cast(SineFloor, cast(Floor, s.floor).sine)
+
+        floor_amp = cases.vec(floor_sine("amplitude"), lambda s: sine(s).amplitude)
+        floor_freq = cases.vec(floor_sine("frequency"), lambda s: sine(s).frequency)
+        floor_phase = cases.vec(floor_sine("phase"), lambda s: sine(s).phase)
     elif s0.floor is not None and s0.floor.recorded is not None:
         rec = s0.floor.recorded
-        samples = np.array(cases.each(lambda s: s.floor.recorded.displacement.samples()), dtype=np.float64)
+
+        def recorded(s: Scene) -> RecordedFloor:
+            return cast(RecordedFloor, cast(Floor, s.floor).recorded)
+
+        samples = np.array(cases.each(lambda s: recorded(s).displacement.samples()), dtype=np.float64)
         floor_t = np.arange(samples.shape[-1]) * rec.dt
         floor_disp = samples.reshape(c, 3, -1)
-    # the floor spectrum: one-third-octave band velocity per axis (studies.floor)
+    # the floor spectrum: one-third-octave band velocity per axis (studies.questions.floor)
     floor_bands = np.array(cases.each(scene_band_velocity), dtype=np.float64).reshape(c, 3, -1)
 
     # simulation
@@ -516,12 +565,16 @@ def build_batch(
     preload = {sim(s).preload for s in scenes}
     if len(preload) != 1:
         raise ValueError("build_batch: scenes of one batch must agree on simulation.preload")
-    duration = cases.get(
-        SIMULATION_DURATION, lambda s: None if sim(s).duration == "auto" else sim(s).duration
-    )
+
+    def fixed_duration(s: Scene) -> float | None:
+        duration = sim(s).duration
+        return None if duration == "auto" else duration
+
+    duration = cases.get(SIMULATION_DURATION, fixed_duration)
     last_move = profiles.end_time(pieces).max(axis=-1) if m else np.zeros(c)
     settle = cases.get(SIMULATION_SETTLE_TOLERANCE, lambda s: sim(s).settle_tolerance)
-    # each point settles to its own criterion's ``within`` (studies.criteria), else to settle_tolerance
+    # each point settles to its own criterion's ``within`` (studies.questions.criteria), else to
+    # settle_tolerance
     point_tol = np.repeat(np.asarray(settle, dtype=np.float64).reshape(-1, 1), len(point_names), axis=1)
     within = [s.criteria.settle_tolerances() if s.criteria is not None else {} for s in scenes]
     for j, name in enumerate(point_names):
@@ -568,7 +621,8 @@ def build_batch(
     if auto.any():
         decay = slowest_decay_time(batch.take(np.flatnonzero(auto)))
         margin = np.maximum(AUTO_DURATION_MARGIN, AUTO_DURATION_DECAYS * decay)
-        batch.duration[auto] = np.minimum(last_move[auto] + margin, AUTO_DURATION_CAP)
+        durations = cast(np.ndarray, batch.duration)  # given above (and SceneBatch fills a missing one)
+        durations[auto] = np.minimum(last_move[auto] + margin, AUTO_DURATION_CAP)
     return batch
 
 

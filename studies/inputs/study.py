@@ -18,7 +18,7 @@ import json
 import re
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeGuard, cast
 
 import numpy as np
 import yaml
@@ -28,7 +28,7 @@ from isolab.engine import modal, model
 from isolab.engine.results import DOF_NAMES
 from isolab.engine.scene import SceneBatch, concat
 from isolab.studies.inputs.isolators import mount_labels
-from isolab.studies.inputs.parameters import Target, apply, resolve, scene_dict
+from isolab.studies.inputs.parameters import Target, apply, drawn_design, resolve, scene_dict
 from isolab.studies.inputs.scenes import build_batch, check_scene
 from isolab.studies.inputs.schema import (
     DesignSpec,
@@ -43,9 +43,10 @@ from isolab.studies.questions import designs
 from isolab.studies.questions.criteria import Criteria
 from isolab.studies.questions.designs import Design, Factor
 from isolab.studies.questions.goals import Goals, plan_goals
+from isolab.studies.questions.tolerances import Spread, Tolerances
 from isolab.studies.units import to_si, written_unit
 
-SAMPLED_TYPES = ("lhs", "sobol", "random", "saltelli")
+SAMPLED_TYPES = ("lhs", "sobol", "random", "saltelli", "monte_carlo")
 """Designs whose cases are drawn: ``design.samples`` sets their count (a saltelli design runs
 :func:`~isolab.studies.questions.designs.saltelli_cases` of it)."""
 _EXTREME_CHECK_LEVELS = 16
@@ -70,7 +71,7 @@ class Study(InputModel):
         None, description="scene file, relative to the study file; read only when loading a study file"
     )
     simulation: Simulation = Field(
-        None,
+        cast(Simulation, None),  # not given: the scene's block, which _plan puts here
         description="overrides the scene's simulation block; after validation, the block every case "
         "runs with",
     )
@@ -78,6 +79,11 @@ class Study(InputModel):
         None,
         description="replaces the scene's criteria block; after validation, the block the cases are "
         "judged by",
+    )
+    tolerances: Tolerances | None = Field(
+        None,
+        description="replaces the scene's tolerances block: each parameter path's spread about its nominal "
+        "value (studies.questions.tolerances), what a monte_carlo design draws from",
     )
     floor: Floor | None = Field(
         None, description="replaces the scene's floor block: the same machine on another site's floor"
@@ -90,6 +96,7 @@ class Study(InputModel):
     _groups: dict[tuple, Scene] = PrivateAttr(default_factory=dict)
     _base: dict[str, Any] = PrivateAttr(default_factory=dict)
     _goals: Goals | None = PrivateAttr(default=None)
+    _spreads: list[Spread] = PrivateAttr(default_factory=list)
 
     @model_validator(mode="after")
     def _plan(self) -> Study:
@@ -113,7 +120,8 @@ class Study(InputModel):
                 raise ValueError(str(err).replace("criteria", where, 1)) from None
         self._base = scene_dict(self.scene)  # the scene as every case starts from it
         self._base["simulation"] = self.simulation.model_dump(mode="json")
-        targets, factors = [], []
+        targets: list[Target] = []
+        factors: list[Factor] = []
         for i, p in enumerate(self.parameters):
             try:
                 t = resolve(p.path, self.scene)
@@ -144,26 +152,53 @@ class Study(InputModel):
             self._goals = plan_goals(
                 self.design_spec, factors, isolator_names(self.scene), list(self.scene.points), self.criteria
             )
-        self._design = _make_design(self.design_spec, factors, targets)
+        if self.tolerances is not None:
+            self.scene = self.scene.model_copy(update={"tolerances": self.tolerances})
+        self._spreads = []
+        if self.design_spec.sampling is not None and self.design_spec.type != "monte_carlo":
+            raise ValueError(
+                f"design.sampling: only a monte_carlo design takes it (type: {self.design_spec.type})"
+            )
+        if self.design_spec.type == "monte_carlo":
+            where = "tolerances" if self.tolerances is not None else "scene.tolerances"
+            self._targets, self._design, self._spreads = drawn_design(
+                self.scene, self.design_spec, where, targets, factors
+            )
+        else:
+            self._design = _make_design(self.design_spec, factors, targets)
         self._groups = {}
         return self
 
     # -----------------------------------------------------------------------------------------------------
 
     def design(self) -> Design:
-        """The cases: a :class:`~studies.designs.Design` (kind, names, values, levels, paths, units).
+        """The cases: a :class:`~studies.questions.designs.Design` (kind, names, values, levels, paths,
+        units).
 
         The design's definition (the ``design:`` block of the input) is ``design_spec``."""
-        return self._design
+        return cast(Design, self._design)  # _plan, the validator, sets it
+
+    @property
+    def base_scene(self) -> Scene:
+        """The scene every case starts from: ``scene`` with the study's floor, criteria and tolerances
+        (_plan, the validator, requires it)."""
+        return cast(Scene, self.scene)
 
     @property
     def n_cases(self) -> int:
-        return self._design.n_cases
+        return self.design().n_cases
 
     @property
     def goals(self) -> Goals | None:
-        """An optimize design's objectives, constraints and settings (:mod:`studies.goals`); else None."""
+        """An optimize design's objectives, constraints and settings (:mod:`studies.questions.goals`); else
+        None."""
         return self._goals
+
+    @property
+    def spreads(self) -> list[Spread]:
+        """A monte_carlo design's tolerances resolved in SI about their nominal values, in the order of its
+        drawn parameters (:class:`~studies.questions.tolerances.Spread`); else empty."""
+        return list(self._spreads)
 
     @property
     def planned_cases(self) -> int:
@@ -187,7 +222,7 @@ class Study(InputModel):
             raise ValueError(
                 f"indices: case numbers run from 0 to {self.n_cases - 1}, got {idx.min()}..{idx.max()}"
             )
-        d = self._design
+        d = self.design()
         cat = [i for i, t in enumerate(self._targets) if t.categorical]
         cont = [i for i, t in enumerate(self._targets) if not t.categorical]
         if cat:
@@ -195,8 +230,8 @@ class Study(InputModel):
         else:
             keys = [()] * idx.size
         groups: dict[tuple, list[int]] = {}
-        for pos, key in enumerate(keys):
-            groups.setdefault(key, []).append(pos)
+        for k, key in enumerate(keys):
+            groups.setdefault(key, []).append(k)
         parts, order = [], []
         for key, positions in groups.items():
             pos = np.asarray(positions)
@@ -220,12 +255,13 @@ class Study(InputModel):
 
     def case_values(self, index: int) -> dict[str, Any]:
         """Parameter name -> value (SI) of one case."""
-        return {n: self._design.values[n][index].item() for n in self._design.names}
+        d = self.design()
+        return {n: d.values[n][index].item() for n in d.names}
 
     def case_scene(self, index: int) -> Scene:
         """The full, validated scene of one case, with the study's simulation block (slow path: for
         inspection and checks; ``build_batch([study.case_scene(i)])`` equals ``study.batch([i])``)."""
-        d = self._design
+        d = self.design()
         values = [d.values[n][index] for n in d.names]
         return Scene.model_validate(apply(self._base, self._targets, values))
 
@@ -250,7 +286,7 @@ class Study(InputModel):
         values = ", ".join(
             _shown(v, t) for v, t in zip(self.case_values(case).values(), self._targets, strict=True)
         )
-        return ValueError(f"case {case} ({', '.join(self._design.names)} = {values}): {msg}")
+        return ValueError(f"case {case} ({', '.join(self.design().names)} = {values}): {msg}")
 
     def _check_cases(self) -> None:
         """Build every case (in chunks) so that a combination of values that is not a physical scene is
@@ -266,7 +302,7 @@ class Study(InputModel):
         of its numeric parameters crossed with every level of its categorical ones; for a sampled or listed
         design, the first case and the cases where each parameter takes its extremes (or each of its
         levels)."""
-        d = self._design
+        d = self.design()
         if not d.names:
             return np.zeros(1, dtype=np.int64)
         if d.kind == "grid":
@@ -317,7 +353,7 @@ class Study(InputModel):
 
     def _check_values(self) -> None:
         """Each parameter's levels (or extremes) applied alone to the scene must give a valid scene."""
-        d = self._design
+        d = self.design()
         base = self._base
         for i, (name, target) in enumerate(zip(d.names, self._targets, strict=True)):
             vals = np.unique(d.values[name])
@@ -362,20 +398,20 @@ def _factor(i: int, p: ParameterSpec, t: Target, design_type: str) -> Factor:
         if design_type == "saltelli":
             raise ValueError(
                 f"{where}.{'range' if p.range is not None else 'values'}: {name} ({t.path}) is categorical "
-                f"({', '.join(t.levels)}); a saltelli design varies ranges only: fix it in the scene, or use "
-                "an lhs, sobol or grid design"
+                f"({', '.join(t.choices)}); a saltelli design varies ranges only: fix it in the scene, or "
+                "use an lhs, sobol or grid design"
             )
         if p.range is not None:
             raise ValueError(
-                f"{where}.range: {t.path} is categorical; list its values ({', '.join(t.levels)})"
+                f"{where}.range: {t.path} is categorical; list its values ({', '.join(t.choices)})"
             )
         if p.values is None:
             if design_type == "list":
-                return Factor(name, t.path, t.unit, levels=np.array(t.levels))
-            raise ValueError(f"{where}.values: give the values of {t.path} ({', '.join(t.levels)})")
+                return Factor(name, t.path, t.unit, levels=np.array(t.choices))
+            raise ValueError(f"{where}.values: give the values of {t.path} ({', '.join(t.choices)})")
         for k, v in enumerate(p.values):
-            if v not in t.levels:
-                raise ValueError(f"{where}.values[{k}]: {v!r} is not one of {', '.join(t.levels)}")
+            if v not in t.choices:
+                raise ValueError(f"{where}.values[{k}]: {v!r} is not one of {', '.join(t.choices)}")
         return Factor(name, t.path, t.unit, levels=np.array(p.values))
     if p.values is not None:
         if all(type(v) is float or type(v) is int for v in p.values):  # SI numbers: read as one array
@@ -415,7 +451,7 @@ def _written_unit(values: list[Any], dimension: str) -> str:
     return ""
 
 
-_OPTIMIZE_FIELDS = ("objective", "constraints", "algorithm", "budget", "population")
+_OPTIMIZE_FIELDS = ("objective", "constraints", "algorithm", "budget", "population", "plateau", "stall")
 
 
 def _make_design(spec: DesignSpec, factors: list[Factor], targets: list[Target]) -> Design:
@@ -455,9 +491,9 @@ def _make_design(spec: DesignSpec, factors: list[Factor], targets: list[Target])
         for i, case in enumerate(spec.cases):
             row = {}
             for k, v in case.items():
-                f = next((f for f in factors if f.name == k), None)
-                if f is not None and not f.categorical:
-                    t = targets[factors.index(f)]
+                named = next((f for f in factors if f.name == k), None)
+                if named is not None and not named.categorical:
+                    t = targets[factors.index(named)]
                     v = to_si(v, t.dimension, f"design.cases[{i}].{k}")
                 row[k] = v
             cases.append(row)
@@ -474,7 +510,7 @@ def _make_design(spec: DesignSpec, factors: list[Factor], targets: list[Target])
         ) from None
 
 
-def _is_text(source: str | Path) -> bool:
+def _is_text(source: str | Path) -> TypeGuard[str]:
     """A string holding YAML/JSON (several lines, or a JSON object) rather than a file name."""
     return isinstance(source, str) and ("\n" in source or source.lstrip().startswith("{"))
 
@@ -566,7 +602,7 @@ def validate_scene(data: Any) -> Scene:
 
 
 def load_scene(source: str | Path | Mapping[str, Any]) -> Scene:
-    """A validated :class:`~studies.schema.Scene` from a YAML/JSON file, YAML/JSON text or a dict."""
+    """A validated :class:`~studies.inputs.schema.Scene` from a YAML/JSON file, YAML/JSON text or a dict."""
     if isinstance(source, Mapping):
         return validate_scene(dict(source))
     data, _ = read_definition(source)
@@ -595,15 +631,16 @@ def load_study(source: str | Path | Mapping[str, Any], base_dir: str | Path | No
 
 
 def isolator_names(scene: Scene) -> list[str]:
-    """Labels of the scene's isolators, in batch order (:func:`studies.isolators.mount_labels`; a layout's
-    order is :data:`studies.schema.LAYOUT_ORDER`)."""
+    """Labels of the scene's isolators, in batch order (:func:`studies.inputs.isolators.mount_labels`; a
+    layout's
+    order is :data:`studies.inputs.schema.LAYOUT_ORDER`)."""
     return mount_labels(scene.isolators.count)
 
 
 def study_labels(study: Study) -> tuple[list[str], list[str]]:
     """(isolator names, point names) of a study's scene, in batch order: the labels of the ``isolator`` and
     ``point`` dimensions of its results (:func:`isolator_names` and the points' own names)."""
-    scene = study.scene
+    scene = study.base_scene
     return isolator_names(scene), [str(p) for p in scene.points]
 
 

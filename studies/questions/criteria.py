@@ -39,13 +39,15 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterable
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
-import xarray as xr
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from isolab.studies.units import Force, Length, Time
+
+if TYPE_CHECKING:  # xarray loads where a dataset is judged, not where a scene is read
+    import xarray as xr
 
 VC_NAMES = ("VC-A", "VC-B", "VC-C", "VC-D", "VC-E", "VC-F", "VC-G")
 """The generic vibration criteria a ``velocity`` criterion may name (levels:
@@ -234,6 +236,8 @@ def _value(ds: xr.Dataset, criterion: Criterion) -> xr.DataArray:
 def margins(ds: xr.Dataset, criteria: Criteria) -> xr.DataArray:
     """Each case's margin to each criterion (dims: the case dims, then ``criterion``), unit 1, positive
     where met; NaN for a case that did not end ``ok``."""
+    import xarray as xr
+
     judged = judged_criteria(criteria)
     parts = []
     for c in judged:
@@ -251,6 +255,8 @@ def margins(ds: xr.Dataset, criteria: Criteria) -> xr.DataArray:
 def add_criteria(ds: xr.Dataset, criteria: Criteria | None) -> xr.Dataset:
     """``ds`` with ``criterion_margin`` (case dims, ``criterion``) and ``meets_criteria`` (case dims)
     added, and the block in the ``criteria`` attribute; ``ds`` unchanged when there are no criteria."""
+    import xarray as xr
+
     if criteria is None or not judged_criteria(criteria):
         return ds
     judged = judged_criteria(criteria)

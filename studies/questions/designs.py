@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import warnings
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
-from scipy.stats import qmc
 
 
 @dataclass
@@ -109,30 +110,38 @@ class Factor:
     def categorical(self) -> bool:
         return self.levels is not None and self.levels.dtype.kind in "US"
 
+    @property
+    def bounds(self) -> tuple[float, float]:
+        """(low, high) of a range, SI: set whenever ``levels`` is None (``__post_init__`` refuses a factor
+        with neither)."""
+        return cast(float, self.low), cast(float, self.high)
+
     def grid_levels(self) -> np.ndarray:
         """The levels a full-factorial grid takes (explicit levels, or ``num`` points over the range)."""
         if self.levels is not None:
             return self.levels
         if self.num is None:
             raise ValueError(f"{self.name}: a grid needs values or a range with num")
+        low, high = self.bounds
         if self.num == 1:
-            return np.array([float(self.low)])
+            return np.array([float(low)])
         if self.scale == "log":
-            return np.geomspace(self.low, self.high, self.num)
-        return np.linspace(self.low, self.high, self.num)
+            return np.geomspace(low, high, self.num)
+        return np.linspace(low, high, self.num)
 
-    def from_unit(self, u: np.ndarray) -> np.ndarray:
+    def from_unit(self, u: np.ndarray | float) -> np.ndarray:
         """Map samples ``u`` in [0, 1) to values: through the range (log space for a log scale), or to
         the level of index ``floor(u * n_levels)`` for explicit levels."""
         u = np.asarray(u, dtype=np.float64)
         if self.levels is not None:
             n = len(self.levels)
             return self.levels[np.clip(np.floor(u * n).astype(np.intp), 0, n - 1)]
+        low, high = self.bounds
         if self.scale == "log":
-            sign = np.sign(self.low)
-            lo, hi = np.log(abs(self.low)), np.log(abs(self.high))
+            sign = np.sign(low)
+            lo, hi = np.log(abs(low)), np.log(abs(high))
             return sign * np.exp(lo + u * (hi - lo))
-        return self.low + u * (self.high - self.low)
+        return low + u * (high - low)
 
 
 def _meta(factors: list[Factor]) -> tuple[list[str], dict[str, str], dict[str, str]]:
@@ -186,6 +195,8 @@ def latin_hypercube(factors: list[Factor], n: int, seed: int = 0) -> Design:
     n = _check_n(n)
     if not factors:
         return _sampled(factors, np.zeros((n, 0)))
+    from scipy.stats import qmc  # on first use: reading a scene needs no scipy
+
     u = qmc.LatinHypercube(d=len(factors), rng=np.random.default_rng(seed)).random(n)
     return _sampled(factors, u)
 
@@ -195,6 +206,8 @@ def sobol(factors: list[Factor], n: int, seed: int = 0) -> Design:
     n = _check_n(n)
     if not factors:
         return _sampled(factors, np.zeros((n, 0)))
+    from scipy.stats import qmc
+
     engine = qmc.Sobol(d=len(factors), scramble=True, rng=np.random.default_rng(seed))
     if n & (n - 1) == 0:
         u = engine.random_base2(int(np.log2(n)))
@@ -259,7 +272,7 @@ def random(factors: list[Factor], n: int, seed: int = 0) -> Design:
     return _sampled(factors, np.random.default_rng(seed).random((n, len(factors))))
 
 
-def explicit(factors: list[Factor], cases: list[dict[str, object]]) -> Design:
+def explicit(factors: list[Factor], cases: Sequence[Mapping[str, object]]) -> Design:
     """The cases listed one by one: each a mapping of every factor's name to its value (SI, or a level
     name for a categorical factor)."""
     names, paths, units = _meta(factors)
@@ -276,11 +289,12 @@ def explicit(factors: list[Factor], cases: list[dict[str, object]]) -> Design:
     values = {}
     for f in factors:
         col = [case[f.name] for case in cases]
-        if f.categorical:
-            bad = [i for i, v in enumerate(col) if v not in set(f.levels.tolist())]
+        levels = f.levels
+        if levels is not None and f.categorical:  # a categorical factor has levels
+            bad = [i for i, v in enumerate(col) if v not in set(levels.tolist())]
             if bad:
                 raise ValueError(
-                    f"design.cases[{bad[0]}].{f.name}: {col[bad[0]]!r} is not one of {f.levels.tolist()}"
+                    f"design.cases[{bad[0]}].{f.name}: {col[bad[0]]!r} is not one of {levels.tolist()}"
                 )
             values[f.name] = np.asarray(col)
         else:

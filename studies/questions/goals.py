@@ -25,16 +25,18 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import xarray as xr
 
 from isolab.engine.results import DIMENSION_LABELS, ISOLATOR, OK, OUTPUTS, POINT
 from isolab.studies.quantities import output_values, pick_quantity
 from isolab.studies.questions.criteria import Criteria, judged_criteria
 from isolab.studies.questions.designs import Factor
 from isolab.studies.units import dimension_of, to_si
+
+if TYPE_CHECKING:  # xarray loads where a dataset is read, not where a scene is
+    import xarray as xr
 
 CRITERIA = "criteria"
 """The constraint that every criterion of the study's ``criteria:`` block is met."""
@@ -45,9 +47,14 @@ any real case, and finite (an optimiser never sees NaN). Such a case is infeasib
 SINGLE_OBJECTIVE = ("ga", "de", "pso", "nelder-mead", "pattern")
 MULTI_OBJECTIVE = ("nsga2",)
 ALGORITHMS = SINGLE_OBJECTIVE + MULTI_OBJECTIVE
-"""The pymoo algorithms an optimize design may name (see :mod:`studies.optimisation`)."""
+"""The pymoo algorithms an optimize design may name (see :mod:`studies.run.optimisation`)."""
 DEFAULT_POPULATION = 40
 """Cases per generation when the design does not say."""
+DEFAULT_PLATEAU = 0.01
+"""The plateau of an optimum when the design does not say: objective within 1 % of the best's."""
+STALL_IMPROVEMENT = 1e-3
+"""The smallest improvement of the best feasible objective, as a share of it, that a generation must make
+not to count towards a stall (0.1 %)."""
 
 _OBJECTIVE = re.compile(r"^\s*(minimi[sz]e|maximi[sz]e)\s+(\S+)\s*$", re.IGNORECASE)
 _CONSTRAINT = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_.]*)\s*(<=|>=)\s*(.+?)\s*$")
@@ -96,7 +103,13 @@ class Goals:
     """One name per column of ``G``: ``case_ok``, then each constraint (each criterion for ``criteria``)."""
     factors: tuple[Factor, ...]
     """The varied parameters, each a continuous range (the optimiser's variables, log-scaled ones in log
-    space: :meth:`studies.designs.Factor.from_unit`)."""
+    space: :meth:`studies.questions.designs.Factor.from_unit`)."""
+    plateau: float = DEFAULT_PLATEAU
+    """The plateau answered beside the best: feasible designs whose first objective is within this share of
+    the best's (1)."""
+    stall: int | None = None
+    """Stop once this many generations in a row improve the best feasible objective by less than
+    :data:`STALL_IMPROVEMENT` (None: the budget alone stops the run)."""
 
 
 QuantityLayout = dict[str, dict[str, list[str]]]
@@ -109,7 +122,7 @@ def quantity_layout(
     """The quantities a study's dataset will hold, in its order, without building it: the catalogue's
     outputs (:data:`isolab.engine.results.OUTPUTS`) over the scene's isolators and points, then, for a
     study with criteria, ``criterion_margin`` (one per criterion) and ``meets_criteria``
-    (:func:`studies.criteria.add_criteria`)."""
+    (:func:`studies.questions.criteria.add_criteria`)."""
     labels = {
         **{d: [str(v) for v in values] for d, values in DIMENSION_LABELS.items()},
         ISOLATOR: [str(n) for n in isolator_names],
@@ -206,7 +219,8 @@ def plan_goals(
     point_names: list[str],
     criteria: Criteria | None = None,
 ) -> Goals:
-    """Check an optimize design block (``spec``, a :class:`studies.schema.DesignSpec`) against the study's
+    """Check an optimize design block (``spec``, a :class:`studies.inputs.schema.DesignSpec`) against the
+    study's
     parameters (``factors``), its scene's labels and its criteria; nothing runs.
 
     Raises:
@@ -243,6 +257,11 @@ def plan_goals(
         raise ValueError(
             f"design.population: {population} cases per generation exceed the budget of {spec.budget} cases"
         )
+    plateau = DEFAULT_PLATEAU
+    if spec.plateau is not None:
+        plateau = to_si(spec.plateau, "dimensionless", "design.plateau")
+        if not 0.0 <= plateau <= 1.0:
+            raise ValueError(f"design.plateau: must be from 0 to 100 %, got {spec.plateau!r}")
     names = ["case_ok"]
     for c in constraints:
         if c.quantity == CRITERIA and criteria is not None:  # checked above: the study has criteria
@@ -258,12 +277,14 @@ def plan_goals(
         int(spec.seed),
         tuple(names),
         tuple(factors),
+        float(plateau),
+        None if spec.stall is None else int(spec.stall),
     )
 
 
 def goal_values(ds: xr.Dataset, goals: Goals) -> tuple[np.ndarray, np.ndarray]:
     """``(F, G)`` of the cases of a sampled dataset (``case`` dimension) that carries the criteria when
-    the goals constrain them (:func:`studies.criteria.add_criteria`).
+    the goals constrain them (:func:`studies.questions.criteria.add_criteria`).
 
     ``F`` is (n, objectives): the objective values, negated for ``maximize``, in their SI units. ``G`` is
     (n, constraints): met where <= 0: first 0 for a case that ended ``ok`` (else :data:`PENALTY`), then

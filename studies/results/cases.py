@@ -227,7 +227,7 @@ def case_table(ds: xr.Dataset) -> CaseColumns:
         "text",
         True,
     )
-    if "meets_criteria" in ds:  # a study with design criteria (studies.criteria)
+    if "meets_criteria" in ds:  # a study with design criteria (studies.questions.criteria)
         t.add("meets_criteria", flat("meets_criteria").astype(np.float64)[:, 0], "1", "bool", True)
         margin = flat("criterion_margin").astype(np.float64)
         for k, name in enumerate(str(c) for c in ds["criterion"].values):
@@ -238,7 +238,7 @@ def case_table(ds: xr.Dataset) -> CaseColumns:
     for group in (*DETAIL, *((name,) for name in others)):  # the catalogue's order: the settings last
         detail(group)
     t.add("message", flat("message")[:, 0].astype(str), "", "text", False)
-    # an optimisation's cases (studies.optimisation): shown by default
+    # an optimisation's cases (studies.run.optimisation): shown by default
     for name, kind in (("generation", "number"), ("feasible", "bool"), ("pareto", "bool"), ("best", "bool")):
         if name in ds.data_vars:
             t.add(name, flat(name).astype(np.float64)[:, 0], "1", kind, True)

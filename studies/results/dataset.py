@@ -17,7 +17,7 @@ Yes/no outputs (``liftoff``, ``settled``, ``mechanism``) are float32 in memory (
 missing) and int8 with ``_FillValue`` -1 on disk, so they too can be missing (the store writes them:
 :func:`isolab.studies.results.store.netcdf_encoding`).
 
-Results that arrive in chunks (see :mod:`studies.fanout`) travel as plain dicts of numpy arrays
+Results that arrive in chunks (see :mod:`studies.run.fanout`) travel as plain dicts of numpy arrays
 (:func:`result_arrays`) and are put back together in case order by :func:`from_chunks`, or, for a study's
 stored dataset, read one block of chunks at a time as the file is written (:func:`streamed_dataset`: the
 same dataset, whose memory does not grow with the number of cases).
@@ -279,7 +279,7 @@ def chunk_dataset(
     """One chunk's cases as a dataset along a ``case`` dimension (no case coordinates, no dataset
     attributes): every per-case variable :func:`to_dataset` stores, with the same values, attributes and
     encodings, plus ``criterion_margin`` and ``meets_criteria`` for a ``criteria`` block
-    (:func:`studies.criteria.add_criteria`). ``arrays`` and ``indices`` are as :func:`chunk_result`
+    (:func:`studies.questions.criteria.add_criteria`). ``arrays`` and ``indices`` are as :func:`chunk_result`
     takes them."""
     from isolab.studies.questions.criteria import add_criteria
 
@@ -309,10 +309,11 @@ def streamed_dataset(
     """A study's dataset whose per-case variables are read from its chunks only when they are computed.
 
     Equal to ``add_criteria(to_dataset(from_chunks(...), design, ...), criteria)`` (see :func:`to_dataset`,
-    :func:`studies.criteria.add_criteria`), but every per-case variable is a dask array with one block per
+    :func:`studies.questions.criteria.add_criteria`), but every per-case variable is a dask array with one
+    block per
     chunk: ``load_chunk(k)`` gives the arrays of the cases ``chunks[k]`` (as :func:`from_chunks` takes
     them) when a block of chunk ``k`` is computed, and only the last chunk read is kept. Written with
-    :func:`studies.store.write_netcdf`, each chunk's slice goes into the file as it is read, so the
+    :func:`studies.results.store.write_netcdf`, each chunk's slice goes into the file as it is read, so the
     memory the write takes does not grow with the number of cases. The coordinates and attributes are
     built at once (the parameter values of every case: 8 bytes a case per numeric parameter).
 

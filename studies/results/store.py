@@ -134,6 +134,24 @@ _NO_SPACE = (errno.ENOSPC, errno.EDQUOT)
 _MB = 1e6
 
 
+def remove_tree(folder: Path, attempts: int = 5) -> None:
+    """Remove ``folder`` and everything in it, while a study that is being stopped may still write there:
+    a file that vanishes under the walk (an atomic write's temporary renamed away) is not an error, and a
+    file written meanwhile is taken on the next attempt."""
+    for _ in range(attempts):
+        try:
+            shutil.rmtree(folder)
+        except FileNotFoundError:
+            pass
+        except OSError as err:
+            if not folder.exists() or err.errno not in (errno.ENOTEMPTY, errno.ENOENT):
+                raise
+        if not folder.exists():
+            return
+        time.sleep(0.05)
+    shutil.rmtree(folder, ignore_errors=True)
+
+
 class StoreFull(OSError):
     """A store write failed for want of space (errno ENOSPC); the message says what needed how much.
     Built as ``StoreFull(errno.ENOSPC, message, path)`` (so it crosses Dask's pickling whole)."""
@@ -493,7 +511,7 @@ class Store:
             found = True
         chunk_dir = self.chunk_dir(study_id)
         if chunk_dir.exists():
-            shutil.rmtree(chunk_dir)
+            remove_tree(chunk_dir)
             found = True
         shutil.rmtree(self.results_dir(study_id), ignore_errors=True)
         return found

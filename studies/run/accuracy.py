@@ -2,11 +2,12 @@
 
 **Choosing.** A simulation block may ask for an accuracy instead of naming the model
 (``accuracy: fast | balanced | reference`` or ``tolerance: "10 um" | "1 %"``, see
-:class:`studies.schema.Simulation`). :func:`choose` then measures: it runs a few pilot cases of the study
+:class:`studies.inputs.schema.Simulation`). :func:`choose` then measures: it runs a few pilot cases of the
+study
 (:func:`pilot_cases`: the hardest case of each isolator type and the stiffest case, found by a cheap
 screening run) at the reference level (nonlinear model, adaptive reference integrator, at the finest
 candidate step: the "truth"), then tries the candidate fidelity/integrator/step triples in order of their
-estimated cost (:data:`studies.costs.STEP_COST`, stability sub-steps included) and takes the first whose
+estimated cost (:data:`studies.run.costs.STEP_COST`, stability sub-steps included) and takes the first whose
 largest error on the pilot cases stays inside the tolerance. A relative tolerance applies to every sizing
 output (:data:`~isolab.studies.run.error_estimate.SIZING_OUTPUTS`: peak c.g. and point displacement, peak
 rotation, peak isolator force, relative to the reference's largest of each; the smallest isolator load
@@ -29,13 +30,13 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from types import SimpleNamespace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from isolab.engine import modal, model, simulate, stability
 from isolab.engine.integrators import INTEGRATORS
-from isolab.engine.results import OK, STATUS_NAMES
+from isolab.engine.results import OK, STATUS_NAMES, SimulationResult
 from isolab.engine.scene import SceneBatch
 from isolab.studies.inputs.schema import (
     ACCURACY_LEVELS,
@@ -187,7 +188,7 @@ def choose_for_batch(
     stays within ``margin`` times that output's tolerance (:func:`component_errors`).
 
     The truth is the nonlinear level with the reference integrator at the smallest of ``steps``.
-    Candidates are tried in order of estimated cost (:func:`studies.costs.step_cost` times the steps each
+    Candidates are tried in order of estimated cost (:func:`studies.run.costs.step_cost` times the steps each
     case takes). A candidate the stability guard would refuse or sub-step on any pilot case (with the stages
     at home, or, found when it runs, at the ends of their travel) is never chosen: a step cut to the
     stability limit is stable, not accurate, and the study's other cases may need it cut further. When
@@ -195,12 +196,13 @@ def choose_for_batch(
     """
     steps = tuple(sorted(float(s) for s in steps))
     fmt: bool | None = None if per_output else relative  # how errors read: of the tolerance, %, um
-    bound = 1.0 if per_output else float(tolerance)  # per output: errors are fractions of the tolerance
+    # per output: errors are fractions of the tolerance; without per-output tolerances the request has one
+    bound = 1.0 if per_output else float(cast(float, tolerance))
     texts = {k: tolerance_text(v, r, TOLERANCE_OUTPUTS[k]) for k, (v, r) in (per_output or {}).items()}
     shown = ", ".join(f"{k} {v}" for k, v in texts.items()) if per_output else _fmt_error(tolerance, relative)
     cases = tuple(int(c) for c in (case_numbers if case_numbers is not None else range(batch.n_cases)))
     fine = steps[0]
-    truth = simulate(batch, *REFERENCE_PAIR, dt=fine, auto_step=auto_step)
+    truth: SimulationResult | SimpleNamespace = simulate(batch, *REFERENCE_PAIR, dt=fine, auto_step=auto_step)
     usable = np.flatnonzero(truth.status == OK)
     if usable.size == 0:
         why = "; ".join(
@@ -397,7 +399,8 @@ def _choose(study: Study) -> Choice:
     sim = study.simulation
     request = sim.request
     if request is None:
-        return Choice(None, sim.fidelity, sim.integrator, float(sim.dt), reason="given in the study")
+        fidelity, integrator, dt = sim.engine_choice()  # no request: the block's validator filled all three
+        return Choice(None, fidelity, integrator, dt, reason="given in the study")
     if sim.accuracy == "reference":
         return _reference_choice(sim, request)
     tolerance, relative = request_tolerance(sim)

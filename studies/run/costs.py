@@ -1,7 +1,8 @@
 """The engine cost model: how long the engine takes per step of one case, by fidelity and integrator.
 
 Two things are sized with it: the accuracy chooser ranks its candidate models by estimated cost
-(:func:`studies.accuracy.choose_for_batch`), and the runner sizes chunks, and authoring estimates a study's
+(:func:`studies.run.accuracy.choose_for_batch`), and the runner sizes chunks, and authoring estimates a
+study's
 run time, from :func:`estimate_seconds_per_case`. Only rankings and rough sizes depend on it: a factor of a
 few changes no result. ``python -m benchmarks accuracy`` prints measured figures beside :data:`STEP_COST`.
 """
@@ -47,7 +48,7 @@ def step_cost(fidelity: str | None, integrator: str | None) -> float:
 def estimate_seconds_per_case(study: Study) -> float:
     """Rough engine time per case of ``study``, s: :data:`CASE_OVERHEAD` plus ``duration / dt`` steps at
     :func:`step_cost` of its fidelity and integrator (the duration of its first case; a study that leaves the
-    step to the accuracy chooser is taken at :data:`studies.schema.DEFAULT_DT`)."""
+    step to the accuracy chooser is taken at :data:`studies.inputs.schema.DEFAULT_DT`)."""
     sim = study.simulation
     steps = max(1.0, _duration(study) / float(sim.dt if sim.dt is not None else DEFAULT_DT))
     return CASE_OVERHEAD + steps * step_cost(sim.fidelity, sim.integrator)

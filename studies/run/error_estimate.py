@@ -121,7 +121,7 @@ def component_errors(
     result: Any, reference: Any, tolerances: Mapping[str, tuple[float, bool]]
 ) -> dict[str, np.ndarray]:
     """Per case (C,), for each output named in ``tolerances`` (output -> (value, relative), as
-    :func:`studies.schema.parse_output_tolerance` gives them), the error of its worst component as a
+    :func:`studies.inputs.schema.parse_output_tolerance` gives them), the error of its worst component as a
     fraction of its tolerance (1 = at the tolerance). NaN where either case is not OK.
 
     A component is one axis of one point, isolator or the c.g. A relative error is ``|a - b| / |b|`` with
@@ -188,10 +188,9 @@ def sample_arrays(definition_json: str, case: int) -> dict[str, dict[str, np.nda
     study = study_from_json(definition_json)
     sim = study.simulation
     batch = study.batch(np.array([int(case)]))
-    ours = result_arrays(
-        simulate(batch, sim.fidelity, sim.integrator, dt=float(sim.dt), auto_step=sim.auto_step)
-    )
-    dt = float(ours["dt"][0]) if np.isfinite(ours["dt"][0]) else float(sim.dt)
+    fidelity, integrator, step = sim.engine_choice()  # resolved, as for the chunks that run this definition
+    ours = result_arrays(simulate(batch, fidelity, integrator, dt=step, auto_step=sim.auto_step))
+    dt = float(ours["dt"][0]) if np.isfinite(ours["dt"][0]) else step
     reference = result_arrays(simulate(batch, *REFERENCE_PAIR, dt=dt, auto_step=sim.auto_step))
     return {"ours": ours, "reference": reference}
 
@@ -249,7 +248,8 @@ def estimate_errors(
             f"{method}; sampled cases {sorted(sub_stepped)} were sub-stepped by the stability guard and are "
             "compared like the others"
         ).lstrip("; ")
-    values, worst = {}, {}
+    values: dict[str, float] = {}
+    worst: dict[str, int | None] = {}
     for name in outputs:
         e = np.asarray(errors[name])
         if np.all(np.isnan(e)):

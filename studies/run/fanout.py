@@ -215,7 +215,8 @@ def run_chunk(
 
     The engine runs on consecutive batches of at most ``ENGINE_BATCH_CASES`` cases. Deterministic given
     its inputs, so Dask may rerun it elsewhere if a worker dies. Returns the result arrays of
-    :func:`studies.dataset.result_arrays` plus ``indices``, and the task's own timings under ``"timing"``
+    :func:`studies.results.dataset.result_arrays` plus ``indices``, and the task's own timings under
+    ``"timing"``
     (float64, in the order of ``TASK_TIMING_FIELDS``).
 
     With ``store_root``, ``study_id`` and ``chunk_index``, and when this worker sees that store (the study's
@@ -358,7 +359,7 @@ def run_chunks(
     Raises:
         FanoutError: every submitted chunk failed.
         OSError: a chunk's task failed for want of space in the store (ENOSPC, e.g.
-            :class:`studies.store.StoreFull`): the outstanding chunks are cancelled.
+            :class:`studies.results.store.StoreFull`): the outstanding chunks are cancelled.
     """
     skip = {int(k) for k in skip}
     total = int(sum(len(c) for c in chunks))

@@ -10,7 +10,11 @@ calls from Python are read (what they call is compiled, and cached, with them): 
 
 from __future__ import annotations
 
+import json
+import os
+import time
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 STEPPED = ("euler", "rk4", "exact")
@@ -47,3 +51,67 @@ def kernels_cached(integrators: Sequence[str | None] = (None,), kernels: Sequenc
         if not any(key[1] == target and key[2] == code for key in index):
             return False
     return True
+
+
+EXAMPLES_DIR = Path(__file__).resolve().parent.parent / "examples"
+"""The example studies (package data): the fidelity and integrator pairs a fresh service warms first."""
+WARMUP_DURATION = "0.1 s"
+"""Simulated time of the one case a warm-up runs per pair: long enough to call every kernel."""
+
+
+def example_study(path: Path) -> Any:
+    """The example study file at ``path`` with its scene inlined, parsed only (an example is checked by the
+    tests; this skips the dry run of its cases)."""
+    from isolab.studies.inputs.study import parse_study, read_definition
+
+    data, here = read_definition(path)
+    if data.get("scene_file") is not None and data.get("scene") is None:
+        data["scene"], _ = read_definition(here / str(data["scene_file"]))
+    return parse_study(data)
+
+
+def example_pairs() -> list[tuple[str, str]]:
+    """The (fidelity, integrator) pairs the example studies run at, then the reference pair every study's
+    error estimate reruns sampled cases at; each once, in that order."""
+    from isolab.studies.run.error_estimate import REFERENCE_PAIR
+
+    pairs: list[tuple[str, str]] = []
+    for path in sorted(EXAMPLES_DIR.glob("*.yaml")):
+        try:
+            sim = example_study(path).simulation
+        except Exception:  # a scene file, or an example that is not a study
+            continue
+        if sim.fidelity is not None and sim.integrator is not None:
+            pairs.append((sim.fidelity, sim.integrator))
+    pairs.append(REFERENCE_PAIR)
+    return list(dict.fromkeys(pairs))
+
+
+def warmup_definition(fidelity: str, integrator: str) -> str:
+    """A one-case study of the article's scriber at ``fidelity`` and ``integrator`` over
+    ``WARMUP_DURATION`` of simulated time, as the JSON a chunk task takes."""
+    definition = example_study(EXAMPLES_DIR / "lhs-10000.yaml").model_dump(mode="json")
+    definition["simulation"] = {"fidelity": fidelity, "integrator": integrator, "duration": WARMUP_DURATION}
+    return json.dumps(definition)
+
+
+def warm_kernels(pairs: Sequence[tuple[str, str]]) -> dict[str, float]:
+    """Run one short case of each (fidelity, integrator) pair through the chunk task, so that this process
+    has imported the studies, built its engine structures and loaded (or, on an empty cache, compiled and
+    saved) every kernel those pairs call: a later chunk starts computing at once. Returns seconds per pair
+    (``"<fidelity>/<integrator>"``) and, under ``"pid"``, this process's id."""
+    from isolab.studies.run.fanout import run_chunk
+
+    took: dict[str, float] = {"pid": float(os.getpid())}
+    for fidelity, integrator in pairs:
+        t0 = time.perf_counter()
+        run_chunk(warmup_definition(fidelity, integrator), [0])
+        took[f"{fidelity}/{integrator}"] = time.perf_counter() - t0
+    return took
+
+
+def warmup_plan() -> tuple[list[tuple[str, str]], bool]:
+    """The pairs a service warms at start (:func:`example_pairs`) and whether the kernels they call are all
+    in the cache already (the worker task that plans the warm-up)."""
+    pairs = example_pairs()
+    return pairs, kernels_cached(sorted({integrator for _, integrator in pairs}))

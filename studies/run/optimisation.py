@@ -1,25 +1,27 @@
 """Optimisation studies: a pymoo optimiser picks the cases, a generation at a time, on the study's cluster.
 
 An ``optimize`` design (``design: {type: optimize, objective: ..., budget: ...}``, its goals read by
-:mod:`studies.goals`) runs an ask-and-tell loop (:func:`optimise`): the algorithm proposes a generation of
+:mod:`studies.questions.goals`) runs an ask-and-tell loop (:func:`optimise`): the algorithm proposes a
+generation of
 cases (``algorithm.ask()``), the generation runs as one batch of cases through the same Dask fan-out as any
-study (a list-design study of those cases, :func:`studies.fanout.run_chunks`), their objective and
+study (a list-design study of those cases, :func:`studies.run.fanout.run_chunks`), their objective and
 constraint values go back (``algorithm.tell``), until the ``budget`` of cases would be exceeded.
 
 The optimiser works in the unit box: each parameter's range maps to [0, 1] (a log-scale range in log
-space, :meth:`studies.designs.Factor.from_unit`), so every variable has the same reach whatever its unit.
+space, :meth:`studies.questions.designs.Factor.from_unit`), so every variable has the same reach whatever its
+unit.
 A case that fails (unstable, tipping, a scene that cannot be built) or lacks a value is infeasible with
-:data:`studies.goals.PENALTY` in every objective and constraint: never NaN.
+:data:`studies.questions.goals.PENALTY` in every objective and constraint: never NaN.
 
 Resume: every evaluated generation is saved in the study's store directory as it finishes
 (``<id>.chunks/generation-<g>.npz``: the unit-box and SI values, ``F``, ``G`` and the cases' result
-arrays), and after each generation the algorithm's state is pickled beside it (``optimiser.pkl``, with
-cloudpickle). A run called again with the same study id (cancel, crash, a service restart: the job queue
-requeues unfinished studies) loads the state of the last finished generation and goes on from there; an
-algorithm whose state cannot be pickled (the pattern search keeps Python generators) is rebuilt from its
-seed and replayed through the saved generations, without evaluating them again. Either way the algorithm
-draws from its own seeded generator, so an interrupted run ends with the same cases, and the same
-optimum, as an uninterrupted one.
+arrays, plain arrays that ``numpy.load`` reads with ``allow_pickle=False``). The algorithm's state is not
+stored: nothing in the store is ever unpickled or executed. A run called again with the same study id
+(cancel, crash, a service restart: the job queue requeues unfinished studies) rebuilds the algorithm from
+its seed and replays it through the saved generations: each generation the algorithm asks for that matches
+a saved one (same unit-box values) is told the saved objectives and constraints, without evaluating it
+again. The algorithm draws from its own seeded generator, so the replayed state is the uninterrupted run's
+and an interrupted run ends with the same cases, and the same optimum, as an uninterrupted one.
 
 The dataset (:func:`optimum_dataset`) is a sampled design of every evaluated case (``case`` dimension,
 parameters as coordinates) with ``generation``, ``feasible``, ``pareto`` and ``best`` per case and the
@@ -46,14 +48,14 @@ from isolab.studies.inputs.study import Study
 from isolab.studies.quantities import output_values
 from isolab.studies.questions.criteria import add_criteria
 from isolab.studies.questions.designs import Design
-from isolab.studies.questions.goals import PENALTY, Goals, goal_values
+from isolab.studies.questions.goals import PENALTY, STALL_IMPROVEMENT, Goals, goal_values
 from isolab.studies.results.dataset import from_chunks, result_arrays, to_dataset
 from isolab.studies.results.store import Store, atomic_path
 
 log = logging.getLogger(__name__)
 
-STATE_FILE = "optimiser.pkl"
-"""The pickled algorithm state in a study's store directory."""
+LEGACY_STATE_FILE = "optimiser.pkl"
+"""A pickled algorithm state older versions left in a study's store directory: removed unread on resume."""
 GENERATION_FILE = "generation-{}.npz"
 """One evaluated generation in a study's store directory."""
 POPULATION_ALGORITHMS = ("ga", "de", "pso", "nsga2")
@@ -61,7 +63,8 @@ POPULATION_ALGORITHMS = ("ga", "de", "pso", "nsga2")
 
 Evaluate = Callable[[int, dict[str, np.ndarray]], dict[str, np.ndarray] | None]
 """``evaluate(generation, values)``: the cases of one generation, ``values`` parameter name -> (n,) SI
-values; returns at least ``F`` (n, objectives) and ``G`` (n, constraints) (:func:`studies.goals.goal_values`)
+values; returns at least ``F`` (n, objectives) and ``G`` (n, constraints)
+(:func:`studies.questions.goals.goal_values`)
 plus any per-case arrays to keep, or None when it was cancelled."""
 
 
@@ -102,7 +105,8 @@ def _pattern_search() -> Any:
 
 
 def make_algorithm(name: str, population: int) -> Any:
-    """The pymoo algorithm ``name`` (one of :data:`studies.goals.ALGORITHMS`) with ``population`` cases per
+    """The pymoo algorithm ``name`` (one of :data:`studies.questions.goals.ALGORITHMS`) with ``population``
+    cases per
     generation (the local searches, ``nelder-mead`` and ``pattern``, take no population)."""
     from pymoo.config import Config
 
@@ -172,9 +176,17 @@ class Journal:
         out: dict[int, dict[str, np.ndarray]] = {}
         for path in self.directory.glob(GENERATION_FILE.format("*")):
             g = path.stem.removeprefix("generation-")
-            if g.isdigit():
+            if not g.isdigit():
+                continue
+            try:
                 with np.load(path, allow_pickle=False) as z:
-                    out[int(g)] = {name: z[name] for name in z.files}
+                    arrays = {name: z[name] for name in z.files}
+                missing = {"u", "x", "F", "G"} - set(arrays)
+                if missing:
+                    raise KeyError(f"no {', '.join(sorted(missing))}")
+                out[int(g)] = arrays
+            except (OSError, ValueError, KeyError) as err:  # damaged, or not plain arrays: run it again
+                log.warning("generation file %s does not load as arrays (%s): its cases run again", path, err)
         return out
 
     def drop_generations(self, start: int) -> None:
@@ -183,35 +195,19 @@ class Journal:
             with contextlib.suppress(FileNotFoundError):
                 (self.directory / GENERATION_FILE.format(g)).unlink()
 
-    def save_state(self, algorithm: Any, generations: int) -> bool:
-        """Pickle the algorithm after ``generations`` finished generations; False (and any older state
-        removed) when it cannot be pickled."""
-        import cloudpickle
-
-        path = self.directory / STATE_FILE
-        try:
-            blob = cloudpickle.dumps({"generations": int(generations), "algorithm": algorithm})
-        except Exception:  # the local searches hold generators: they resume by replay
-            with contextlib.suppress(FileNotFoundError):
-                path.unlink()
+    def discard_legacy_state(self) -> bool:
+        """Remove a pickled algorithm state an older version saved, without reading it (a pickle runs code
+        when loaded; the state is rebuilt by replaying the saved generations instead). True if there was
+        one."""
+        path = self.directory / LEGACY_STATE_FILE
+        if not path.exists() and not path.is_symlink():
             return False
-        with atomic_path(path) as tmp:
-            tmp.write_bytes(blob)
+        log.warning(
+            "optimiser state %s is a pickle: removed unread, the saved generations are replayed", path
+        )
+        with contextlib.suppress(FileNotFoundError):
+            path.unlink()
         return True
-
-    def load_state(self) -> tuple[Any, int] | None:
-        """(algorithm, finished generations) of the saved state, or None when there is none that loads."""
-        import cloudpickle
-
-        path = self.directory / STATE_FILE
-        if not path.is_file():
-            return None
-        try:
-            saved = cloudpickle.loads(path.read_bytes())
-            return saved["algorithm"], int(saved["generations"])
-        except Exception as err:  # another pymoo version, a damaged file: replay instead
-            log.warning("optimiser state %s does not load (%s): replaying the saved generations", path, err)
-            return None
 
 
 # ------------------------------------------------------------------------------------------------- loop
@@ -223,14 +219,14 @@ class Outcome:
         generations: the arrays of each evaluated generation, in order (``u`` unit-box values, ``x`` SI
             values (n, parameters), ``F``, ``G`` and whatever the evaluation returned).
         cancelled: it stopped because ``cancel`` was set (the finished generations are kept).
-        resumed: generations taken from a saved state (0 for a fresh start).
-        replayed: generations taken from the journal without evaluating them again (after ``resumed``).
+        replayed: generations taken from the journal without evaluating them again (0 for a fresh start).
     """
 
     generations: list[dict[str, np.ndarray]] = field(default_factory=list)
     cancelled: bool = False
-    resumed: int = 0
     replayed: int = 0
+    stalled: bool = False
+    """It stopped before the budget: the best feasible objective stopped improving (:func:`stalled`)."""
 
     @property
     def n_cases(self) -> int:
@@ -257,25 +253,21 @@ def optimise(
     """Run the ask-and-tell loop of ``goals`` until the next generation would exceed the budget.
 
     Args:
-        goals: the optimize design (:func:`studies.goals.plan_goals`).
+        goals: the optimize design (:func:`studies.questions.goals.plan_goals`).
         evaluate: runs one generation's cases (see :data:`Evaluate`).
-        journal: where generations and the algorithm's state are saved and resumed from (None: nowhere).
+        journal: where generations are saved and replayed from on a resume (None: nowhere).
         cancel: set it to stop after (or, through ``evaluate``, during) the running generation.
         on_generation: called as ``on_generation(finished_generations, evaluated_cases)``.
     """
     from pymoo.core.population import Population
 
     names = [f.name for f in goals.factors]
+    if journal is not None:
+        journal.discard_legacy_state()
     saved = journal.load_generations() if journal is not None else {}
-    state = journal.load_state() if journal is not None else None
     outcome = Outcome()
-    if state is not None and all(g in saved for g in range(state[1])):
-        algorithm, done = state
-        outcome.generations = [saved[g] for g in range(done)]
-        outcome.resumed = done
-    else:
-        algorithm, done = _fresh(goals), 0
-    g, evaluated = done, outcome.n_cases
+    algorithm = _fresh(goals)
+    g, evaluated = 0, 0
     while True:
         if cancel is not None and cancel.is_set():
             outcome.cancelled = True
@@ -305,11 +297,29 @@ def optimise(
         algorithm.tell(infills=pop)
         outcome.generations.append(arrays)
         g, evaluated = g + 1, evaluated + len(U)
-        if journal is not None:
-            journal.save_state(algorithm, g)
         if on_generation is not None:
             on_generation(g, evaluated)
+        if goals.stall is not None and stalled(
+            [a["F"] for a in outcome.generations], [a["G"] for a in outcome.generations], goals.stall
+        ):
+            outcome.stalled = True
+            break
     return outcome
+
+
+def stalled(F: list[np.ndarray], G: list[np.ndarray], generations: int) -> bool:
+    """Whether each of the last ``generations`` generations (``F``, ``G`` per generation) improved the best
+    feasible first objective so far by less than :data:`STALL_IMPROVEMENT` of it (a generation that finds
+    the first feasible case improves it)."""
+    best = np.inf
+    quiet = 0
+    for f, g in zip(F, G, strict=True):
+        ok = (np.asarray(g) <= 0.0).all(axis=1)
+        now = min(best, float(np.min(np.asarray(f)[ok, 0]))) if ok.any() else best
+        improved = np.isfinite(now) and (not np.isfinite(best) or best - now > STALL_IMPROVEMENT * abs(best))
+        quiet = 0 if improved else quiet + 1
+        best = now
+    return quiet >= generations
 
 
 # --------------------------------------------------------------------------------------------- optimum
@@ -403,7 +413,82 @@ def mark_optimum(
             o.quantity: float(F[b, k] if o.sense == "minimize" else -F[b, k])
             for k, o in enumerate(goals.objectives)
         }
+    out = mark_plateau(out, F, np.asarray(feasible, dtype=bool), best, goals, summary)
     out.attrs["optimisation"] = json.dumps(summary)
+    return out
+
+
+LIMIT_SHARE = 0.01
+"""A variable whose best value lies within this share of its range from an end is flagged at that limit."""
+
+
+def unit_position(factor: Any, x: np.ndarray) -> np.ndarray:
+    """Where values ``x`` (SI) lie in ``factor``'s range: 0 at ``low``, 1 at ``high`` (in log space for a log
+    scale): the inverse of :meth:`studies.questions.designs.Factor.from_unit`."""
+    x = np.asarray(x, dtype=np.float64)
+    if factor.scale == "log":
+        return np.log(np.abs(x) / abs(factor.low)) / np.log(abs(factor.high) / abs(factor.low))
+    return (x - factor.low) / (factor.high - factor.low)
+
+
+def mark_plateau(
+    out: xr.Dataset,
+    F: np.ndarray,
+    feasible: np.ndarray,
+    best: np.ndarray,
+    goals: Goals,
+    summary: dict[str, Any],
+) -> xr.Dataset:
+    """``out`` with ``plateau`` per case (feasible, first objective within ``goals.plateau`` of the best's)
+    and ``at_range_limit`` per parameter (-1 the best sits at the low end of its range, +1 at the high end,
+    0 inside); ``summary`` gains the plateau's size and each variable's range over it, and the limits."""
+    n = len(F)
+    plateau = np.zeros(n, dtype=bool)
+    names = [f.name for f in goals.factors]
+    limit = np.zeros(len(names), dtype=np.int8)
+    if best.any():
+        b = int(np.flatnonzero(best)[0])
+        f0 = np.asarray(F, dtype=np.float64)[:, 0]
+        plateau = feasible & (f0 <= f0[b] + goals.plateau * abs(f0[b]))
+        for j, f in enumerate(goals.factors):
+            u = float(unit_position(f, out[f.name].values[b]))
+            limit[j] = -1 if u <= LIMIT_SHARE else (1 if u >= 1.0 - LIMIT_SHARE else 0)
+        summary["plateau"] = goals.plateau
+        summary["n_plateau"] = int(plateau.sum())
+        summary["plateau_ranges"] = {
+            name: [float(out[name].values[plateau].min()), float(out[name].values[plateau].max())]
+            for name in names
+        }
+        summary["at_limit"] = {
+            name: "low" if lim < 0 else "high" for name, lim in zip(names, limit, strict=True) if lim != 0
+        }
+    flags = {"flag_values": np.array([0, 1], dtype=np.int8), "flag_meanings": "false true"}
+    out["plateau"] = xr.Variable(
+        "case",
+        plateau,
+        {
+            "units": "1",
+            "long_name": f"feasible, with {goals.objectives[0].quantity} within {goals.plateau:.3g} of the "
+            "best case's (a share of it): the designs as good as the optimum",
+            **flags,
+        },
+    )
+    out = out.assign_coords(
+        parameter=xr.Variable(
+            "parameter", np.array(names, dtype=np.str_), {"units": "1", "long_name": "optimised parameter"}
+        )
+    )
+    out["at_range_limit"] = xr.Variable(
+        "parameter",
+        limit,
+        {
+            "units": "1",
+            "long_name": "the best case's value at an end of the parameter's range (within "
+            f"{LIMIT_SHARE:.0%} of it): -1 the low end, 1 the high end, 0 inside",
+            "flag_values": np.array([-1, 0, 1], dtype=np.int8),
+            "flag_meanings": "at_low_end inside at_high_end",
+        },
+    )
     return out
 
 
@@ -440,7 +525,12 @@ def optimum_dataset(
     F = np.concatenate([a["F"] for a in gens]) if gens else np.zeros((0, len(goals.objectives)))
     G = np.concatenate([a["G"] for a in gens]) if gens else np.zeros((0, len(goals.constraint_names)))
     generation = np.repeat(np.arange(len(gens)), sizes)
-    return mark_optimum(ds, F, G, generation, goals)
+    out = mark_optimum(ds, F, G, generation, goals)
+    summary = json.loads(out.attrs["optimisation"])
+    summary["stopped"] = "stalled" if outcome.stalled else ("cancelled" if outcome.cancelled else "budget")
+    summary["stall"] = goals.stall
+    out.attrs["optimisation"] = json.dumps(summary)
+    return out
 
 
 # ------------------------------------------------------------------------------------------ the runner
@@ -457,11 +547,11 @@ def run_optimisation(
 ) -> str:
     """Run an optimize study whose catalog row is ``running`` and store its dataset; returns the study id.
 
-    :func:`studies.runner.run_study` calls it for an optimize design once the model is resolved: the row,
+    :func:`studies.run.runner.run_study` calls it for an optimize design once the model is resolved: the row,
     its status and any failure are the runner's (which marks the row failed if this raises).
 
     Args:
-        study: the :class:`studies.study.Study` (its ``goals`` set).
+        study: the :class:`studies.inputs.study.Study` (its ``goals`` set).
         run_json: the study's definition with the model it runs at (an accuracy request resolved).
         store: the study store; the journal lives in the study's chunk directory.
         client: the Dask client.
@@ -538,13 +628,8 @@ def run_optimisation(
     outcome = optimise(goals, evaluate, journal, cancel, on_generation)
     done = outcome.n_cases
     failed = int(sum(np.count_nonzero(np.asarray(a["status"]) != 0) for a in outcome.generations))
-    if outcome.resumed or outcome.replayed:
-        log.info(
-            "study %s: resumed after %d generations (%d more replayed from the store)",
-            study_id,
-            outcome.resumed,
-            outcome.replayed,
-        )
+    if outcome.replayed:
+        log.info("study %s: resumed, %d generations replayed from the store", study_id, outcome.replayed)
     if outcome.cancelled:
         store.update(study_id, status="cancelled", finished=utc_now(), n_done=done, n_failed=failed)
         return study_id
@@ -599,4 +684,14 @@ def describe_optimum(ds: xr.Dataset) -> list[str]:
     for q, v in s["best_objectives"].items():
         unit = str(output_values(ds, q).attrs.get("units", ""))
         lines.append(f"  {q} = {v:.6g} {'' if unit == '1' else unit}".rstrip())
+    for name, end in s.get("at_limit", {}).items():
+        lines.append(f"  {name} is at the {end} end of its range: the optimum may lie beyond it")
+    if "plateau_ranges" in s:
+        lines.append(
+            f"plateau: {s['n_plateau']} feasible cases within {s['plateau']:.3g} of the best objective, over"
+        )
+        for k, (lo, hi) in s["plateau_ranges"].items():
+            lines.append(f"  {k} = {lo:.4g} to {hi:.4g} {units.get(k, '')}".rstrip())
+    if s.get("stopped") == "stalled":
+        lines.append(f"stopped early: {s.get('stall')} generations without improving the best by 0.1 %")
     return lines

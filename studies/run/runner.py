@@ -8,18 +8,18 @@ and this process does both.
 :func:`run_study` is what the service calls for each submitted study; :func:`run_local` runs a study
 file on a private LocalCluster (the CLI and notebooks); :func:`make_client` is the default Dask client.
 
-A run saves every chunk as it arrives (``<id>.chunks/<k>.npz``, see :class:`studies.store.Store`), so
+A run saves every chunk as it arrives (``<id>.chunks/<k>.npz``, see :class:`studies.results.store.Store`), so
 calling :func:`run_study` again with the same ``study_id`` after an interruption (cancel, crash, restart)
 computes only the chunks that are not saved yet. The chunk split itself is saved with the first chunk, so a
 resumed run splits the cases the same way even on a cluster of another size.
 
-Around the fan-out (see :mod:`studies.accuracy`): a study that asks for an accuracy instead of naming its
+Around the fan-out (see :mod:`studies.run.accuracy`): a study that asks for an accuracy instead of naming its
 model gets the cheapest fidelity, integrator and step that meets it, measured on pilot cases on a worker
 before the chunks run (the chunks then run the resolved definition); and every dataset carries its
 measured error, from a seeded sample of cases rerun at the reference level on the same client.
 
 An ``optimize`` design does not plan its cases: once its model is resolved, :func:`run_study` hands it to
-:func:`studies.optimisation.run_optimisation`, which runs it a generation at a time through the same
+:func:`studies.run.optimisation.run_optimisation`, which runs it a generation at a time through the same
 fan-out and keeps its own journal in the study's chunk directory.
 """
 
@@ -41,6 +41,7 @@ import xarray as xr
 
 from isolab.studies.inputs.study import Study, study_from_json, study_labels
 from isolab.studies.questions.criteria import add_criteria
+from isolab.studies.questions.tolerances import add_reliability
 from isolab.studies.results.dataset import add_error_estimate, from_chunks, streamed_dataset, to_dataset
 from isolab.studies.results.store import Store, StoreFull, copy_atomic, failures, is_no_space, utc_now
 from isolab.studies.run.accuracy import (
@@ -84,14 +85,14 @@ def run_study(
     """Run every case of ``study`` on ``client`` and store the dataset; returns the study id.
 
     Args:
-        study: a :class:`studies.study.Study`.
+        study: a :class:`studies.inputs.study.Study`.
         store: where the catalog row, chunks and dataset go.
         client: a ``dask.distributed.Client``.
         study_id: an existing catalog row to run (or resume); None creates one.
         progress: called as ``progress(done_cases, total_cases)``.
         cancel: set it to stop: outstanding chunks are cancelled, finished ones stay saved, the study is
             marked ``cancelled`` and can be resumed by calling again with its id.
-        chunk_size: cases per chunk (default: :func:`studies.fanout.choose_chunk_size`); ignored when
+        chunk_size: cases per chunk (default: :func:`studies.run.fanout.choose_chunk_size`); ignored when
             resuming a run whose split is saved.
 
     The catalog row goes ``running`` (``started`` is the first start, kept on resume), then
@@ -247,7 +248,8 @@ def assemble_dataset(
     the number of cases that did not end OK.
 
     Up to ``IN_MEMORY_CASES`` cases the dataset is built whole in memory and written at once (fastest:
-    1.8 s for 100,000 cases). Beyond, it is streamed (:func:`studies.dataset.streamed_dataset`): each chunk
+    1.8 s for 100,000 cases). Beyond, it is streamed (:func:`studies.results.dataset.streamed_dataset`): each
+    chunk
     is read when its slice is written and let go after, so the memory this takes does not grow with the
     number of cases (only the statuses, 1 byte a case, and the parameter values, 8 bytes a case per
     parameter, are held), at about 7x the writing time."""
@@ -281,6 +283,8 @@ def assemble_dataset(
             attrs=attrs,
             criteria=run.criteria,
         )
+    if run.spreads:  # a monte_carlo design: the probability of meeting the criteria within tolerances
+        ds = add_reliability(ds, run.spreads, run.design_spec.sampling or "sobol")
     ds = add_error_estimate(
         ds,
         estimate.values,
@@ -323,7 +327,7 @@ def _choice(
     client: Any, study: Study, definition_json: str, cancel: threading.Event | None, key_prefix: str
 ) -> Choice | None:
     """The fidelity, integrator and step to run with: the study's own, or measured for its accuracy
-    request on a worker (:func:`studies.accuracy.choose`); None when cancelled meanwhile."""
+    request on a worker (:func:`studies.run.accuracy.choose`); None when cancelled meanwhile."""
     if study.simulation.request is None or study.simulation.accuracy == "reference":
         return choose(study)
     known = cached_choice(study)
@@ -340,7 +344,7 @@ def _choice(
 
 def _submit_samples(client: Any, study: Study, run_json: str, key_prefix: str) -> tuple[list[int], list[Any]]:
     """The error estimate's seeded sample of cases and the Dask futures of their
-    :func:`studies.accuracy.sample_arrays` (none for a study that runs at the reference level itself)."""
+    :func:`studies.run.accuracy.sample_arrays` (none for a study that runs at the reference level itself)."""
     cases = error_sample(study)
     if (study.simulation.fidelity, study.simulation.integrator) == REFERENCE_PAIR:
         return cases, []
@@ -432,8 +436,10 @@ def run_local(
     progress: Progress | None = None,
     store: Store | None = None,
 ) -> xr.Dataset:
-    """Run a study (YAML/JSON file, text or dict, as :func:`studies.study.load_study` takes, or a validated
-    :class:`studies.study.Study`) on a private LocalCluster of ``workers`` processes (one thread each) and
+    """Run a study (YAML/JSON file, text or dict, as :func:`studies.inputs.study.load_study` takes, or a
+    validated
+    :class:`studies.inputs.study.Study`) on a private LocalCluster of ``workers`` processes (one thread each)
+    and
     write its dataset to ``out_path`` atomically, with the mode a new file gets under the umask. Uses
     ``store`` if given (the study stays in its catalog), else a temporary one. Returns the dataset (loaded
     in memory)."""

@@ -21,6 +21,7 @@ from ui_driver import (
     service,
     submit_example,
     wait_done,
+    wait_until,
 )
 
 pytestmark = [
@@ -83,9 +84,7 @@ def test_submit_watch_sweep_and_case(page, open_service: str) -> None:
     page.select_option("#x", "isolator_type")
     page.select_option("#y", "peak_rotation_rx")
     page.select_option("#colour", "")
-    page.wait_for_function(
-        "document.querySelector('#sweep .ytitle').textContent.includes('peak_rotation_rx')"
-    )
+    wait_until(page, "document.querySelector('#sweep .ytitle').textContent.includes('peak_rotation_rx')")
     assert "isolator_type" in page.text_content("#sweep .xtitle")
     assert "[mrad]" in page.text_content("#sweep .ytitle")
     assert plot_rendered(page, "#sweep")
@@ -94,7 +93,7 @@ def test_submit_watch_sweep_and_case(page, open_service: str) -> None:
     page.fill("#filter", "isolator_type==air,peak_displacement_y<50 mm")
     page.fill("#sort", "-stage_y_acceleration")
     page.click("#query button[type=submit]")
-    page.wait_for_function("document.querySelectorAll('#case-table tbody tr').length === 4")
+    wait_until(page, "document.querySelectorAll('#case-table tbody tr').length === 4")
     assert "4 of 12 cases match" in page.inner_text("#matched")
     with page.expect_download() as csv:  # the filtered table, fetched with the page's credentials
         page.click("#csv")
@@ -190,3 +189,44 @@ def test_with_a_token_the_page_asks_once_and_the_api_stays_guarded(chromium, tmp
         assert page.locator("#token-dialog").count() == 0
         assert errors == []
         context.close()
+
+
+CRAFTED = '"><img src=x onerror="window.stolen=sessionStorage.getItem(`isolab-token`)">'
+
+
+def test_a_crafted_path_in_the_services_messages_runs_no_script(page, open_service: str) -> None:
+    base = open_service
+    page.goto(f"{base}/ui/new")
+    page.evaluate("sessionStorage.setItem('isolab-token', 'secret-of-the-tab')")
+    page.wait_for_selector("#source option[value='example:isolator-comparison']", state="attached")
+    page.select_option("#source", "example:isolator-comparison")
+    page.wait_for_selector("#check.ok")
+    text = page.input_value("#text")
+    crafted = text.replace("path: isolators.preset", f"path: '{CRAFTED}'", 1)
+    assert crafted != text
+    page.fill("#text", crafted)
+    page.wait_for_selector("#check.error")
+    assert CRAFTED in page.inner_text("#problems")  # shown as text...
+    page.hover("#gutter .bad")
+    page.hover("#problems li")
+    page.wait_for_timeout(500)
+    # ...never as markup: no element made from it, no handler run, the token unread
+    assert page.locator("#gutter img, #backdrop img, #problems img, #check img").count() == 0
+    assert page.evaluate("window.stolen === undefined")
+    title = page.get_attribute("#gutter .bad", "title")
+    assert CRAFTED in title
+    # and a page's own inline script would not run either: the policy allows the service's files alone
+    page.evaluate(
+        "() => { const s = document.createElement('img'); s.src = 'x';"
+        " s.setAttribute('onerror', 'window.stolen = 1'); document.body.appendChild(s); }"
+    )
+    page.wait_for_timeout(500)
+    assert page.evaluate("window.stolen === undefined")
+
+
+def test_pages_carry_the_security_headers(open_service: str) -> None:
+    for path in ("/ui/", "/ui/new", "/ui/compare", "/docs"):
+        r = httpx.get(f"{open_service}{path}")
+        assert "script-src 'self'" in r.headers["content-security-policy"], path
+        assert r.headers["x-content-type-options"] == "nosniff"
+        assert r.headers["referrer-policy"] == "no-referrer"

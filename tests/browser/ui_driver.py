@@ -29,10 +29,13 @@ CHROMIUM_FLAGS = [
 """Without the background-networking flags Chromium keeps trying to reach Google's hosts, which this
 machine's closed network refuses."""
 EXAMPLE = "isolator-comparison"
-STUDY_TIMEOUT_S = 600.0
-"""The first study of a fresh checkout compiles the engine's kernels on each worker (the scene's
-integrator and the error estimate's reference: about 100 s of compiling for the rk4 kernels alone, two to
-four minutes with both workers compiling at once on the 2-core machine) before it runs in seconds."""
+STUDY_TIMEOUT_S = 120.0
+"""Longest wait for a study. The engine's kernels are compiled (fresh checkout) or loaded by the service's
+warm-up before a page is opened (:func:`service` waits for it, up to ``KERNELS_TIMEOUT_S``), so a study
+runs in seconds."""
+KERNELS_TIMEOUT_S = 480.0
+"""Longest wait for the service's warm-up: on an empty kernel cache it compiles each pair once (the rk4
+kernels about 100 s on the 2-core machine)."""
 
 
 @contextmanager
@@ -52,8 +55,25 @@ def browser() -> Iterator:
 def service(tmp: Path, token: str | None = None, workers: int = 2) -> Iterator[ServiceProcess]:
     """A real ``isolab serve`` on a free loopback port, with a study store under ``tmp``."""
     env = {"ISOLAB_API_TOKEN": token} if token else {"ISOLAB_API_TOKEN": ""}
+    env["ISOLAB_KERNEL_WARMUP"] = "on"  # the suite turns it off (tests/conftest.py); a page waits for it
     with ServiceProcess(tmp / "data", workers=workers, env=env) as svc:
+        wait_kernels(svc, token)
         yield svc
+
+
+def wait_kernels(svc: ServiceProcess, token: str | None = None, timeout: float = KERNELS_TIMEOUT_S) -> None:
+    """Wait until ``/health`` says the workers hold the engine's kernels (ready, or failed: then each
+    study compiles its own)."""
+    import httpx
+
+    headers = {"Authorization": f"Bearer {token}"} if token else {}
+    deadline = time.monotonic() + timeout
+    while True:
+        kernels = httpx.get(svc.url + "/health", headers=headers, timeout=10.0).json().get("kernels") or {}
+        if kernels.get("state") in ("ready", "failed", "off"):
+            return
+        assert time.monotonic() < deadline, f"the service's kernels still {kernels} after {timeout} s"
+        time.sleep(0.2)
 
 
 class ConsoleErrors(list):
@@ -99,9 +119,18 @@ def submit_example(page, base: str, example: str = EXAMPLE) -> str:
 def wait_done(page, timeout_s: float = STUDY_TIMEOUT_S) -> None:
     """On a study's page: wait until its badge says done and the sweep plot is drawn."""
     page.wait_for_selector("#title .status-done", timeout=timeout_s * 1000)
-    page.wait_for_function(
-        "document.querySelector('#sweep svg.main-svg') !== null", timeout=30_000, polling=200
-    )
+    wait_until(page, "document.querySelector('#sweep svg.main-svg') !== null", timeout_s=30)
+
+
+def wait_until(page, expression: str, timeout_s: float = 30.0) -> None:
+    """Poll a JavaScript expression until it is true. The pages' Content-Security-Policy forbids eval,
+    which Playwright's ``wait_for_function`` uses for a predicate given as text; ``page.evaluate`` runs
+    the expression through the browser's debugging protocol, outside the page's policy."""
+    deadline = time.monotonic() + timeout_s
+    while not page.evaluate(expression):
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"{expression} still false after {timeout_s} s")
+        time.sleep(0.1)
 
 
 def settle(seconds: float = 0.3) -> None:

@@ -62,7 +62,10 @@ ROUTES: dict[tuple[str, str], dict[str, Any]] = {
         "status": 422,
         "params": {"output": "peak_displacement.y"},
     },
-    ("POST", "/calibrations"): {"status": 200, "json": EXAMPLE_CALIBRATION},
+    ("POST", "/calibrations"): {"status": 202, "json": EXAMPLE_CALIBRATION},
+    # no calibration of that id: answered (404) with the token
+    ("GET", "/calibrations/{calibration_id}"): {"status": 404},
+    ("DELETE", "/calibrations/{calibration_id}"): {"status": 404},
     ("DELETE", "/studies/{study_id}"): {"status": 204},
     ("GET", "/examples"): {"status": 200},
     ("GET", "/examples/{name}"): {"status": 200},
@@ -108,7 +111,10 @@ def done(api: httpx.Client) -> str:
 
 def concrete(path: str, study_id: str) -> str:
     return (
-        path.replace("{study_id}", study_id).replace("{case}", "0").replace("{name}", "isolator-comparison")
+        path.replace("{study_id}", study_id)
+        .replace("{case}", "0")
+        .replace("{name}", "isolator-comparison")
+        .replace("{calibration_id}", "0" * 32)
     )
 
 

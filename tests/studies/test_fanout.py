@@ -51,7 +51,7 @@ def client():
 
 
 def slow_chunk(*args) -> dict[str, np.ndarray]:
-    """:func:`studies.fanout.run_chunk` after 0.2 s: a run that a cancel reliably interrupts."""
+    """:func:`studies.run.fanout.run_chunk` after 0.2 s: a run that a cancel reliably interrupts."""
     time.sleep(0.2)
     return fanout.run_chunk(*args)
 

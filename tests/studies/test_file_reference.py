@@ -165,7 +165,15 @@ def test_no_model_takes_keys_the_schema_cannot_describe(study_schema: dict) -> N
             assert extra is False or isinstance(extra, dict), name
 
 
-EXPECTED_CASES = {"grid": 12, "lhs": 200, "sobol": 256, "random": 100, "saltelli": 64 * (3 + 2), "list": 3}
+EXPECTED_CASES = {
+    "grid": 12,
+    "lhs": 200,
+    "sobol": 256,
+    "random": 100,
+    "saltelli": 64 * (3 + 2),
+    "list": 3,
+    "monte_carlo": 256,
+}
 
 
 @pytest.mark.parametrize("kind", ref.design_types())

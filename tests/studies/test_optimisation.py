@@ -161,15 +161,68 @@ def test_an_interrupted_loop_resumes_where_it_stopped(tmp_path: Path, algorithm:
     rest = optimise(g, bowl(calls), journal)
     assert not rest.cancelled
     assert calls and calls[0] == 3  # the saved generations are not evaluated again
-    if algorithm != "pattern":  # a pickled state; the pattern search (generators) replays
-        assert rest.resumed == 3
-    else:
-        assert rest.replayed == 3
+    assert rest.replayed == 3  # the algorithm is rebuilt from its seed and replayed through them
+    saved = sorted(p.name for p in tmp_path.iterdir())  # plain arrays of each generation, no state
+    assert saved == sorted(GENERATION_FILE.format(k) for k in range(len(rest.generations)))
     np.testing.assert_array_equal(
         np.concatenate([a["u"] for a in rest.generations]),
         np.concatenate([a["u"] for a in whole.generations]),
     )
     assert best_of(rest)[1] == best_of(whole)[1]
+
+
+class _Planted:
+    """An object whose unpickling writes a file: what a crafted state file in the data directory does."""
+
+    def __init__(self, mark: Path):
+        self.mark = mark
+
+    def __reduce__(self):
+        return (Path.write_text, (self.mark, "ran"))
+
+
+def test_a_planted_state_file_runs_nothing_and_the_run_resumes_as_the_clean_one(tmp_path: Path) -> None:
+    """A pickle planted as the optimiser's state (its name in older versions) is removed unread: nothing it
+    holds runs, and the run replays the saved generations to the clean run's cases and optimum."""
+    import pickle
+
+    g = goals("ga", budget=240, population=24)
+    whole = optimise(g, bowl())
+    cancel = threading.Event()
+    journal = Journal(tmp_path / "chunks")
+    journal.directory.mkdir()
+    optimise(g, bowl(), journal, cancel, lambda done, _n: cancel.set() if done == 3 else None)
+    mark = tmp_path / "planted-code-ran"
+    planted = journal.directory / "optimiser.pkl"
+    planted.write_bytes(pickle.dumps({"generations": 3, "algorithm": _Planted(mark)}))
+    calls: list[int] = []
+    rest = optimise(g, bowl(calls), journal)
+    assert not mark.exists() and not planted.exists()
+    assert rest.replayed == 3 and calls[0] == 3
+    np.testing.assert_array_equal(
+        np.concatenate([a["u"] for a in rest.generations]),
+        np.concatenate([a["u"] for a in whole.generations]),
+    )
+    assert best_of(rest)[1] == best_of(whole)[1]
+
+
+def test_a_crafted_generation_file_is_not_unpickled_and_its_cases_run_again(tmp_path: Path) -> None:
+    """A generation file holding a pickled object array is not unpickled: it is set aside and its cases run
+    again, to the clean run's cases."""
+    g = goals("ga", budget=96, population=24)
+    whole = optimise(g, bowl())
+    journal = Journal(tmp_path)
+    mark = tmp_path / "planted-code-ran"
+    with open(tmp_path / GENERATION_FILE.format(0), "wb") as f:
+        np.savez(f, u=np.array([_Planted(mark)], dtype=object))
+    calls: list[int] = []
+    rest = optimise(g, bowl(calls), journal)
+    assert not mark.exists()
+    assert calls == [0, 1, 2, 3] and rest.replayed == 0
+    np.testing.assert_array_equal(
+        np.concatenate([a["u"] for a in rest.generations]),
+        np.concatenate([a["u"] for a in whole.generations]),
+    )
 
 
 # ---------------------------------------------------------------------------------- definitions
@@ -327,7 +380,8 @@ def test_a_cancelled_optimisation_resumes_to_the_same_optimum(client: Client, wh
     assert row["status"] == "cancelled" and g in (2, 3) and row["n_done"] >= 12 * g
     journal = Journal(store.chunk_dir(sid))
     saved = journal.load_generations()
-    assert sorted(saved) == list(range(g)) and journal.load_state() is not None
+    assert sorted(saved) == list(range(g))
+    assert sorted(p.suffix for p in store.chunk_dir(sid).iterdir()) == [".npz"] * g  # arrays, no state
     # mark the saved cases: a resumed run keeps them, one that recomputed them would not
     for k, arrays in saved.items():
         journal.save_generation(k, {**arrays, "message": np.array(["kept"] * len(arrays["status"]))})

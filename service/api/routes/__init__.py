@@ -18,6 +18,7 @@ from distributed import Client
 from fastapi import Depends, HTTPException, Request
 
 from isolab.service.api.jobs import JobQueue
+from isolab.service.api.kernel_warmup import KernelWarmup
 from isolab.service.api.schemas import MessageBody, ValidationErrorBody
 from isolab.service.settings import Settings
 from isolab.studies.results.store import Store, StudyNotFound, StudyRecord
@@ -61,6 +62,12 @@ async def dask_client(request: Request) -> Client:
     return client
 
 
+async def kernel_warmup(request: Request) -> KernelWarmup | None:
+    """FastAPI dependency: the warm-up of the engine's kernels on the workers, or None while the app's
+    lifespan does not run."""
+    return getattr(request.app.state, "kernels", None)
+
+
 async def study_store(request: Request) -> Store:
     """FastAPI dependency: the app's study store (the job queue's; opened on first use)."""
     return _jobs(request).store
@@ -92,6 +99,8 @@ DaskDep = Annotated[Client, Depends(dask_client)]
 """A handler's parameter: the app's Dask client (500 when the app runs without its lifespan)."""
 DaskIfRunningDep = Annotated[Client | None, Depends(dask_client_if_running)]
 """A handler's parameter: the app's Dask client, or None (what ``/health`` reports on)."""
+KernelsDep = Annotated[KernelWarmup | None, Depends(kernel_warmup)]
+"""A handler's parameter: the warm-up of the engine's kernels (None without the app's lifespan)."""
 
 
 # ------------------------------------------------------------------------------------ HTTP answers

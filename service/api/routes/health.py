@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hmac
+import shutil
 from pathlib import Path
 from typing import Any, Literal
 
@@ -11,11 +12,14 @@ from fastapi import APIRouter, Request, Response
 from fastapi.security.utils import get_authorization_scheme_param
 from pydantic import BaseModel, Field
 
-from isolab.service.api.routes import DaskIfRunningDep, SettingsDep
+from isolab.service.api.routes import DaskIfRunningDep, KernelsDep, SettingsDep
 from isolab.studies.results.store import check_writable
 
 #: Longest wait for the Dask scheduler to answer the health probe, in seconds.
 SCHEDULER_TIMEOUT_S = 5.0
+#: The store's next write when no study has saved a chunk yet: about one chunk of a study, bytes.
+TYPICAL_CHUNK_BYTES = 2 * 1024 * 1024
+MB = 1024 * 1024
 
 router = APIRouter(tags=["health"])
 
@@ -26,7 +30,14 @@ class ServiceInfo(BaseModel):
 
 class StoreHealth(BaseModel):
     path: str = Field(description="absolute path of the study store directory")
-    writable: bool = Field(description="a file could be created and removed in the store directory")
+    writable: bool = Field(
+        description="a file could be created and removed in the store directory, and the free space holds "
+        "the next write"
+    )
+    free_bytes: int | None = Field(None, description="free space of the store's file system, bytes")
+    next_write_bytes: int | None = Field(
+        None, description="estimate of the store's next write (the largest chunk a study saved), bytes"
+    )
     error: str | None = None
 
 
@@ -43,6 +54,22 @@ class DaskHealth(BaseModel):
     error: str | None = None
 
 
+class KernelHealth(BaseModel):
+    """The engine's compiled kernels on the workers: loaded (or, on a fresh machine, compiled once) in the
+    background when the service starts; studies submitted meanwhile wait for them."""
+
+    state: Literal["starting", "compiling", "loading", "ready", "failed", "off"] = Field(
+        description="starting: not looked at yet; compiling: not in the kernel cache, compiling on the "
+        "workers "
+        "(first start only, a minute or two); loading: cached, the workers load them (seconds); ready; "
+        "failed or off (no warm-up): each study compiles what it needs itself"
+    )
+    pairs: list[str] = Field(description="fidelity/integrator pairs warmed (the examples' and the reference)")
+    seconds: float | None = Field(description="seconds since the warm-up started, or that it took once over")
+    error: str | None = Field(None, description="why the warm-up failed")
+    note: str | None = Field(None, description="what the web page shows meanwhile; null once ready")
+
+
 class HealthStatus(BaseModel):
     """What ``/health`` answers a request without the API token when one is set: the status only."""
 
@@ -53,13 +80,36 @@ class HealthReport(HealthStatus):
     service: ServiceInfo
     store: StoreHealth
     dask: DaskHealth
+    kernels: KernelHealth | None = Field(
+        None, description="the engine's kernels on the workers (null while the service is not running)"
+    )
+
+
+def next_write_bytes(root: Path) -> int:
+    """Estimate of the store's next write, bytes: the largest chunk a study has saved and not yet
+    assembled (its next chunk is about as large), else :data:`TYPICAL_CHUNK_BYTES`."""
+    sizes = [p.stat().st_size for p in (root / "studies").glob("*.chunks/*.npz") if p.is_file()]
+    return max(sizes, default=TYPICAL_CHUNK_BYTES)
 
 
 def probe_store(path: Path) -> StoreHealth:
-    """Check that the store directory exists and takes writes (64 kB, and room for its reserve)."""
+    """Check that the store directory exists and takes writes (64 kB, and room for its reserve), and that
+    its free space holds the next write."""
     resolved = path.resolve()
     error = check_writable(resolved)  # writes and syncs 64 kB; a full disk is not writable
-    return StoreHealth(path=str(resolved), writable=error is None, error=error)
+    try:
+        free: int | None = int(shutil.disk_usage(resolved).free)
+    except OSError:
+        free = None
+    needed = next_write_bytes(resolved) if free is not None else None
+    if error is None and free is not None and needed is not None and free < needed:
+        error = (
+            f"no space left on device for the next write: {free / MB:.2f} MB free in {resolved}, a chunk "
+            f"needs about {needed / MB:.2f} MB"
+        )
+    return StoreHealth(
+        path=str(resolved), writable=error is None, free_bytes=free, next_write_bytes=needed, error=error
+    )
 
 
 def probe_dask(client: Client | None, timeout_s: float = SCHEDULER_TIMEOUT_S) -> DaskHealth:
@@ -100,9 +150,14 @@ def has_token(request: Request, token: str | None) -> bool:
     },
 )
 def health(
-    request: Request, response: Response, settings: SettingsDep, dask_client: DaskIfRunningDep
+    request: Request,
+    response: Response,
+    settings: SettingsDep,
+    dask_client: DaskIfRunningDep,
+    kernels: KernelsDep,
 ) -> HealthReport | HealthStatus:
-    """Report the service version, the store and the Dask cluster; 503 when the service cannot work.
+    """Report the service version, the store, the Dask cluster and the engine's kernels on its workers
+    (still 200 while they compile); 503 when the service cannot work.
     With an API token set, a request without it gets the status only (no paths, no addresses)."""
     store = probe_store(settings.data_dir)
     dask = probe_dask(dask_client)
@@ -116,4 +171,5 @@ def health(
         service=ServiceInfo(version=request.app.version),
         store=store,
         dask=dask,
+        kernels=KernelHealth.model_validate(kernels.report()) if kernels is not None else None,
     )

@@ -22,6 +22,7 @@ from isolab.service.api.routes import (
     NOT_DONE,
     NOT_FOUND,
     JobsDep,
+    KernelsDep,
     SettingsDep,
     StoreDep,
     invalid,
@@ -43,7 +44,7 @@ from isolab.service.api.schemas import (
 )
 from isolab.service.settings import Settings
 from isolab.studies.inputs.definitions import check_definition
-from isolab.studies.results.store import Store, StudyFilter, StudyRecord, utc_now
+from isolab.studies.results.store import Store, StudyFilter, StudyRecord
 
 router = APIRouter(prefix="/studies", tags=["studies"])
 
@@ -88,9 +89,12 @@ def links(study_id: str) -> StudyLinks:
     return StudyLinks(self=base, dataset=f"{base}/dataset", cases=f"{base}/cases")
 
 
-def summary(record: StudyRecord) -> dict[str, Any]:
-    """The catalog record as the fields of :class:`StudySummary`."""
+def summary(record: StudyRecord, kernels_note: str | None = None) -> dict[str, Any]:
+    """The catalog record as the fields of :class:`StudySummary`; ``kernels_note`` (what the kernels'
+    warm-up says while it runs) becomes the ``note`` of a study that waits for its first cases."""
+    waiting = record.status in ("queued", "running") and not record.n_done
     return {
+        "note": kernels_note if waiting else None,
         "id": record.id,
         "name": record.name,
         "status": record.status,
@@ -132,7 +136,7 @@ def failure_note(record: StudyRecord) -> str | None:
         503: {"model": MessageBody, "description": "the service is shutting down; submit again later"},
     },
     summary="Submit a study",
-    # the definition is checked by studies.definitions (its errors name the field); the description
+    # the definition is checked by studies.inputs.definitions (its errors name the field); the description
     # says at least what every definition has
     openapi_extra={
         "requestBody": {
@@ -195,6 +199,7 @@ def accept_study(
 @router.get("", response_model=StudyList, responses=INVALID, summary="List studies")
 def list_studies(
     store: StoreDep,
+    kernels: KernelsDep,
     name: Annotated[str | None, Query(description="exact study name")] = None,
     status: Annotated[StudyStatusName | None, Query(description="study status")] = None,
     isolator_type: Annotated[str | None, Query(description="studies involving this isolator type")] = None,
@@ -217,28 +222,29 @@ def list_studies(
     except ValueError as err:
         field_name = str(err).split(":", 1)[0]
         raise invalid(["query", field_name], str(err)) from None
+    note = kernels.note() if kernels is not None else None
     return StudyList(
-        items=[StudySummary(**summary(r)) for r in records], total=total, limit=limit, offset=offset
+        items=[StudySummary(**summary(r, note)) for r in records], total=total, limit=limit, offset=offset
     )
 
 
 @router.get("/{study_id}", response_model=StudyDetail, responses=NOT_FOUND, summary="A study's status")
-def get_study(study_id: StudyId, store: StoreDep) -> StudyDetail:
-    """Status, progress, times, error and the definition of one study."""
+def get_study(study_id: StudyId, store: StoreDep, kernels: KernelsDep) -> StudyDetail:
+    """Status, progress, times, error and the definition of one study; while the service compiles the
+    engine's kernels (first start only), a study waiting for them says so in ``note``."""
     row = study_row(store, study_id)
-    return StudyDetail(**summary(row), definition=row["definition"])
+    return StudyDetail(**summary(row, kernels.note() if kernels else None), definition=row["definition"])
 
 
-@router.delete("/{study_id}", status_code=204, responses=NOT_FOUND, summary="Cancel or delete a study")
+@router.delete("/{study_id}", status_code=204, responses=NOT_FOUND, summary="Delete a study")
 def delete_study(study_id: StudyId, store: StoreDep, jobs: JobsDep) -> Response:
-    """A queued or running study is cancelled (status cancelled, kept in the catalog); a finished,
-    failed or cancelled one is removed with its files."""
+    """Remove the study with its files, whatever its status: every route answers 404 for it from now on.
+    A queued study never runs; a running one stops at its next chunk (its workers finish the chunk they
+    hold, and what it leaves behind is removed when it stops)."""
     row = study_row(store, study_id)
     if row["status"] in ("queued", "running"):
-        if not jobs.cancel(study_id):
-            store.update(study_id, status="cancelled", finished=utc_now())
-    else:
-        store.delete(study_id)
+        jobs.cancel(study_id, wait=0.0)  # the request does not wait for the running chunk
+    store.delete(study_id)
     return Response(status_code=204)
 
 

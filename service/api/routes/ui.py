@@ -6,18 +6,28 @@ with the bearer token when the service has one (the page asks for it once and ke
 sessionStorage). The page shells and their assets carry no data and are served without a token, as the
 API description is. The plotting library is the ``plotly.min.js`` that the PyPI ``plotly`` package ships;
 Swagger UI and ReDoc are the copies the PyPI ``fastapi-offline`` package ships.
+
+Every answer of the app carries ``X-Content-Type-Options: nosniff`` and ``Referrer-Policy: no-referrer``,
+and every HTML page a Content-Security-Policy (:data:`PAGE_POLICY`) that runs the service's own script files
+alone: no inline script, no handler attribute, no ``eval``, nothing from another host
+(:class:`PageHeaders`). Swagger UI's one inline set-up script is allowed by its hash, nothing else.
 """
 
 from __future__ import annotations
 
+import base64
 import functools
+import hashlib
 import importlib.util
+import re
 from pathlib import Path
 
 from fastapi import APIRouter, FastAPI, HTTPException
 from fastapi.openapi.docs import get_redoc_html, get_swagger_ui_html
 from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
 from fastapi.staticfiles import StaticFiles
+from starlette.datastructures import MutableHeaders
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 UI_DIR = Path(__file__).resolve().parents[2] / "ui"
 """The page's HTML, JavaScript and CSS (package data of isolab.service)."""
@@ -28,7 +38,60 @@ REDOC_JS = "/ui/vendor/redoc.standalone.js"
 REDOC_LOGO_URL = "https://cdn.redoc.ly/redoc/logo-mini.svg"
 """The one address ReDoc's bundle reaches for by itself (the sidebar's logo): pointed at a local image."""
 
+PAGE_POLICY_PARTS: dict[str, str] = {
+    "default-src": "'self'",
+    "script-src": "'self'",
+    "style-src": "'self' 'unsafe-inline'",  # plotly and ReDoc set styles as they draw
+    "img-src": "'self' data: blob:",
+    "connect-src": "'self'",
+    "worker-src": "'self' blob:",  # ReDoc's search runs in a worker made from a blob
+    "object-src": "'none'",
+    "base-uri": "'none'",
+    "form-action": "'self'",
+    "frame-ancestors": "'none'",
+}
+"""The Content-Security-Policy of every HTML page, by directive."""
+PAGE_POLICY = "; ".join(f"{name} {value}" for name, value in PAGE_POLICY_PARTS.items())
+ALWAYS = {"x-content-type-options": "nosniff", "referrer-policy": "no-referrer"}
+"""Headers of every answer of the app."""
+_INLINE_SCRIPT = re.compile(r"<script>(.*?)</script>", re.DOTALL)
+
 router = APIRouter(include_in_schema=False)
+
+
+def policy_allowing_inline(html: str) -> str:
+    """:data:`PAGE_POLICY` with the inline scripts of ``html`` (its own, fixed set-up code) allowed by
+    their SHA-256 hashes."""
+    hashes = [
+        "'sha256-" + base64.b64encode(hashlib.sha256(code.encode()).digest()).decode() + "'"
+        for code in _INLINE_SCRIPT.findall(html)
+    ]
+    parts = {**PAGE_POLICY_PARTS, "script-src": " ".join([PAGE_POLICY_PARTS["script-src"], *hashes])}
+    return "; ".join(f"{name} {value}" for name, value in parts.items())
+
+
+class PageHeaders:
+    """ASGI middleware: :data:`ALWAYS` on every answer, and :data:`PAGE_POLICY` on an HTML answer that
+    does not set a policy of its own."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+
+        async def send_with_headers(message: Message) -> None:
+            if message["type"] == "http.response.start":
+                headers = MutableHeaders(scope=message)
+                for name, value in ALWAYS.items():
+                    headers.setdefault(name, value)
+                if headers.get("content-type", "").startswith("text/html"):
+                    headers.setdefault("content-security-policy", PAGE_POLICY)
+            await send(message)
+
+        await self.app(scope, receive, send_with_headers)
 
 
 def package_dir(name: str) -> Path:
@@ -109,13 +172,15 @@ def redoc_js() -> Response:
 
 @router.get("/docs")
 def swagger_ui() -> HTMLResponse:
-    return get_swagger_ui_html(
+    page = get_swagger_ui_html(
         openapi_url="/openapi.json",
         title="isolab - API reference",
         swagger_js_url=f"{DOCS_ASSETS}/swagger-ui-bundle.js",
         swagger_css_url=f"{DOCS_ASSETS}/swagger-ui.css",
         swagger_favicon_url=f"{DOCS_ASSETS}/favicon.png",
     )
+    page.headers["Content-Security-Policy"] = policy_allowing_inline(bytes(page.body).decode())
+    return page
 
 
 @router.get("/redoc")
@@ -133,6 +198,7 @@ def add_ui(app: FastAPI) -> None:
     """Serve the page, its assets and the API reference pages from ``app`` (create it with
     ``docs_url=None, redoc_url=None``: these routes replace FastAPI's CDN-backed ones)."""
     app.include_router(router)
+    app.add_middleware(PageHeaders)
     app.mount(ASSETS, StaticFiles(directory=UI_DIR / "assets"), name="ui-assets")
     app.mount(
         DOCS_ASSETS, StaticFiles(directory=package_dir("fastapi_offline") / "static"), name="docs-assets"

@@ -197,7 +197,14 @@ function when(iso) {
 const PLOT_CONFIG = { responsive: true, displaylogo: false };
 const PALETTE = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf"];
 
+// The study id of the page's address, encoded for a path (a crafted address cannot step out of
+// /studies/{id}/... in the requests built from it).
 function studyIdFromPath() {
   const m = location.pathname.match(/\/ui\/studies\/([^/]+)/);
-  return m ? decodeURIComponent(m[1]) : null;
+  if (!m) return null;
+  try {
+    return encodeURIComponent(decodeURIComponent(m[1]));
+  } catch (err) {
+    return encodeURIComponent(m[1]);
+  }
 }

@@ -29,7 +29,7 @@ async function sceneOf(source) {
     const example = await apiJson(`/examples/${encodeURIComponent(key)}`);
     definition = (await postJson("/studies/validate", { text: example.text })).definition;
   } else {
-    definition = (await apiJson(`/studies/${key}`)).definition;
+    definition = (await apiJson(`/studies/${encodeURIComponent(key)}`)).definition;
   }
   return { scene: definition.scene, simulation: definition.simulation || null };
 }

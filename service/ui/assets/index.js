@@ -47,15 +47,31 @@ function render() {
   );
 }
 
-async function refresh() {
+// "compiling the engine's kernels (first start only)" while the service warms its workers
+async function refreshKernels() {
+  let note = "";
   try {
-    const page = await apiJson("/studies?limit=500");
+    const health = await apiJson("/health");
+    note = (health.kernels && health.kernels.note) || "";
+  } catch (err) {
+    note = ""; // a degraded service: the studies' own errors say more
+  }
+  $("#kernels").textContent = note;
+  $("#kernels").hidden = !note;
+  return Boolean(note);
+}
+
+async function refresh() {
+  let warming = false;
+  try {
+    const [page, kernelsBusy] = await Promise.all([apiJson("/studies?limit=500"), refreshKernels()]);
     studies = page.items;
+    warming = kernelsBusy;
     render();
   } catch (err) {
     showError("#studies", err);
   }
-  const busy = studies.some((s) => s.status === "queued" || s.status === "running");
+  const busy = warming || studies.some((s) => s.status === "queued" || s.status === "running");
   clearTimeout(timer);
   timer = setTimeout(refresh, busy ? 1500 : 10000);
 }

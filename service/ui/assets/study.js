@@ -41,6 +41,7 @@ function renderStatus() {
   document.title = `isolab – ${s.name}`;
   fill($("#status"), 
     progressBar(s.progress.done, s.progress.total, s.progress.failed),
+    s.note ? el("p", { class: "muted", id: "study-note" }, s.note) : null,
     el(
       "dl",
       { class: "facts" },

@@ -220,6 +220,22 @@ def _verdict(
     return sigma, reasons, info
 
 
+@dataclass
+class PreparedFit:
+    """A checked calibration, ready to fit: its channel model (:attr:`model`, whose ``duration``,
+    ``choice`` and ``params`` size its cost), the fitted parameters and the time offset's bounds."""
+
+    model: ChannelModel
+    params: list[BoundedParameter]
+    offset: tuple[float, float, Any]
+    offset_fixed: bool
+    prefix: Loc
+
+    def run(self) -> Calibration:
+        """The least-squares fit (see :func:`calibrate`)."""
+        return _fit(self.model, self.params, self.offset, self.offset_fixed, self.prefix)
+
+
 def calibrate(
     scene: Mapping[str, Any] | Scene,
     measurement: Measurement,
@@ -230,7 +246,23 @@ def calibrate(
     lowpass: Any = None,
     prefix: Loc | None = None,
 ) -> Calibration:
-    """Fit ``fit``'s parameters of ``scene`` (and the time offset) to ``measurement``.
+    """Fit ``fit``'s parameters of ``scene`` (and the time offset) to ``measurement``: see
+    :func:`prepare_calibration` for the arguments; raises :class:`DefinitionError` on bad input."""
+    return prepare_calibration(scene, measurement, fit, offset, simulation, highpass, lowpass, prefix).run()
+
+
+def prepare_calibration(
+    scene: Mapping[str, Any] | Scene,
+    measurement: Measurement,
+    fit: Sequence[FitSpec | Mapping[str, Any]],
+    offset: Mapping[str, Any] | None = None,
+    simulation: Mapping[str, Any] | None = None,
+    highpass: Any = None,
+    lowpass: Any = None,
+    prefix: Loc | None = None,
+) -> PreparedFit:
+    """Check a calibration of ``fit``'s parameters of ``scene`` (and the time offset) against
+    ``measurement``, without running the engine; :meth:`PreparedFit.run` fits it.
 
     Args:
         scene: a scene definition (data, validated here) or a validated Scene.
@@ -311,7 +343,7 @@ def calibrate(
             ]
         )
     model = ChannelModel(sc, params, measurement, choice, (o_lo, o_hi), hp, lp, pre)
-    return _fit(model, params, (o_lo, o_hi, off.get("start")), fixed_offset is not None, pre)
+    return PreparedFit(model, params, (o_lo, o_hi, off.get("start")), fixed_offset is not None, pre)
 
 
 def _fit(

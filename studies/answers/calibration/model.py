@@ -11,7 +11,7 @@ step it runs with; :func:`synthetic_measurement` uses it to make what sensors wo
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -130,6 +130,9 @@ class ChannelModel:
                 self.gain[self.accel] = _noise_gain(self.sos, self.t.size)
         self.cases = 0
         self.calls = 0
+        self.watch: Callable[[int, int], None] | None = None
+        """Called as ``watch(engine_calls, cases)`` before each engine batch (progress; it may raise to
+        stop the fit)."""
         self.measured = self.filtered(np.stack([c.values for c in meas.channels], axis=1))
         rms = np.sqrt(np.mean(self.measured**2, axis=0))
         for k, c in enumerate(meas.channels if check_signal else []):
@@ -158,6 +161,8 @@ class ChannelModel:
         times (from one step before the motion) and each channel's quantity there (finite differences of
         the recorded displacement); None for a case that failed."""
         k = values.shape[0]
+        if self.watch is not None:
+            self.watch(self.calls, self.cases)
         overrides: dict[str, np.ndarray] = {"simulation.duration": np.full(k, self.duration)}
         for j, p in enumerate(self.params):
             for leaf in p.target.writes:

@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from isolab.studies.answers.calibration.fit import Calibration, calibrate
+from isolab.studies.answers.calibration.fit import Calibration, PreparedFit, prepare_calibration
 from isolab.studies.answers.calibration.measurements import (
     Measurement,
     measurement_from_columns,
@@ -31,9 +31,15 @@ def request_measurement(data: Mapping[str, Any], prefix: Loc | None = None) -> M
 def calibrate_request(body: Mapping[str, Any]) -> Calibration:
     """:func:`calibrate` of a request body (``scene``, ``measurement``, ``fit``, and optionally
     ``offset``, ``simulation``, ``highpass``, ``lowpass``), errors located under ``body``."""
+    return prepare_request(body).run()
+
+
+def prepare_request(body: Mapping[str, Any]) -> PreparedFit:
+    """:func:`prepare_calibration` of a request body (see :func:`calibrate_request`): every check, no
+    engine run."""
     meas = request_measurement(dict(body.get("measurement") or {}))
     fit = [{k: v for k, v in dict(f).items() if v is not None} for f in body.get("fit") or []]
-    return calibrate(
+    return prepare_calibration(
         dict(body.get("scene") or {}),
         meas,
         fit,

@@ -55,6 +55,20 @@ floor origin; beyond that only typos (mm read as m) reach, and float64 positions
 resolution the peaks are reported at."""
 MAX_FLOOR_DISPLACEMENT = 0.1
 """Largest floor displacement (amplitude or sample), m."""
+MAX_MOUNTS = 64
+"""Most mounts of a ``list`` placement (a machine base stands on 3 to 5; a long beam on a few more)."""
+MAX_STAGES = 32
+"""Most stages of a scene."""
+MAX_POINTS = 256
+"""Most points of interest of a scene."""
+MAX_CRITERIA = 256
+"""Most entries of a ``criteria`` block (its points and ``isolators``)."""
+MAX_SEGMENTS = 10_000
+"""Most segments of one sequence profile."""
+MAX_PARAMETERS = 64
+"""Most parameters one study varies."""
+MAX_RECORDED_SAMPLES = 2_000_000
+"""Most samples of one axis of a recorded floor displacement."""
 MAX_STAGE_MASS_RATIO = 1.0
 """The stages together weigh at most this many times the machine base. Stages are point masses: a base
 lighter than its stages leaves the composite body almost without rotational inertia, its rocking modes

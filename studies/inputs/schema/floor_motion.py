@@ -12,6 +12,7 @@ from pydantic import BeforeValidator, Field, ValidationError, field_validator, m
 from isolab.engine.results import AXES
 from isolab.studies.inputs.schema.errors import error_messages
 from isolab.studies.inputs.schema.fields import (
+    MAX_RECORDED_SAMPLES,
     FloorDisplacement,
     InputModel,
     NonNegativeFrequency,
@@ -35,9 +36,9 @@ class SineFloor(InputModel):
 class RecordedDisplacement(InputModel):
     """Sampled floor displacement per axis, m (an axis left out does not move)."""
 
-    x: list[FloorDisplacement] | None = None
-    y: list[FloorDisplacement] | None = None
-    z: list[FloorDisplacement] | None = None
+    x: list[FloorDisplacement] | None = Field(None, max_length=MAX_RECORDED_SAMPLES)
+    y: list[FloorDisplacement] | None = Field(None, max_length=MAX_RECORDED_SAMPLES)
+    z: list[FloorDisplacement] | None = Field(None, max_length=MAX_RECORDED_SAMPLES)
 
     @model_validator(mode="after")
     def _equal_lengths(self) -> RecordedDisplacement:
@@ -72,7 +73,7 @@ MAX_SPECTRUM_POINTS = 100_000
 class SpectrumBands(InputModel):
     """One-third-octave RMS velocity of the floor by band centre (``{4 Hz: 20 um/s, 8 Hz: 10 um/s}``):
     bands between given ones are interpolated on log-log axes, bands outside them are zero
-    (:mod:`studies.floor`)."""
+    (:mod:`studies.questions.floor`)."""
 
     bands: dict[Annotated[Frequency, Field(gt=0)], BandVelocity] = Field(
         min_length=1, description="band centre (Hz, nominal or exact) -> RMS velocity in that band, m/s"
@@ -106,9 +107,9 @@ class SpectrumPSD(InputModel):
 
     @model_validator(mode="after")
     def _one_series(self) -> SpectrumPSD:
-        if (self.displacement is None) == (self.velocity is None):
-            raise ValueError("psd: give either displacement (m^2/Hz) or velocity ((m/s)^2/Hz)")
         values = self.displacement if self.displacement is not None else self.velocity
+        if values is None or (self.displacement is not None and self.velocity is not None):
+            raise ValueError("psd: give either displacement (m^2/Hz) or velocity ((m/s)^2/Hz)")
         if len(values) != len(self.frequency):
             raise ValueError(
                 f"psd: {len(values)} PSD values for {len(self.frequency)} frequencies; give one per frequency"
@@ -146,7 +147,8 @@ AxisSpectrum = Annotated[str | SpectrumBands | PSDSpectrum | None, BeforeValidat
 
 class FloorSpectrum(InputModel):
     """The floor's steady vibration per axis as a spectrum (what ``floor_point_velocity`` is computed
-    from; :mod:`studies.floor`): per floor axis a VC level (``z: VC-D``), one-third-octave band levels
+    from; :mod:`studies.questions.floor`): per floor axis a VC level (``z: VC-D``), one-third-octave band
+    levels
     (``z: {bands: {4 Hz: 20 um/s, ...}}``) or a PSD (``z: {psd: {frequency: [...], displacement:
     [...]}}``). An axis left out does not move; the axes are uncorrelated."""
 
@@ -164,7 +166,7 @@ class FloorSpectrum(InputModel):
 class Floor(InputModel):
     """Motion of the floor under the isolators: a sine per axis or a recorded displacement (the time
     integration sees them), and/or a ``spectrum`` (steady state, one-third-octave bands: the velocity at
-    the points of interest, :mod:`studies.floor`)."""
+    the points of interest, :mod:`studies.questions.floor`)."""
 
     sine: SineFloor | None = None
     recorded: RecordedFloor | None = None

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
 from pydantic import Field, field_validator, model_validator
 
@@ -39,7 +41,7 @@ class Block(InputModel):
 
     def properties(self) -> tuple[float, np.ndarray, np.ndarray]:
         """Mass (kg), inertia about the c.g. (3, 3) kg m^2 and c.g. (3,) m of the block
-        (:func:`studies.block.block_properties`)."""
+        (:func:`studies.inputs.block.block_properties`)."""
         mass, inertia, cg = block_properties(self.size, self.density, self.corner)
         return float(mass), inertia, cg
 
@@ -120,4 +122,5 @@ class Machine(InputModel):
             if self.inertia is not None
             else np.diag(np.asarray(self.inertia_diagonal, dtype=float))
         )
-        return float(self.mass), inertia, np.asarray(self.cg, dtype=float)
+        mass = cast(float, self.mass)  # without a block, _one_description requires mass, cg and an inertia
+        return float(mass), inertia, np.asarray(self.cg, dtype=float)

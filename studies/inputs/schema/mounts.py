@@ -18,6 +18,7 @@ from isolab.studies.inputs.isolators import (
 )
 from isolab.studies.inputs.schema.fields import (
     MAX_MOUNT_HEIGHT,
+    MAX_MOUNTS,
     DampingRatio,
     InputModel,
     MountFrequency,
@@ -180,7 +181,7 @@ class Isolators(InputModel):
     k: AxisStiffness | None = None
     c: AxisDamping | None = None
     layout: Layout | None = None
-    mounts: list[Mount] | None = Field(None, alias="list")
+    mounts: list[Mount] | None = Field(None, alias="list", max_length=MAX_MOUNTS)
 
     @model_validator(mode="after")
     def _placement(self) -> Isolators:
@@ -202,7 +203,13 @@ class Isolators(InputModel):
     def count(self) -> int:
         return 4 if self.mounts is None else len(self.mounts)
 
-    def preset_of(self, name: str) -> IsolatorPreset:
+    @property
+    def listed(self) -> list[Mount]:
+        """The mounts of a ``list`` placement, in order; empty for a ``layout`` (``_placement`` requires
+        exactly one of the two)."""
+        return self.mounts if self.mounts is not None else []
+
+    def preset_of(self, name: PresetName) -> IsolatorPreset:
         """The figures of type ``name``: the preset, with this machine's ``tuning`` of it applied."""
         base = PRESETS[name]
         tune = self.tuning.get(name)

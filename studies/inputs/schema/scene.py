@@ -6,7 +6,14 @@ from __future__ import annotations
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from isolab.studies.inputs.block import MAX_TRAVEL, beyond_travel, travel_bound
-from isolab.studies.inputs.schema.fields import MAX_STAGE_MASS_RATIO, InputModel, Name, Position
+from isolab.studies.inputs.schema.fields import (
+    MAX_POINTS,
+    MAX_STAGE_MASS_RATIO,
+    MAX_STAGES,
+    InputModel,
+    Name,
+    Position,
+)
 from isolab.studies.inputs.schema.floor_motion import Floor
 from isolab.studies.inputs.schema.machine import Machine
 from isolab.studies.inputs.schema.mounts import Isolators
@@ -14,6 +21,7 @@ from isolab.studies.inputs.schema.scene_paths import stage_entry
 from isolab.studies.inputs.schema.simulation import Simulation
 from isolab.studies.inputs.schema.stages import Stage, profile_excursion
 from isolab.studies.questions.criteria import Criteria
+from isolab.studies.questions.tolerances import Tolerances
 
 
 class Scene(InputModel):
@@ -21,21 +29,26 @@ class Scene(InputModel):
 
     machine: Machine
     isolators: Isolators
-    stages: list[Stage] = Field(default_factory=list)
+    stages: list[Stage] = Field(default_factory=list, max_length=MAX_STAGES)
     points: dict[Name, Position] = Field(
-        default_factory=dict, description="material points of the machine, m"
+        default_factory=dict, max_length=MAX_POINTS, description="material points of the machine, m"
     )
     floor: Floor | None = None
     simulation: Simulation = Field(default_factory=Simulation)
     criteria: Criteria | None = Field(
-        None, description="limits at the points of interest and on the mounts (studies.criteria)"
+        None, description="limits at the points of interest and on the mounts (studies.questions.criteria)"
+    )
+    tolerances: Tolerances | None = Field(
+        None,
+        description="parameter path -> its spread about the nominal value (studies.questions.tolerances): "
+        "what a monte_carlo design draws from",
     )
 
     @field_validator("stages")
     @classmethod
     def _stage_tree_and_travel(cls, stages: list[Stage], info: ValidationInfo) -> list[Stage]:
         names = [s.name for s in stages]
-        index = {}
+        index: dict[str, int] = {}
         for i, s in enumerate(stages):
             if s.name in index:
                 raise ValueError(
@@ -52,7 +65,8 @@ class Scene(InputModel):
                     f"{stage_entry(i)}.parent: no stage named {s.parent!r} (stages: {', '.join(names)})"
                 )
             if index[s.parent] > i:
-                chain, cur = [s.name], s.parent
+                chain: list[str] = [s.name]
+                cur: str | None = s.parent
                 while cur is not None and cur not in chain:
                     chain.append(cur)
                     cur = stages[index[cur]].parent
@@ -81,7 +95,8 @@ class Scene(InputModel):
     @model_validator(mode="after")
     def _stage_mass(self) -> Scene:
         """Stages heavier than the base are refused. What only the assembled scene shows (mounts that
-        cannot carry the weight, moves off the base) is the check step's, :func:`studies.scenes.check_scene`:
+        cannot carry the weight, moves off the base) is the check step's,
+        :func:`studies.inputs.scenes.check_scene`:
         parsing builds nothing."""
         stages = sum(s.mass for s in self.stages)
         base = self.machine.properties()[0]

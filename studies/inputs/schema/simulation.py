@@ -125,7 +125,7 @@ class Simulation(InputModel):
     request: ``accuracy`` (fast ~5 %, balanced ~0.5 %, reference) or ``tolerance`` (``"10 um"`` of peak
     displacement, or a relative error ``"1 %"``). An accuracy request lets the study runner pick the
     cheapest fidelity, integrator and step whose error, measured on pilot cases of the study against the
-    nonlinear reference, stays inside it (:mod:`studies.accuracy`); ``dt`` then caps the step it may pick
+    nonlinear reference, stays inside it (:mod:`studies.run.accuracy`); ``dt`` then caps the step it may pick
     (``reference``: the step). Until a runner resolves it, ``fidelity``, ``integrator`` and ``dt`` of such
     a block are None.
 

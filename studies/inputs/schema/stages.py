@@ -9,6 +9,7 @@ import numpy as np
 from pydantic import Discriminator, Field, Tag, field_validator
 
 from isolab.studies.inputs.schema.fields import (
+    MAX_SEGMENTS,
     InputModel,
     Name,
     NonNegativeTime,
@@ -81,7 +82,7 @@ class SequenceProfile(InputModel):
     """Moves and dwells one after the other, from home."""
 
     type: Literal["sequence"]
-    segments: list[Segment] = Field(min_length=1)
+    segments: list[Segment] = Field(min_length=1, max_length=MAX_SEGMENTS)
     start: NonNegativeTime = 0.0
 
 
@@ -118,4 +119,5 @@ class Stage(InputModel):
         norm = float(np.linalg.norm(value))
         if not norm > 0.0:
             raise ValueError("axis: the zero vector has no direction")
-        return tuple(float(x) / norm for x in value)
+        x, y, z = (float(v) / norm for v in value)
+        return x, y, z

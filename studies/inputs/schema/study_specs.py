@@ -12,8 +12,12 @@ from isolab.studies.inputs.schema.fields import InputModel, Name
 Value = StrictFloat | StrictInt | StrictStr
 MAX_LIST_ENTRIES = 10_000_000
 """Most entries of a parameter's ``values`` or a list design's ``cases``: the most cases a design holds
-(:data:`studies.designs.GRID_LIMIT`). A service refuses lists longer than its case limit
-(``ISOLAB_MAX_CASES``) before parsing (:func:`studies.definitions.long_lists`)."""
+(:data:`studies.questions.designs.GRID_LIMIT`). A service refuses lists longer than its case limit
+(``ISOLAB_MAX_CASES``) before parsing (:func:`studies.inputs.definitions.long_lists`)."""
+
+
+MIN_SALTELLI_SAMPLES = 2
+"""Fewest base samples of a saltelli design (one sample gives no variance to split into indices)."""
 
 
 class RangeSpec(InputModel):
@@ -44,16 +48,23 @@ class DesignSpec(InputModel):
     """How cases are drawn: full factorial ``grid``, ``lhs``, ``sobol``, ``random``, ``saltelli`` (Sobol'
     indices: ``samples`` is the base sample N and the study runs N (D + 2) cases, N (2D + 2) with
     ``second_order``), explicit ``list``, or ``optimize`` (a pymoo optimiser picks the cases generation
-    by generation within ``budget``: :mod:`studies.optimisation`)."""
+    by generation within ``budget``: :mod:`studies.run.optimisation`), or ``monte_carlo`` (``samples``
+    cases drawn from the study's ``tolerances``: :mod:`studies.questions.tolerances`)."""
 
-    type: Literal["grid", "lhs", "sobol", "random", "saltelli", "list", "optimize"] = "grid"
+    type: Literal["grid", "lhs", "sobol", "random", "saltelli", "list", "optimize", "monte_carlo"] = "grid"
     samples: int | None = Field(None, ge=1, le=10_000_000)
     seed: int = Field(0, ge=0)
     second_order: bool | None = Field(
         None, description="saltelli only: also run the cases pairwise (second-order) indices need; default no"
     )
     cases: list[dict[str, Value]] | None = Field(None, max_length=MAX_LIST_ENTRIES)
-    # optimize only (see studies.optimisation and studies.goals, which check them against the outputs)
+    sampling: Literal["sobol", "random"] | None = Field(
+        None,
+        description="monte_carlo only: draw the tolerances along a scrambled Sobol' sequence (sobol, the "
+        "default) or independently (random)",
+    )
+    # optimize only (see studies.run.optimisation and studies.questions.goals, which check them against the
+    # outputs)
     objective: str | list[str] | None = Field(
         None,
         description="optimize: 'minimize <quantity>' or 'maximize <quantity>', or a list of them "
@@ -74,3 +85,30 @@ class DesignSpec(InputModel):
     population: int | None = Field(
         None, ge=2, le=10_000, description="optimize: cases per generation (default 40, at most the budget)"
     )
+    plateau: Value | None = Field(
+        None,
+        description="optimize: the designs answered beside the best: feasible and with the first objective "
+        "within this share of the best's (default 1 %)",
+    )
+    stall: int | None = Field(
+        None,
+        ge=1,
+        le=10_000,
+        description="optimize: stop once this many generations in a row improve the best feasible objective "
+        "by less than 0.1 % (default: run the whole budget)",
+    )
+
+    @model_validator(mode="after")
+    def _fields_of_its_type(self) -> DesignSpec:
+        if self.type == "saltelli" and self.samples is not None and self.samples < MIN_SALTELLI_SAMPLES:
+            raise ValueError(
+                f"design.samples: a saltelli design needs at least {MIN_SALTELLI_SAMPLES} base samples "
+                f"(its indices compare the samples with one another), got {self.samples}"
+            )
+        if self.type == "optimize":
+            given = [k for k in ("samples", "second_order", "cases") if getattr(self, k) is not None]
+            if given:
+                raise ValueError(
+                    f"design.{given[0]}: an optimize design does not take it (its budget sets the cases)"
+                )
+        return self
