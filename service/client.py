@@ -280,6 +280,9 @@ class Client:
         simulation: Mapping[str, Any] | None = None,
         cost_order: builtins.list[str] | None = None,
         tune: bool = False,
+        samples: int | None = None,
+        require: float | None = None,
+        seed: int | None = None,
     ) -> Any:
         """Run one scene (a dict, or a YAML/JSON scene file) under several isolator types (default all
         three); the side-by-side table as a pandas DataFrame: one row per isolator type, one column per
@@ -290,7 +293,10 @@ class Client:
         default elastomer < air < active, that meets every criterion; ``reason``), ``requirements`` (the
         criteria: name, limit, unit), ``units`` (column -> SI unit), ``best`` (column -> best type) and
         ``simulation``; with ``tune`` (each type first tuned to the criteria within its physical range),
-        also ``tuning`` (type -> values found)."""
+        also ``tuning`` (type -> values found). With a ``tolerances:`` block in the scene, each type is also
+        judged on ``samples`` machines drawn from it (seed ``seed``; the service's defaults when None):
+        ``robustness`` gives the probability of meeting every criterion, and the recommendation is the
+        most probable type that reaches ``require`` (a probability, 0 to 1)."""
         if not isinstance(scene, Mapping):
             import yaml
 
@@ -306,9 +312,26 @@ class Client:
             body["cost_order"] = list(cost_order)
         if tune:
             body["tune"] = True
+        for key, value in (("samples", samples), ("require", require), ("seed", seed)):
+            if value is not None:
+                body[key] = value
         from isolab.studies.answers.comparisons import comparison_frame
 
         return comparison_frame(self._request("POST", "/comparisons", json=body).json())
+
+    def simulate(
+        self,
+        scene: Mapping[str, Any],
+        simulation: Mapping[str, Any] | None = None,
+        max_points: int = 2000,
+    ) -> dict[str, Any]:
+        """Run one scene now on the service (``POST /simulations``): its ``summary`` (column -> value in
+        SI, unit, long name), ``modes``, ``isolators`` and ``traces`` (at most ``max_points`` samples a
+        trace)."""
+        body: dict[str, Any] = {"scene": dict(scene), "max_points": int(max_points)}
+        if simulation is not None:
+            body["simulation"] = dict(simulation)
+        return self._request("POST", "/simulations", json=body).json()
 
     # --------------------------------------------------------------------------------- calibrations
     def calibrate(
@@ -321,6 +344,8 @@ class Client:
         highpass: float | str | None = None,
         lowpass: float | str | None = None,
         plot: bool = False,
+        noise: Mapping[str, float | str] | None = None,
+        starts: int | None = None,
         progress: Callable[[dict[str, Any]], object] | None = None,
         poll: float = 0.5,
         timeout: float | None = None,
@@ -332,6 +357,9 @@ class Client:
         waits for it (:meth:`calibration_wait`: ``progress``, ``poll``, ``timeout`` in s, None for ever;
         on a timeout the job is cancelled). Answers fitted values +- 1 sigma (SI), the misfit per channel
         before and after and the calibrated scene (``scene_yaml``); ``plot=True`` adds a base64 PNG.
+        ``noise``: channel -> a sensor's noise (one sample's standard deviation, SI or ``"0.01 mm"``), what
+        the goodness of fit is judged against; ``starts``: fits from the scene's values and Sobol' points
+        (1 to 16), the best kept.
         A refused request or a failed fit raises :class:`ClientError`."""
         from isolab.studies.answers.calibration import parse_fit, read_measurement
 
@@ -370,6 +398,10 @@ class Client:
         for key, corner in (("highpass", highpass), ("lowpass", lowpass)):
             if corner is not None:
                 body[key] = corner
+        if noise is not None:
+            body["noise"] = dict(noise)
+        if starts is not None:
+            body["starts"] = int(starts)
         job = self.calibration_submit(body)
         try:
             done = self.calibration_wait(job["id"], progress=progress, poll=poll, timeout=timeout)

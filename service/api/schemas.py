@@ -10,7 +10,9 @@ from __future__ import annotations
 from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, StrictBool
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt
+
+from isolab.studies.answers.calibration.jobs import CalibrationTraces
 
 StudyStatusName = Literal["queued", "running", "done", "failed", "cancelled"]
 IsolatorType = Literal["active", "air", "elastomer"]
@@ -166,6 +168,7 @@ class CaseTable(BaseModel):
     limit: int
     columns: list[str]
     units: dict[str, str] = Field(description="column -> SI unit ('1' dimensionless, '' text)")
+    long_names: dict[str, str] = Field(default_factory=dict, description="output column -> what it holds")
     rows: list[dict[str, Any]] = Field(description="missing values are null")
 
     model_config = ConfigDict(
@@ -214,6 +217,12 @@ class CaseMode(BaseModel):
     damping_ratio: float | None
     energy: dict[str, float | None] = Field(description="DOF (x, y, z, rx, ry, rz) -> kinetic-energy share")
     name: str = Field(description="dominant motion: heave, pitch, roll, yaw, surge, sway (+ a coupled one)")
+    shape: dict[str, float | None] | None = Field(
+        None, exclude_if=lambda v: v is None, description="x, y, z (m), rx, ry, rz (rad): 1 m at far mount"
+    )
+
+
+PLACES = "isolator -> place (front-left: -X left, -Y front), position (x, y, z in m), label"
 
 
 class Timeseries(BaseModel):
@@ -238,10 +247,39 @@ class Timeseries(BaseModel):
         default_factory=dict,
         description="stage -> position, velocity, acceleration along its axis, on the same time axis",
     )
+    isolators: dict[str, dict[str, Any]] = Field(default_factory=dict, description=PLACES)
     modes: list[CaseMode] = Field(default_factory=list, description="natural modes, ascending")
     settling_time: float | None = Field(None, description="s after the last stage move")
     settled: bool | None = None
     last_move_end: float | None = Field(None, description="time the last stage move ends, s")
+
+
+class SimulationRequest(BaseModel):
+    """One scene to run at once."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    scene: dict[str, Any] = Field(description="inline scene (as in a study's scene block)")
+    simulation: dict[str, Any] | None = Field(None, description="overrides of the scene's simulation block")
+    max_points: int = Field(2000, ge=2, le=20_000, description="most samples per trace in the answer")
+
+
+class SimulationAnswer(BaseModel):
+    """One case's summary (SI, each value with its unit and long name) and its traces, thinned."""
+
+    status: str
+    message: str
+    model: dict[str, Any] = Field(description="fidelity, integrator, dt (s), duration (s), engine_seconds")
+    summary: dict[str, dict[str, Any]] = Field(description="case-table column -> value, unit, long_name")
+    isolators: dict[str, dict[str, Any]] = Field(description=PLACES)
+    modes: list[CaseMode]
+    settling_time: float | None = Field(None, description="s after the last stage move")
+    settled: bool | None = None
+    last_move_end: float | None = Field(None, description="time the last stage move ends, s")
+    n_samples: int = Field(description="samples the case recorded")
+    every: int = Field(description="the traces keep every n-th of them")
+    max_points: int
+    traces: dict[str, Any] = Field(description="units, time, displacement, rotation, isolator_force...")
 
 
 # --------------------------------------------------------------------------------------- comparisons
@@ -272,16 +310,24 @@ class ComparisonRequest(BaseModel):
         description="first tune each type's frequencies and damping, within what the type can reach, to "
         "the scene's criteria (maximising the smallest margin); the answer's tuning gives the values",
     )
+    samples: StrictInt = Field(200, ge=1, le=2000, description="with tolerances: machines drawn per type")
+    require: StrictFloat = Field(
+        0.95, gt=0, le=1, description="with tolerances: P a recommended type reaches"
+    )
+    seed: StrictInt = Field(0, ge=0, le=2**32 - 1, description="with tolerances: seed of the draws")
 
 
 class Recommendation(BaseModel):
     """The one isolator type to buy, and why."""
 
     isolator_type: str | None = Field(
-        description="the cheapest type that meets every criterion (null: no criteria, or none meets them)"
+        description="the cheapest type that meets every criterion; with tolerances, the most probable type "
+        "that reaches require (null: no criteria, or none meets them)"
     )
     reason: str
     cost_order: list[str] = Field(description="the types from the cheapest to the dearest")
+    basis: str | None = Field(None, exclude_if=lambda v: v is None, description="probability: on tolerances")
+    require: float | None = Field(None, exclude_if=lambda v: v is None, description="probability required")
 
 
 class Requirement(BaseModel):
@@ -310,6 +356,12 @@ class Comparison(BaseModel):
     recommendation: Recommendation
     tuning: dict[str, dict[str, Any]] | None = Field(
         None, description="with tune: per type, the values found (f_vertical, f_horizontal in Hz, zeta)"
+    )
+    robustness: dict[str, Any] | None = Field(
+        None,
+        exclude_if=lambda v: v is None,
+        description="with tolerances: per type (types.<type>.nominal, .tuned) the probability of meeting "
+        "every criterion, its interval and each criterion's failure probability",
     )
     simulation: dict[str, Any] = Field(description="the simulation block every type ran with")
 
@@ -565,6 +617,8 @@ class CalibrationRequest(BaseModel):
     plot: StrictBool = Field(
         True, description="answer a PNG of measured against simulated traces in plot_png"
     )
+    noise: dict[str, float | str] | None = Field(None, max_length=16, description="channel -> sensor noise")
+    starts: int = Field(1, ge=1, le=16, description="fits from the scene's values and Sobol' points")
 
 
 class FittedParameter(BaseModel):
@@ -592,10 +646,10 @@ class Calibration(BaseModel):
     identifiability: dict[str, Any] = Field(
         description="singular values and condition number of the column-normalised Jacobian, correlations"
     )
-    residual_variance: float = Field(
-        description="s^2 of the weighted residuals (about 1: they are the noise)"
-    )
+    residual_variance: float = Field(description="chi-square against the sensor noise per degree of freedom")
     degrees_of_freedom: float
+    goodness_of_fit: dict[str, Any] = Field(default_factory=dict, description="chi-square test and verdict")
+    starts: dict[str, Any] = Field(default_factory=dict, description="where each start began and ended")
     scene: dict[str, Any] = Field(description="the calibrated scene (SI)")
     scene_yaml: str = Field(description="the calibrated scene as YAML, ready for a study")
     simulation: dict[str, Any]
@@ -604,6 +658,7 @@ class Calibration(BaseModel):
     evaluations: dict[str, Any]
     message: str
     plot_png: str | None = Field(None, description="base64 PNG of measured against simulated traces")
+    traces: CalibrationTraces | None = Field(None, description="measured against simulated, decimated")
 
 
 class CalibrationCost(BaseModel):

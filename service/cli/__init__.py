@@ -101,6 +101,10 @@ from isolab.service.cli.comparisons import compare_command  # noqa: E402
 
 app.command("compare")(compare_command)
 
+from isolab.service.cli.sizing import size_command  # noqa: E402
+
+app.command("size")(size_command)
+
 from isolab.service.cli.sensitivity import sensitivity_command  # noqa: E402
 
 app.command("sensitivity")(sensitivity_command)

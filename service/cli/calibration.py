@@ -54,6 +54,17 @@ def calibrate_command(
         str | None,
         typer.Option(help="Low-pass corner of acceleration channels, Hz (default min(fs/5, 0.03/dt))."),
     ] = None,
+    noise: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--noise",
+            help="CHANNEL=NOISE, a sensor's noise (one sample's standard deviation), e.g. "
+            "cg.z.displacement=0.01 mm; repeat it per channel (default: estimated from the record).",
+        ),
+    ] = None,
+    starts: Annotated[
+        int, typer.Option(help="Fits from the scene's values and STARTS - 1 Sobol' points in the bounds.")
+    ] = 1,
     plot: Annotated[
         Path | None, typer.Option(help="Write measured against simulated traces to a PNG.")
     ] = None,
@@ -76,8 +87,24 @@ def calibrate_command(
         sim = {
             k: v for k, v in (("fidelity", fidelity), ("integrator", integrator), ("dt", dt)) if v is not None
         }
+        stated: dict[str, str] = {}
+        for item in noise or []:
+            name, sep, value = item.partition("=")
+            if not sep:
+                raise ValueError(f"--noise {item!r}: write CHANNEL=NOISE, e.g. cg.z.displacement=0.01 mm")
+            stated[name.strip()] = value.strip()
         result = calibrate(
-            sc, meas, specs, offset=off, simulation=sim or None, highpass=highpass, lowpass=lowpass, prefix=[]
+            sc,
+            meas,
+            specs,
+            offset=off,
+            simulation=sim or None,
+            highpass=highpass,
+            lowpass=lowpass,
+            prefix=[],
+            noise=stated or None,
+            starts=starts,
+            scene_text=scene.read_text(encoding="utf-8"),
         )
     except DefinitionError as err:
         for d in err.details:
@@ -132,6 +159,10 @@ def calibrate_command(
             f"{ch['rms_after'] / f:.4g}",
         )
     console.print(misfit)
+    console.print(f"fit: {answer['goodness_of_fit']['verdict']}")
+    if answer["starts"]["count"] > 1:
+        st = answer["starts"]
+        console.print(f"starts: {st['count']}, {st['agreeing']} ending within 3 sigma of the best")
     if out is not None:
         console.print(f"calibrated scene -> {out}")
     if plot is not None:

@@ -28,6 +28,13 @@ def _cell(value: Any, scale: float = 1.0, unit: str = "") -> str:
     return f"{float(value) * scale:.4g} {unit}".rstrip()
 
 
+def _probability(share: dict[str, Any] | None) -> str:
+    if not share:
+        return "-"
+    lo, hi = share["interval"]
+    return f"{share['probability']:.1%} ({lo:.1%}-{hi:.1%})"
+
+
 def compare_command(
     scene: Annotated[
         Path,
@@ -53,6 +60,14 @@ def compare_command(
             help="First tune each type's frequencies and damping to the criteria, within its range."
         ),
     ] = False,
+    samples: Annotated[
+        int, typer.Option(help="With tolerances in the scene: machines drawn from them per type.")
+    ] = 200,
+    require: Annotated[
+        float,
+        typer.Option(help="With tolerances: the probability of meeting every criterion a type must reach."),
+    ] = 0.95,
+    seed: Annotated[int, typer.Option(help="With tolerances: seed of the draws.")] = 0,
     as_json: Annotated[bool, typer.Option("--json", help="Print the answer as JSON (SI units).")] = False,
     csv: Annotated[
         Path | None, typer.Option(help="Write the table (one row per type, units in the header) here.")
@@ -60,7 +75,7 @@ def compare_command(
 ) -> None:
     """Run SCENE on each isolator type and print the side-by-side table: the scene's design criteria
     with each type's margin, the main outputs, and the recommended type (the cheapest that meets every
-    criterion)."""
+    criterion; with a tolerances block, the most probable type to meet them once built)."""
     from pydantic import ValidationError
 
     from isolab.studies.answers.comparisons import compare, comparison_frame
@@ -81,6 +96,9 @@ def compare_command(
             {"duration": duration} if duration else None,
             [t.strip() for t in cost_order.split(",") if t.strip()] if cost_order else None,
             tune=tune,
+            samples=samples,
+            require=require,
+            seed=seed,
         )
     except DefinitionError as err:
         for d in err.details:
@@ -120,6 +138,11 @@ def compare_command(
         )
     if "meets_criteria" in df.columns:
         table.add_row("meets every criterion", *(_cell(df.at[t, "meets_criteria"]) for t in names))
+    robust = answer.get("robustness") or {}
+    for design in ("nominal", "tuned"):
+        shares = {t: robust["types"][t].get(design) for t in names} if robust else {}
+        if any(shares.values()):
+            table.add_row(f"P(meets every criterion), {design}", *(_probability(shares[t]) for t in names))
     for col, label, scale, unit in _SHOWN:
         if col in df.columns:
             table.add_row(label, *(_cell(df.at[t, col], scale, unit) for t in names))
@@ -129,6 +152,12 @@ def compare_command(
         typer.echo(
             f"tuned {t}: f_vertical {v['f_vertical']:.2f} Hz, f_horizontal {v['f_horizontal']:.2f} Hz, "
             f"zeta {v['zeta']:.3f} ({found['evaluations']} cases)"
+        )
+    if robust:
+        typer.echo(
+            f"P: share of {robust['samples']} machines drawn independently from the tolerances (seed "
+            f"{robust['seed']}) that meet every criterion, {robust['confidence']:.0%} Clopper-Pearson "
+            "interval"
         )
     rec = answer["recommendation"]
     head = f"recommended: {rec['isolator_type']}" if rec["isolator_type"] else "no recommendation"

@@ -315,7 +315,13 @@ def run_study_command(
         raise typer.Exit(code=1) from None
     wall = time.perf_counter() - t0
     n = int(ds.attrs.get("n_cases", 0)) or int(np.prod([ds.sizes[d] for d in ds.status.dims]))
-    typer.echo(f"{n} cases in {wall:.1f} s ({n / wall:.1f} cases/s) -> {out}")
+    robust = json.loads(str(ds.attrs.get("optimisation", "{}"))).get("robust")
+    if robust:  # a robust optimisation's rows are candidates, each run as its nominal case and its draws
+        simulated = n * (int(robust["samples"]) + 1)
+        rate = f"{simulated / wall:.1f} cases/s"
+        typer.echo(f"{simulated} cases simulated ({n} candidates) in {wall:.1f} s ({rate}) -> {out}")
+    else:
+        typer.echo(f"{n} cases in {wall:.1f} s ({n / wall:.1f} cases/s) -> {out}")
     from isolab.studies.questions.tolerances import described_reliability
     from isolab.studies.run.optimisation import describe_optimum
 

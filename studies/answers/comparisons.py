@@ -237,6 +237,9 @@ def compare(
     simulation: Any = None,
     cost_order: list[str] | tuple[str, ...] | None = None,
     tune: bool = False,
+    samples: int | None = None,
+    require: float | None = None,
+    seed: int = 0,
 ) -> dict[str, Any]:
     """Validate, run and tabulate a comparison in one call (see :func:`comparison_table`), with the
     recommended type (:func:`recommend`; ``cost_order`` default :data:`COST_ORDER`). With ``tune``, each
@@ -244,10 +247,34 @@ def compare(
     (:func:`studies.answers.tuning.tune`);
     the answer's ``tuning`` gives the values found.
 
+    When the scene has a ``tolerances:`` block, each type is also judged on ``samples`` machines drawn
+    from it (default :data:`~studies.answers.robustness.DEFAULT_SAMPLES`, seeded by ``seed``), as
+    drawn and, with ``tune``, as tuned: the answer's ``robustness`` gives each type's probability of
+    meeting every criterion, and the recommendation is the most probable type that reaches ``require``
+    (default :data:`~studies.answers.robustness.DEFAULT_REQUIRE`; see
+    :func:`studies.answers.robustness.robustness_answer`). Without tolerances these are ignored.
+
     Raises:
         DefinitionError: bad input, naming the field.
     """
+    from isolab.studies.answers import robustness
+
     study = resolved_study(comparison_study(scene, isolator_types, simulation))
+    robust = study.scene is not None and bool(study.scene.tolerances)
+    if robust:
+        samples = robustness.DEFAULT_SAMPLES if samples is None else samples
+        require = robustness.DEFAULT_REQUIRE if require is None else require
+        if not 1 <= samples <= robustness.MAX_SAMPLES:
+            raise DefinitionError(
+                [detail(["body", "samples"], f"draw 1 to {robustness.MAX_SAMPLES} machines, got {samples}")]
+            )
+        if not (math.isfinite(require) and 0.0 < require <= 1.0):
+            raise DefinitionError([detail(["body", "require"], f"a probability in (0, 1], got {require}")])
+        assert study.scene is not None
+        nominal = study.scene.model_dump(mode="json", exclude_none=True)
+        sim = study.simulation.model_dump(mode="json")
+        for t in map(str, study.design().levels["isolator_type"]):  # a bad tolerance: 422 before any run
+            robustness.tolerance_study(nominal, t, sim, samples, seed)
     tuned: list[Any] = []
     if tune:
         from isolab.studies.answers.tuning import tune as tune_type
@@ -278,6 +305,18 @@ def compare(
     answer = comparison_table(table, study, COST_ORDER if cost_order is None else cost_order)
     if tuned:
         answer["tuning"] = {t.isolator_type: t.to_dict() for t in tuned}
+    if robust:
+        assert study.scene is not None and samples is not None and require is not None
+        judged = study.criteria.names() if study.criteria is not None else []
+        tuned_data = study.scene.model_dump(mode="json", exclude_none=True) if tuned else None
+        try:
+            answer = robustness.robustness_answer(
+                answer, nominal, tuned_data, sim, judged, samples, require, seed
+            )
+        except DefinitionError:
+            raise
+        except ValueError as err:
+            raise DefinitionError([detail(["body", "scene"], str(err))]) from None
     return answer
 
 
@@ -299,4 +338,6 @@ def comparison_frame(answer: dict[str, Any]) -> Any:
     )
     for key in ("recommendation", "requirements", "units", "best", "simulation"):
         df.attrs[key] = answer.get(key)
+    if answer.get("robustness") is not None:  # with tolerances: each type's probability of meeting them
+        df.attrs["robustness"] = answer["robustness"]
     return df

@@ -23,12 +23,14 @@ import xarray as xr
 
 from isolab.engine import STATUS_NAMES, simulate
 from isolab.engine.profiles import Pieces, evaluate
-from isolab.engine.results import AXES, DOF_NAMES, OUTPUTS, ROTATIONS
+from isolab.engine.results import AXES, DOF_NAMES, OUTPUTS, ROTATIONS, SimulationResult
+from isolab.engine.scene import SceneBatch
 from isolab.studies.inputs.definitions import definition_json, study_of
+from isolab.studies.inputs.isolators import mount_places
 from isolab.studies.inputs.study import Study, study_from_json, study_labels
 from isolab.studies.results.cases import CaseQueryError
-from isolab.studies.results.store import NETCDF_LOCK, StudyRecord
-from isolab.studies.run.accuracy import recorded_choice, resolved_study
+from isolab.studies.results.store import NETCDF_LOCK, Store, StudyRecord
+from isolab.studies.run.accuracy import recorded_choice, resolved_definition, resolved_study
 
 MAX_RECORDED_SAMPLES = 2_000_000
 """Longest time history (samples) a case is recomputed with: about 200 bytes a sample in memory."""
@@ -81,6 +83,7 @@ class CaseHistory:
     point_displacement: np.ndarray  # (T, p, 3) m
     isolator_names: list[str]
     point_names: list[str]
+    isolator_positions: np.ndarray | None = None  # (n, 3) m, in the scene's floor frame
     stage_names: list[str] | None = None
     stage_position: np.ndarray | None = None  # (m, T) m, along each stage's axis
     stage_velocity: np.ndarray | None = None  # (m, T) m/s
@@ -100,8 +103,6 @@ def case_history(study: Study, case: int, every: int = 1) -> CaseHistory:
     :data:`MAX_RECORDED_SAMPLES` samples, or return more than :data:`MAX_RETURNED_SAMPLES` with every
     ``every``-th kept."""
     sim = study.simulation
-    scene = study.scene
-    assert scene is not None  # a validated study has its scene
     try:
         batch = study.batch([case])
     except ValueError as err:  # a combination of values no scene can have
@@ -125,6 +126,14 @@ def case_history(study: Study, case: int, every: int = 1) -> CaseHistory:
     result = simulate(
         batch, fidelity=fidelity, integrator=integrator, dt=dt, auto_step=sim.auto_step, record=[0]
     )
+    return recorded_history(study, case, batch, result)
+
+
+def recorded_history(study: Study, case: int, batch: SceneBatch, result: SimulationResult) -> CaseHistory:
+    """The :class:`CaseHistory` of case ``case`` of ``study``, from the engine's ``result`` of a one-case
+    ``batch`` of it that recorded its histories (``record=[0]``)."""
+    scene = study.scene
+    assert scene is not None  # a validated study has its scene
     h = result.history
     assert h is not None  # asked for with record=[0]
     n = int(h["n_samples"][0])
@@ -143,6 +152,7 @@ def case_history(study: Study, case: int, every: int = 1) -> CaseHistory:
         point_displacement=np.asarray(h["point_displacement"][0, :n]),
         isolator_names=iso,
         point_names=pts,
+        isolator_positions=np.asarray(batch.iso_pos)[0],
         stage_names=[str(st.name) for st in scene.stages],
         stage_position=stage_s,
         stage_velocity=stage_v,
@@ -156,20 +166,49 @@ def case_history(study: Study, case: int, every: int = 1) -> CaseHistory:
     )
 
 
-def case_study(record: StudyRecord, case: int) -> Study:
+def case_study(record: StudyRecord, case: int, store: Store | None = None) -> Study:
     """The study of a catalog ``record`` as its case ``case`` runs: an accuracy request resolved to the
-    model the runner chose and recorded.
+    model the runner chose and recorded. An optimisation's cases are the candidates it evaluated (their
+    parameter values read from its dataset in ``store``): the study returned lists them, case for case (a
+    robust optimisation's candidate as its nominal case, the tolerances at their nominal values).
 
     Raises:
-        CaseNotFound: the study has no such case.
+        CaseNotFound: the study has no such case (an optimisation: none before its dataset is written).
     """
+    study = study_of(record)
+    if study.goals is not None:
+        return _candidate_study(record, study, case, store)
     if not 0 <= case < record.n_cases:
         raise CaseNotFound(f"study {record.id} has no case {case} (cases 0..{record.n_cases - 1})")
-    study = study_of(record)
     if study.simulation.request is None:
         return study
     choice = recorded_choice(study, record.fidelity, record.integrator, record.dt)
     return _resolved(definition_json(record), choice)
+
+
+def _candidate_study(record: StudyRecord, study: Study, case: int, store: Store | None) -> Study:
+    """An optimisation's study with a list design of the candidates its dataset holds (case ``case`` among
+    them), run at the model its runner recorded."""
+    goals = study.goals
+    assert goals is not None  # an optimisation's study
+    names = [f.name for f in goals.factors]
+    try:
+        if store is None:
+            raise FileNotFoundError
+        with store.open_dataset(record.id) as ds:
+            values = {n: np.asarray(ds[n].values, dtype=np.float64).reshape(-1) for n in names}
+    except (FileNotFoundError, OSError, KeyError):
+        raise CaseNotFound(
+            f"study {record.id} has no stored candidates yet (its dataset is not written)"
+        ) from None
+    n = len(values[names[0]]) if names else 0
+    if not 0 <= case < n:
+        raise CaseNotFound(f"study {record.id} has no case {case} (cases 0..{n - 1})")
+    choice = recorded_choice(study, record.fidelity, record.integrator, record.dt)
+    definition = dict(record.definition) if choice is None else resolved_definition(study, choice)
+    base = {k: v for k, v in definition.items() if k not in ("design", "design_spec")}
+    cases = [{k: float(values[k][i]) for k in names} for i in range(n)]
+    return study_from_json(json.dumps({**base, "design": {"type": "list", "cases": cases}}, sort_keys=True))
 
 
 @functools.lru_cache(maxsize=16)
@@ -214,6 +253,7 @@ def history_json(study_id: str, case: int, h: CaseHistory, every: int) -> dict[s
             p: {a: _series(h.point_displacement[s, j, k]) for k, a in enumerate(axes)}
             for j, p in enumerate(h.point_names)
         },
+        "isolators": isolator_places(h.isolator_names, h.isolator_positions),
         "stages": {
             name: {
                 "position": _series(h.stage_position[j, s]),
@@ -229,6 +269,24 @@ def history_json(study_id: str, case: int, h: CaseHistory, every: int) -> dict[s
         "settling_time": _number(h.settling_time),
         "settled": h.settled,
         "last_move_end": _number(h.last_move_end),
+    }
+
+
+def isolator_places(names: list[str], positions: np.ndarray | None) -> dict[str, dict[str, Any]]:
+    """Each isolator's ``place`` on the base in words (:func:`~isolab.studies.inputs.isolators.mount_places`),
+    its ``position`` (m, the scene's floor frame) and a ``label`` for people: ``front-left (x 0.20 m,
+    y 0.30 m)``. Empty without positions."""
+    if positions is None:
+        return {}
+    xyz = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    places = mount_places(xyz)
+    return {
+        name: {
+            "place": place,
+            "position": [float(v) for v in xyz[j]],
+            "label": f"{place} (x {xyz[j, 0]:.2f} m, y {xyz[j, 1]:.2f} m)",
+        }
+        for j, (name, place) in enumerate(zip(names, places, strict=True))
     }
 
 

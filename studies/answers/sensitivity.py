@@ -50,8 +50,23 @@ from isolab.studies.quantities import case_dims, output_values
 
 CONF_LEVEL = 0.95
 """Confidence level of every interval."""
-NUM_RESAMPLES = 100
-"""Bootstrap resamples behind each confidence interval of the Sobol' estimator."""
+NUM_RESAMPLES = 1000
+"""Bootstrap resamples behind each confidence interval of the Sobol' estimator (fewer for a large study:
+:data:`RESAMPLE_BUDGET`)."""
+MIN_RESAMPLES = 200
+"""Fewest bootstrap resamples of the Sobol' estimator, whatever the study's size."""
+RESAMPLE_BUDGET = 4_000_000
+"""Most base samples x resamples of the Sobol' estimator (its bootstrap holds arrays of that size per
+parameter): a study of more than 4,000 base samples gets fewer resamples, at least :data:`MIN_RESAMPLES`."""
+SOBOL_INTERVAL = (
+    "bootstrap over the base samples, three intervals joined: percentile (2.5 % to 97.5 % quantile of the "
+    "resampled indices), normal (the estimate +-1.96 of their standard deviation) and bootstrap-t "
+    "(studentized by each resample's linearised standard error); from the lowest lower end to the highest "
+    "upper end; conf is the half-width of the smallest interval about the estimate that holds it"
+)
+"""How the Sobol' indices' 95 % intervals are formed (:func:`sobol_estimates`)."""
+DELTA_INTERVAL = "normal approximation: the estimate +-1.96 standard deviations of the bootstrap resamples"
+"""How the delta estimator's 95 % intervals are formed (SALib's own)."""
 DELTA_NUM_RESAMPLES = 50
 """Bootstrap resamples behind each confidence interval of the delta estimator (each one costs a kernel
 density per class: the delta estimator's time is proportional to this)."""
@@ -63,7 +78,7 @@ cost about the square of it; at 2,000 a 10,000-case study of 4 parameters is ana
 minutes, and the confidence intervals are those of 2,000-case estimates."""
 MIN_SALTELLI_BLOCKS = 2
 """Fewest complete Saltelli blocks the Sobol' estimator is run on."""
-CACHE_VERSION = 1
+CACHE_VERSION = 2
 """Part of the cache key: a change of the analysis invalidates what is cached."""
 
 _SALIB_LOCK = threading.Lock()
@@ -94,7 +109,11 @@ class SensitivityResult:
         parameters: parameter names, in design order.
         parameter_long_names, parameter_units: per parameter, its long name and SI unit.
         indices: index name (``S1``, ``ST``, ``delta``) -> one value per parameter (None: not estimable).
-        conf: index name -> half-width of its 95 % confidence interval, per parameter.
+        conf: index name -> half-width of its 95 % confidence interval, per parameter (an interval about
+            the index, holding ``intervals`` where those are given).
+        intervals: Sobol' indices: index name -> (lower, upper) of its 95 % interval per parameter, as
+            :data:`SOBOL_INTERVAL` says; None for the delta estimator.
+        interval_method: how the intervals are formed, in words.
         second_order: ``{"pairs": [[a, b]...], "S2": [...], "S2_conf": [...]}`` for a saltelli design with
             second order, else None.
         n_cases: cases the indices were estimated from.
@@ -122,6 +141,8 @@ class SensitivityResult:
     second_order: dict[str, Any] | None = None
     notes: list[str] = field(default_factory=list)
     conf_level: float = CONF_LEVEL
+    intervals: dict[str, list[list[float | None]]] | None = None
+    interval_method: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able dict (missing values as None, never NaN), with ``index_meanings``."""
@@ -263,6 +284,110 @@ def _check_varies(y: np.ndarray, output: str) -> None:
         )
 
 
+def sobol_resamples(n_base: int) -> int:
+    """Bootstrap resamples of the Sobol' estimator for ``n_base`` base samples: :data:`NUM_RESAMPLES`,
+    fewer when ``n_base`` x resamples exceeds :data:`RESAMPLE_BUDGET`, never under :data:`MIN_RESAMPLES`."""
+    return int(max(MIN_RESAMPLES, min(NUM_RESAMPLES, RESAMPLE_BUDGET // max(int(n_base), 1))))
+
+
+def studentized_intervals(
+    y: np.ndarray, d: int, resamples: int, second_order: bool = False
+) -> dict[str, np.ndarray]:
+    """Bootstrap-t 95 % intervals ((d, 2): lower, upper) of S1 (Saltelli 2010) and ST (Jansen) from the
+    outputs ``y`` of a Saltelli design over ``d`` parameters (blocks of ``d + 2``, ``2d + 2`` with
+    ``second_order``: A, A with column j from B..., B)).
+
+    Each index is a ratio of block means, linearised per block into its influence z_i (the standard error
+    is sd(z) / sqrt(N)); each of ``resamples`` draws of N blocks with replacement (seed :data:`SEED`) gives
+    t = (index* - index) / se*, and the interval is index - t_(97.5 %) se .. index - t_(2.5 %) se. Where a
+    few blocks carry most of an index (a total index near zero whose differences are rare jumps), the
+    resamples that miss them have a small se*, so the upper end reaches further than a percentile
+    interval's.
+    """
+    y = np.asarray(y, dtype=np.float64).reshape(-1)
+    block = (2 * d + 2) if second_order else (d + 2)
+    n = y.size // block
+    rows = (y - y.mean()) / (y.std() or 1.0)
+    table = rows.reshape(n, block)
+    a, ab, b = table[:, 0], table[:, 1 : d + 1], table[:, -1]
+    pick = np.random.default_rng(SEED).integers(n, size=(int(resamples), n))
+    tail = 100.0 * (1.0 - CONF_LEVEL) / 2
+    out: dict[str, np.ndarray] = {"S1": np.full((d, 2), np.nan), "ST": np.full((d, 2), np.nan)}
+
+    def ratio(num: np.ndarray, aa: np.ndarray, bb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        both = np.concatenate([aa, bb], axis=-1)
+        mu, var = both.mean(axis=-1, keepdims=True), both.var(axis=-1, keepdims=True)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            index = num.mean(axis=-1, keepdims=True) / var
+            share = 0.5 * ((aa - mu) ** 2 + (bb - mu) ** 2)
+            influence = (num - index * share) / var
+        return index[..., 0], influence.std(axis=-1, ddof=1) / math.sqrt(n)
+
+    for j in range(d):
+        for k, num in (("S1", b * (ab[:, j] - a)), ("ST", 0.5 * (a - ab[:, j]) ** 2)):
+            index, se = ratio(num, a, b)
+            star, se_star = ratio(num[pick], a[pick], b[pick])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = (star - index) / se_star
+            t = t[np.isfinite(t)]
+            if t.size < 2 or not (np.isfinite(se) and se > 0):
+                continue
+            t_lo, t_hi = np.percentile(t, [tail, 100.0 - tail])
+            out[k][j] = (index - t_hi * se, index - t_lo * se)
+    return out
+
+
+def sobol_estimates(
+    y: np.ndarray, d: int, second_order: bool = False, resamples: int | None = None
+) -> dict[str, np.ndarray]:
+    """Sobol' indices of ``y``, the outputs of a Saltelli design over ``d`` parameters in its order
+    (blocks of ``d + 2`` cases, ``2d + 2`` with ``second_order``), by ``SALib.analyze.sobol``: S1
+    (Saltelli 2010) and ST (Jansen), with ``S1_conf`` and ``ST_conf`` the half-widths of their 95 %
+    intervals formed as :data:`SOBOL_INTERVAL` says, and ``S1_interval`` and ``ST_interval`` ((d, 2):
+    lower, upper) the intervals themselves; with ``second_order``, S2 and S2_conf as SALib gives them
+    (normal approximation). The bootstrap (``resamples``, default :func:`sobol_resamples`) is seeded by
+    :data:`SEED`; the indices do not depend on it.
+    """
+    from SALib.analyze import sobol as salib_sobol
+    from scipy.stats import norm
+
+    y = np.asarray(y, dtype=np.float64).reshape(-1)
+    n_base = y.size // ((2 * d + 2) if second_order else (d + 2))
+    problem = {"num_vars": d, "names": [f"x{i}" for i in range(d)], "bounds": [[0.0, 1.0]] * d}
+    count = sobol_resamples(n_base) if resamples is None else int(resamples)
+    with _quiet_salib(SEED):
+        si = salib_sobol.analyze(
+            problem,
+            y,
+            calc_second_order=second_order,
+            num_resamples=count,
+            conf_level=CONF_LEVEL,
+            seed=SEED,
+            keep_resamples=True,
+        )
+    z = float(norm.ppf(0.5 + CONF_LEVEL / 2))
+    tail = 100.0 * (1.0 - CONF_LEVEL) / 2
+    studentized = studentized_intervals(y, d, count, second_order)
+    out: dict[str, np.ndarray] = {}
+    for k in ("S1", "ST"):
+        est = np.asarray(si[k], dtype=np.float64)
+        boot = np.asarray(si[f"{k}_conf_all"], dtype=np.float64).reshape(-1, d)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # an index SALib could not resample: NaN
+            sd = np.nanstd(boot, axis=0, ddof=1)
+            q_lo, q_hi = np.nanpercentile(boot, [tail, 100.0 - tail], axis=0)
+        t_lo, t_hi = studentized[k].T
+        lower = np.fmin(np.minimum(est - z * sd, q_lo), t_lo)
+        upper = np.fmax(np.maximum(est + z * sd, q_hi), t_hi)
+        out[k] = est
+        out[f"{k}_conf"] = np.maximum(est - lower, upper - est)
+        out[f"{k}_interval"] = np.column_stack([lower, upper])
+    if second_order:
+        out["S2"] = np.asarray(si["S2"], dtype=np.float64)
+        out["S2_conf"] = np.asarray(si["S2_conf"], dtype=np.float64)
+    return out
+
+
 def _sobol(
     y: np.ndarray,
     bad: np.ndarray,
@@ -272,8 +397,6 @@ def _sobol(
     notes: list[str],
     common: dict,
 ) -> SensitivityResult:
-    from SALib.analyze import sobol as salib_sobol
-
     d = len(names)
     block = (2 * d + 2) if second_order else (d + 2)
     if y.size % block:
@@ -299,16 +422,7 @@ def _sobol(
         )
     yk = y.reshape(n_blocks, block)[keep].reshape(-1)
     _check_varies(yk, output)
-    problem = {"num_vars": d, "names": names, "bounds": [[0.0, 1.0]] * d}
-    with _quiet_salib(SEED):
-        si = salib_sobol.analyze(
-            problem,
-            yk,
-            calc_second_order=second_order,
-            num_resamples=NUM_RESAMPLES,
-            conf_level=CONF_LEVEL,
-            seed=SEED,
-        )
+    si = sobol_estimates(yk, d, second_order)
     s2 = None
     if second_order:
         pairs = [(j, k) for j in range(d) for k in range(j + 1, d)]
@@ -324,6 +438,8 @@ def _sobol(
         method_name=METHODS["sobol"],
         indices={"S1": _plain(si["S1"]), "ST": _plain(si["ST"])},
         conf={"S1": _plain(si["S1_conf"]), "ST": _plain(si["ST_conf"])},
+        intervals={k: [_plain(row) for row in si[f"{k}_interval"]] for k in ("S1", "ST")},
+        interval_method=SOBOL_INTERVAL,
         n_cases=int(yk.size),
         n_excluded=n_excluded,
         n_dropped=int(n_dropped),
@@ -399,6 +515,7 @@ def _delta(
         method_name=METHODS["delta"],
         indices={"delta": _plain(si["delta_raw"]), "S1": _plain(si["S1"])},
         conf={"delta": _plain(si["delta_raw_conf"]), "S1": _plain(si["S1_conf"])},
+        interval_method=DELTA_INTERVAL,
         n_cases=n_keep,
         n_excluded=int(bad.sum()),
         notes=notes,

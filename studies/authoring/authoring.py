@@ -37,6 +37,10 @@ MAX_TEXT_CHARS = 1_000_000
 """Longest study text :func:`check_text` reads."""
 MAX_DEPTH = 64
 """Deepest nesting of a study text (a study and its scene are about 6 levels deep)."""
+MAX_NODES = 500_000
+"""Most values and keys a study text may hold with its YAML aliases expanded (about as many as a text of
+:data:`MAX_TEXT_CHARS` holds without aliases): aliases are accepted, as the command line accepts them, but
+a few lines of aliases of aliases cannot expand to more."""
 
 _EXAMPLE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,99}$")
 _SCENE_FILE_LINE = re.compile(r"^scene_file:\s*(?P<file>[^#\s]+)\s*(#.*)?$", re.MULTILINE)
@@ -114,19 +118,44 @@ def _line_of(root: yaml.Node | None, loc: Loc) -> int | None:
     return line
 
 
-def _depth(node: yaml.Node) -> int:
-    """Nesting depth of a composed document, without recursion."""
-    deepest, stack = 0, [(node, 1)]
+def expanded_size(root: yaml.Node) -> tuple[int, int] | None:
+    """(nodes, depth) of a composed document once its aliases are expanded (``*name`` repeats the node of
+    ``&name`` in full, as the loaded data does), counted without expanding anything: each node once, its
+    size and depth remembered. None when an alias sits inside the node it names (the data would be
+    infinite)."""
+    nodes: dict[int, int] = {}
+    depth: dict[int, int] = {}
+    open_: set[int] = set()
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
     while stack:
-        n, d = stack.pop()
-        deepest = max(deepest, d)
-        if d > MAX_DEPTH:
-            break
-        if isinstance(n, yaml.MappingNode):
-            stack.extend((v, d + 1) for _, v in n.value)
-        elif isinstance(n, yaml.SequenceNode):
-            stack.extend((v, d + 1) for v in n.value)
-    return deepest
+        node, children_done = stack.pop()
+        key = id(node)
+        if children_done:
+            kids = _children(node)
+            nodes[key] = 1 + sum(nodes[id(k)] for k in kids)
+            depth[key] = 1 + max((depth[id(k)] for k in kids), default=0)
+            open_.discard(key)
+            continue
+        if key in nodes:
+            continue
+        if key in open_:
+            return None
+        open_.add(key)
+        stack.append((node, True))
+        for kid in _children(node):
+            if id(kid) in open_:
+                return None
+            if id(kid) not in nodes:
+                stack.append((kid, False))
+    return nodes[id(root)], depth[id(root)]
+
+
+def _children(node: yaml.Node) -> list[yaml.Node]:
+    if isinstance(node, yaml.MappingNode):
+        return [n for kv in node.value for n in kv]
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    return []
 
 
 def flow_depth(text: str) -> int:
@@ -190,8 +219,12 @@ def duplicate_key(root: yaml.Node | None) -> tuple[str, int, int] | None:
     """(key, line, first line) of the first key written twice in one mapping of a composed document,
     else None (YAML would keep the last silently)."""
     stack = [root] if root is not None else []
+    seen_nodes: set[int] = set()
     while stack:
         node = stack.pop()
+        if id(node) in seen_nodes:
+            continue  # an aliased node, already read
+        seen_nodes.add(id(node))
         if isinstance(node, yaml.MappingNode):
             seen: dict[str, int] = {}
             for key, value in node.value:
@@ -206,22 +239,14 @@ def duplicate_key(root: yaml.Node | None) -> tuple[str, int, int] | None:
     return None
 
 
-def _no_aliases(text: str) -> int | None:
-    """Line of the first YAML alias (``*name``) in ``text``, else None: aliases let a few lines expand
-    to an exponential amount of data, so a study text may not use them."""
-    for event in yaml.parse(text, Loader=yaml.SafeLoader):
-        if isinstance(event, yaml.AliasEvent):
-            return event.start_mark.line + 1 if event.start_mark is not None else 1
-    return None
-
-
 def parse_text(text: str, prefix: Loc) -> tuple[dict[str, Any], yaml.Node | None]:
     """The mapping a YAML (or JSON) study text holds, as JSON data, and its composed document (for line
     numbers).
 
     Raises:
-        DefinitionError: the text is not YAML, not a mapping, uses aliases, nests too deep or holds values
-            JSON has no form for (dates, binary); each detail has the ``line`` it points at.
+        DefinitionError: the text is not YAML, not a mapping, nests too deep, expands past
+            :data:`MAX_NODES` by its aliases or holds values JSON has no form for (dates, binary); each
+            detail has the ``line`` it points at.
     """
     if len(text) > MAX_TEXT_CHARS:
         raise DefinitionError([detail(prefix, f"the text is longer than {MAX_TEXT_CHARS} characters")])
@@ -229,14 +254,23 @@ def parse_text(text: str, prefix: Loc) -> tuple[dict[str, Any], yaml.Node | None
     if too_deep is not None:
         raise DefinitionError([too_deep])
     try:
-        alias_line = _no_aliases(text)
-        if alias_line is not None:
-            raise DefinitionError(
-                [{**detail(prefix, "YAML aliases (*name) are not accepted in a study"), "line": alias_line}]
-            )
         root = yaml.compose(text, Loader=yaml.SafeLoader)
-        if root is not None and _depth(root) > MAX_DEPTH:
+        size = expanded_size(root) if root is not None else (0, 0)
+        if size is None:
+            raise DefinitionError([detail(prefix, "a YAML alias (*name) sits inside the node it names")])
+        if size[1] > MAX_DEPTH:
             raise DefinitionError([detail(prefix, f"the text nests deeper than {MAX_DEPTH} levels")])
+        if size[0] > MAX_NODES:
+            raise DefinitionError(
+                [
+                    detail(
+                        prefix,
+                        f"the text holds {size[0]:,} values and keys once its YAML aliases (*name) are "
+                        f"expanded, more than {MAX_NODES:,}",
+                        "too_large",
+                    )
+                ]
+            )
         twice = duplicate_key(root)
         if twice is not None:
             key, line, first = twice

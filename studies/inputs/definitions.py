@@ -148,8 +148,12 @@ def case_count_bound(body: Any, prefix: Loc | None = None) -> tuple[int, Loc] | 
     if kind == "list":
         cases = design.get("cases")
         return (len(cases), [*pre, "design", "cases"]) if isinstance(cases, list) else None
-    if kind == "optimize":  # an optimiser runs at most its budget
+    if kind == "optimize":  # an optimiser runs at most its budget (a robust one: each candidate's draws too)
         n = _count(design.get("budget"))
+        robust = design.get("robust")
+        draws = _count(robust.get("samples")) if isinstance(robust, dict) else None
+        if n is not None and draws is not None and draws >= 0:
+            n *= draws + 1
         return None if n is None else (n, [*pre, "design", "budget"])
     parameters = body.get("parameters")
     if parameters is None:

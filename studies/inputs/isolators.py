@@ -86,6 +86,29 @@ def mount_labels(count: int) -> list[str]:
     return [f"mount_{j}" for j in range(int(count))]
 
 
+CENTRED_SHARE = 0.25
+"""A mount within this share of the mounts' half-spread of their centre along an axis is named by the
+other axis alone (``left``, ``front``), or ``centre``."""
+
+
+def mount_places(positions: ArrayLike) -> list[str]:
+    """Where each mount stands on the base, in words, from its (n, 3) positions (m, floor frame: Y along
+    the machine): ``front-left`` for the smallest X and Y of the layout, ``back-right`` for the largest
+    (-Y is the front, -X the left), ``front`` or ``left`` for a mount centred along the other axis,
+    ``centre`` for one centred along both. Two mounts at one corner are both named by it."""
+    xy = np.asarray(positions, dtype=np.float64).reshape(-1, 3)[:, :2]
+    if xy.shape[0] == 0:
+        return []
+    offset = xy - xy.mean(axis=0)
+    half = np.maximum(np.abs(offset).max(axis=0), 1e-12)
+    places = []
+    for dx, dy in offset:
+        depth = "" if abs(dy) <= CENTRED_SHARE * half[1] else ("front" if dy < 0 else "back")
+        side = "" if abs(dx) <= CENTRED_SHARE * half[0] else ("left" if dx < 0 else "right")
+        places.append("-".join(w for w in (depth, side) if w) or "centre")
+    return places
+
+
 class CollinearIsolatorsError(ValueError):
     """The mounts lie on one line (or at one point): they cannot carry a rigid base."""
 

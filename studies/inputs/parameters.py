@@ -23,6 +23,7 @@ ones become per-case arrays that :func:`studies.inputs.scenes.build_batch` reads
 from __future__ import annotations
 
 import copy
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, cast
 
@@ -66,7 +67,7 @@ from isolab.studies.inputs.schema.scene_paths import (
     stage_profile,
 )
 from isolab.studies.questions.designs import Design, Factor
-from isolab.studies.questions.tolerances import Spread, draw, resolve_spread
+from isolab.studies.questions.tolerances import Spread, Tolerance, draw, resolve_spread
 from isolab.studies.units import si_unit
 
 CATEGORICAL = "categorical"
@@ -406,6 +407,7 @@ _NOT_DRAWN = (
     "population",
     "plateau",
     "stall",
+    "robust",
     "cases",
     "second_order",
 )
@@ -430,56 +432,23 @@ def drawn_design(
     if spec.samples is None:
         raise ValueError("design.samples: a monte_carlo design needs the number of cases to draw")
     n = int(spec.samples)
-    fixed: dict[str, Factor] = {}
-    for i, (f, t) in enumerate(zip(factors, targets, strict=True)):
+    for i, f in enumerate(factors):
         if f.levels is None or len(f.levels) != 1:
             raise ValueError(
                 f"parameters[{i}]: a monte_carlo design draws its cases from the tolerances; a parameter "
                 "sets a nominal value, with one value (values: [...])"
             )
-        fixed[t.path] = f
     all_targets, names = list(targets), [f.name for f in factors]
     # each factor has one level (checked above)
     values: dict[str, np.ndarray] = {f.name: np.repeat(cast(np.ndarray, f.levels), n) for f in factors}
     shown = {f.name: f.display_unit or f.unit for f in factors if not f.categorical}
-    spreads = []
-    for path, tolerance in block.items():
-        loc = f"{where}.{path}"
-        try:
-            t = resolve(path, scene)
-        except ValueError as err:
-            raise ValueError(f"{loc}: {err}") from None
-        if t.categorical or t.path.split(".")[0] == "simulation":
-            raise ValueError(
-                f"{loc}: {t.path} is a choice or a setting, not a built dimension; it has no spread"
-            )
-        if t.path in fixed:
-            name, nominal = fixed[t.path].name, float(cast(np.ndarray, fixed[t.path].levels)[0])
-        else:
-            for other in all_targets:
-                if set(t.writes) & set(other.writes):
-                    raise ValueError(f"{loc}: {t.path} sets what {other.path} already sets")
-            try:
-                nominal = nominal_value(scene, t)
-            except ValueError as err:
-                raise ValueError(f"{loc}: {err}") from None
-            name = t.name
-            if name in names:
-                raise ValueError(f"{loc}: its name {name!r} is already a parameter's")
-            all_targets.append(t)
-            names.append(name)
-            shown[name] = t.unit
-        spreads.append(
-            resolve_spread(
-                tolerance,
-                name=name,
-                path=t.path,
-                unit=t.unit,
-                dimension=t.dimension,
-                nominal=nominal,
-                where=loc,
-            )
-        )
+    nominals = {
+        t.path: (f.name, float(cast(np.ndarray, f.levels)[0])) for t, f in zip(targets, factors, strict=True)
+    }
+    extra, spreads = tolerance_spreads(scene, block, where, targets, nominals)
+    all_targets += extra
+    names += [t.name for t in extra]
+    shown.update({t.name: t.unit for t in extra})
     x = draw(spreads, n, spec.seed, spec.sampling or "sobol")
     for j, sp in enumerate(spreads):
         values[sp.name] = x[:, j]
@@ -494,3 +463,92 @@ def drawn_design(
         scales={name: "linear" for name in shown},
     )
     return all_targets, design, spreads
+
+
+def tolerance_spreads(
+    scene: Scene,
+    block: Mapping[str, Tolerance],
+    where: str,
+    targets: list[Target],
+    nominals: Mapping[str, tuple[str, float]],
+) -> tuple[list[Target], list[Spread]]:
+    """The spreads of a ``tolerances`` block about their nominal values, and the targets of the paths the
+    study's parameters (``targets``) do not already set.
+
+    Args:
+        scene: the study's scene (the nominal value of a path no parameter sets).
+        block: the tolerances, path -> :class:`~studies.questions.tolerances.Tolerance`.
+        where: the block's place in the file (``tolerances`` or ``scene.tolerances``), for messages.
+        targets: the study's parameters.
+        nominals: a parameter's path -> (its name, the nominal value of its spread, SI).
+
+    Raises:
+        ValueError: ``<where>.<path>: reason``.
+    """
+    all_targets = list(targets)
+    names = [name for name, _ in nominals.values()]
+    spreads = []
+    for path, tolerance in block.items():
+        loc = f"{where}.{path}"
+        try:
+            t = resolve(path, scene)
+        except ValueError as err:
+            raise ValueError(f"{loc}: {err}") from None
+        if t.categorical or t.path.split(".")[0] == "simulation":
+            raise ValueError(
+                f"{loc}: {t.path} is a choice or a setting, not a built dimension; it has no spread"
+            )
+        if t.path in nominals:
+            name, nominal = nominals[t.path]
+        else:
+            for other in all_targets:
+                if set(t.writes) & set(other.writes):
+                    raise ValueError(f"{loc}: {t.path} sets what {other.path} already sets")
+            try:
+                nominal = nominal_value(scene, t)
+            except ValueError as err:
+                raise ValueError(f"{loc}: {err}") from None
+            name = t.name
+            if name in names:
+                raise ValueError(f"{loc}: its name {name!r} is already a parameter's")
+            all_targets.append(t)
+            names.append(name)
+        spreads.append(
+            resolve_spread(
+                tolerance,
+                name=name,
+                path=t.path,
+                unit=t.unit,
+                dimension=t.dimension,
+                nominal=nominal,
+                where=loc,
+            )
+        )
+    return all_targets[len(targets) :], spreads
+
+
+def robust_spreads(scene: Scene, where: str, targets: list[Target], factors: list[Factor]) -> list[Spread]:
+    """The spreads a robust optimize design draws each candidate's cloud from: the tolerances block's,
+    an optimised parameter's about the middle of its range (each candidate re-centres it on its own value,
+    :meth:`studies.questions.tolerances.Spread.about`), any other path's about the scene's value.
+
+    Raises:
+        ValueError: ``design.robust: ...`` without a tolerances block, else ``<where>.<path>: reason``
+            (a path that is not a built dimension, a spread that is not valid at an end of its range).
+    """
+    block = scene.tolerances or {}
+    if not block:
+        raise ValueError(
+            "design.robust: a robust design judges each candidate on draws of its tolerances; give a "
+            "tolerances block in the study or its scene"
+        )
+    ranges = {f.name: (float(cast(float, f.low)), float(cast(float, f.high))) for f in factors}
+    nominals = {t.path: (f.name, 0.5 * sum(ranges[f.name])) for t, f in zip(targets, factors, strict=True)}
+    _, spreads = tolerance_spreads(scene, block, where, targets, nominals)
+    for sp in spreads:
+        for end in ranges.get(sp.name, ()):  # an optimised parameter's spread at each end of its range
+            try:
+                sp.about(end)
+            except ValueError as err:
+                raise ValueError(f"{where}.{sp.path}: at {end:g} {sp.unit}, {err}") from None
+    return spreads

@@ -27,8 +27,9 @@ from pydantic import Field, PrivateAttr, ValidationError, model_validator
 from isolab.engine import modal, model
 from isolab.engine.results import DOF_NAMES
 from isolab.engine.scene import SceneBatch, concat
+from isolab.studies.inputs.catalogues import inline_catalogue_file
 from isolab.studies.inputs.isolators import mount_labels
-from isolab.studies.inputs.parameters import Target, apply, drawn_design, resolve, scene_dict
+from isolab.studies.inputs.parameters import Target, apply, drawn_design, resolve, robust_spreads, scene_dict
 from isolab.studies.inputs.scenes import build_batch, check_scene
 from isolab.studies.inputs.schema import (
     DesignSpec,
@@ -159,12 +160,14 @@ class Study(InputModel):
             raise ValueError(
                 f"design.sampling: only a monte_carlo design takes it (type: {self.design_spec.type})"
             )
+        where = "tolerances" if self.tolerances is not None else "scene.tolerances"
         if self.design_spec.type == "monte_carlo":
-            where = "tolerances" if self.tolerances is not None else "scene.tolerances"
             self._targets, self._design, self._spreads = drawn_design(
                 self.scene, self.design_spec, where, targets, factors
             )
         else:
+            if self._goals is not None and self._goals.robust is not None:
+                self._spreads = robust_spreads(self.scene, where, targets, factors)
             self._design = _make_design(self.design_spec, factors, targets)
         self._groups = {}
         return self
@@ -197,14 +200,19 @@ class Study(InputModel):
     @property
     def spreads(self) -> list[Spread]:
         """A monte_carlo design's tolerances resolved in SI about their nominal values, in the order of its
-        drawn parameters (:class:`~studies.questions.tolerances.Spread`); else empty."""
+        drawn parameters (:class:`~studies.questions.tolerances.Spread`), or a robust optimize design's
+        (an optimised parameter's about the middle of its range, re-centred on each candidate); else
+        empty."""
         return list(self._spreads)
 
     @property
     def planned_cases(self) -> int:
         """Cases the study will run: its design's, or an optimize design's budget (its :meth:`design` then
-        holds only the few cases the study is checked with: every parameter at its low, high and middle)."""
-        return self._goals.budget if self._goals is not None else self.n_cases
+        holds only the few cases the study is checked with: every parameter at its low, high and middle;
+        a robust one runs each candidate's nominal case and draws)."""
+        if self._goals is not None:
+            return self._goals.budget * self._goals.cases_per_candidate
+        return self.n_cases
 
     @property
     def targets(self) -> list[Target]:
@@ -451,7 +459,16 @@ def _written_unit(values: list[Any], dimension: str) -> str:
     return ""
 
 
-_OPTIMIZE_FIELDS = ("objective", "constraints", "algorithm", "budget", "population", "plateau", "stall")
+_OPTIMIZE_FIELDS = (
+    "objective",
+    "constraints",
+    "algorithm",
+    "budget",
+    "population",
+    "plateau",
+    "stall",
+    "robust",
+)
 
 
 def _make_design(spec: DesignSpec, factors: list[Factor], targets: list[Target]) -> Design:
@@ -605,8 +622,8 @@ def load_scene(source: str | Path | Mapping[str, Any]) -> Scene:
     """A validated :class:`~studies.inputs.schema.Scene` from a YAML/JSON file, YAML/JSON text or a dict."""
     if isinstance(source, Mapping):
         return validate_scene(dict(source))
-    data, _ = read_definition(source)
-    return validate_scene(data)
+    data, here = read_definition(source)
+    return validate_scene(inline_catalogue_file(data, here))
 
 
 def load_study(source: str | Path | Mapping[str, Any], base_dir: str | Path | None = None) -> Study:
@@ -626,7 +643,8 @@ def load_study(source: str | Path | Mapping[str, Any], base_dir: str | Path | No
         scene_path = here / str(data["scene_file"])
         if not scene_path.is_file():
             raise FileNotFoundError(f"scene_file: no file {scene_path}")
-        data["scene"], _ = read_definition(scene_path)
+        data["scene"], here = read_definition(scene_path)
+    data["scene"] = inline_catalogue_file(data.get("scene"), here)
     return validate_study(data)
 
 

@@ -14,6 +14,11 @@ criterion of the study's ``criteria:`` block is met: one constraint per criterio
 ``<quantity> <= <value>`` / ``<quantity> >= <value>`` with the value in the quantity's units (SI when
 bare).
 
+A ``robust`` block (``robust: {samples: 32, require: 95 %, statistic: mean | quantile, quantile: 90 %}``)
+judges every candidate on its tolerance cloud instead of its nominal case (:mod:`studies.run.robust`):
+the objective is the statistic of its draws (:func:`robust_values`) and the constraints become one chance
+constraint, the share of the draws that meet every constraint at least ``require``.
+
 :func:`plan_goals` checks the names against the outputs a study's dataset will hold, without running
 anything: it reads them from the output catalogue (:data:`isolab.engine.results.OUTPUTS`) and the scene's
 labels (:func:`quantity_layout`). :func:`goal_values` turns a dataset of evaluated cases into the objective
@@ -110,6 +115,116 @@ class Goals:
     stall: int | None = None
     """Stop once this many generations in a row improve the best feasible objective by less than
     :data:`STALL_IMPROVEMENT` (None: the budget alone stops the run)."""
+
+    robust: Robust | None = None
+    """A robust design's cloud and chance constraint (None: each candidate judged on its nominal case)."""
+
+    @property
+    def told_constraints(self) -> tuple[str, ...]:
+        """The columns of ``G`` the optimiser is told: :attr:`constraint_names`, or a robust design's one
+        chance constraint."""
+        if self.robust is None:
+            return self.constraint_names
+        return (f"probability_meets_criteria >= {self.robust.require:g}",)
+
+    @property
+    def cases_per_candidate(self) -> int:
+        """Cases simulated per candidate: 1, or a robust design's nominal case and its draws."""
+        return 1 if self.robust is None else self.robust.samples + 1
+
+
+STATISTICS = ("mean", "quantile")
+"""What a robust design minimises over each candidate's cloud."""
+
+
+@dataclass(frozen=True)
+class Robust:
+    """A robust design: each candidate judged on ``samples`` draws of its tolerances, the same unit-cube
+    points for every candidate (common random numbers, drawn by ``sampling`` from the design's seed).
+
+    Attributes:
+        samples: draws per candidate.
+        require: the least share of the draws that must meet every constraint (the chance constraint, 1).
+        statistic: ``mean`` or ``quantile`` of each objective over the draws that ended ok.
+        quantile: the share (1) of the quantile statistic: of the value to minimise, so ``maximize`` with
+            quantile 0.9 is the value 90 % of the draws reach or exceed.
+        sampling: ``sobol`` (scrambled Sobol' points) or ``random``.
+    """
+
+    samples: int
+    require: float
+    statistic: str = "mean"
+    quantile: float = 0.9
+    sampling: str = "sobol"
+
+    @property
+    def text(self) -> str:
+        stat = "mean" if self.statistic == "mean" else f"{self.quantile:.3g} quantile"
+        return (
+            f"{stat} over {self.samples} draws, probability of meeting the constraints >= {self.require:.3g}"
+        )
+
+    def described(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"samples": self.samples, "require": self.require, "statistic": self.statistic}
+        if self.statistic == "quantile":
+            out["quantile"] = self.quantile
+        return {**out, "sampling": self.sampling}
+
+
+def _share(value: Any, where: str, *, low_open: bool, high_closed: bool) -> float:
+    """A share written as a fraction or with ``%``, in (0, 1] or (0, 1)."""
+    share = float(f"{to_si(value, 'dimensionless', where):.12g}")  # 95 % is 0.95, not 0.9500000000000001
+    if not (0.0 < share < 1.0 or (high_closed and share == 1.0)) or (not low_open and share == 0.0):
+        upper = "100 %" if high_closed else "below 100 %"
+        raise ValueError(f"{where}: a share above 0 and up to {upper} (e.g. 95 % or 0.95), got {value!r}")
+    return float(share)
+
+
+def plan_robust(spec: Any, constraints: tuple[Constraint, ...]) -> Robust:
+    """The :class:`Robust` of a design's ``robust`` block (:class:`studies.inputs.schema.RobustSpec`).
+
+    Raises:
+        ValueError: ``design.robust.<field>: reason``, or ``design.constraints`` when there is nothing for
+            the chance constraint to hold.
+    """
+    if not constraints:
+        raise ValueError(
+            "design.constraints: a robust design's chance constraint is the probability of meeting the "
+            "design's constraints; give at least one (e.g. constraints: [criteria])"
+        )
+    require = _share(spec.require, "design.robust.require", low_open=True, high_closed=True)
+    if spec.statistic != "quantile" and spec.quantile is not None:
+        raise ValueError("design.robust.quantile: only statistic: quantile takes it")
+    quantile = 0.9
+    if spec.quantile is not None:
+        quantile = _share(spec.quantile, "design.robust.quantile", low_open=True, high_closed=False)
+    return Robust(int(spec.samples), require, spec.statistic, quantile, spec.sampling)
+
+
+def robust_values(F: np.ndarray, G: np.ndarray, robust: Robust) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Candidates judged on their clouds: ``F`` (P, N, objectives) and ``G`` (P, N, constraints) of each
+    candidate's N draws (:func:`goal_values`, column 0 the case's own ``case_ok``) -> ``(F, G, meets)``.
+
+    ``F`` (P, objectives): the statistic (``robust.statistic``) of each objective over the draws that ended
+    ok, :data:`PENALTY` when none did. ``G`` (P, 1): ``(require - p) / require``, p the share of the N
+    draws that meet every constraint (a draw that failed meets none): met (<= 0) when p >= require.
+    ``meets`` (P, N): which draws meet every constraint.
+    """
+    F = np.asarray(F, dtype=np.float64)
+    G = np.asarray(G, dtype=np.float64)
+    ok = G[..., 0] <= 0.0
+    meets = (G <= 0.0).all(axis=2)
+    p = meets.mean(axis=1)
+    values = np.where(ok[..., None], F, np.nan)
+    stat = np.full((F.shape[0], F.shape[2]), PENALTY)
+    some = ok.any(axis=1)
+    if some.any():
+        if robust.statistic == "mean":
+            stat[some] = np.nanmean(values[some], axis=1)
+        else:
+            stat[some] = np.nanquantile(values[some], robust.quantile, axis=1)
+    chance = np.asarray((robust.require - p) / robust.require, dtype=np.float64)[:, None]
+    return stat, chance, np.asarray(meets, dtype=bool)
 
 
 QuantityLayout = dict[str, dict[str, list[str]]]
@@ -279,6 +394,7 @@ def plan_goals(
         tuple(factors),
         float(plateau),
         None if spec.stall is None else int(spec.stall),
+        None if spec.robust is None else plan_robust(spec.robust, constraints),
     )
 
 

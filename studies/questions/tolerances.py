@@ -35,7 +35,7 @@ import json
 import math
 import warnings
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import numpy as np
@@ -107,6 +107,8 @@ class Spread:
         nominal: the nominal value (SI).
         sigma: the standard deviation (SI; NaN for uniform).
         low, high: the bounds (SI; -inf/inf for an untruncated normal or lognormal).
+        within: the half-width as written, in SI (inf when not given).
+        shares: whether ``sigma`` and ``within`` were written as a share of the nominal (``%``).
     """
 
     name: str
@@ -117,6 +119,33 @@ class Spread:
     sigma: float
     low: float
     high: float
+    within: float = math.inf
+    shares: tuple[bool, bool] = (False, False)
+
+    def about(self, nominal: float) -> Spread:
+        """The same tolerance about another nominal value (SI): an amount written as a share of the
+        nominal (``%``) scales with it, one written in units stays.
+
+        Raises:
+            ValueError: a lognormal spread about a nominal that is not positive, or a share of a zero
+                nominal.
+        """
+        if nominal == self.nominal:
+            return self
+        if not np.isfinite(nominal):
+            raise ValueError("the nominal value is not finite")
+        if (self.shares[0] or self.shares[1]) and nominal == 0.0:
+            raise ValueError("a share of the nominal value means nothing for a nominal of 0")
+        scale = abs(nominal / self.nominal) if self.nominal != 0.0 else 1.0
+        sigma = self.sigma * scale if self.shares[0] else self.sigma
+        within = self.within * scale if self.shares[1] else self.within
+        low, high = nominal - within, nominal + within
+        if self.distribution == "lognormal":
+            if nominal <= 0.0:
+                raise ValueError(f"a lognormal spread needs a positive nominal, got {nominal:g}")
+            if math.isfinite(within):
+                low = max(low, 0.0)  # the logarithm has no lower end: truncated at zero
+        return replace(self, nominal=float(nominal), sigma=sigma, low=low, high=high, within=within)
 
     def from_unit(self, u: np.ndarray) -> np.ndarray:
         """Map ``u`` in (0, 1) to values by the inverse distribution function (SI)."""
@@ -203,7 +232,7 @@ def resolve_spread(
     sigma = float("nan")
     if tolerance.sigma is not None:
         sigma = _amount(tolerance.sigma, nominal, dimension, f"{where}.sigma")
-    low, high = -np.inf, np.inf
+    low, high, w = -np.inf, np.inf, math.inf
     if tolerance.within is not None:
         w = _amount(tolerance.within, nominal, dimension, f"{where}.within")
         low, high = nominal - w, nominal + w
@@ -214,7 +243,14 @@ def resolve_spread(
             )
         if tolerance.within is not None and low <= 0.0:
             low = 0.0  # the logarithm has no lower end: truncate at zero
-    return Spread(name, path, unit, tolerance.distribution, float(nominal), sigma, float(low), float(high))
+    shares = (_is_share(tolerance.sigma), _is_share(tolerance.within))
+    return Spread(
+        name, path, unit, tolerance.distribution, float(nominal), sigma, float(low), float(high), w, shares
+    )
+
+
+def _is_share(value: _Written | None) -> bool:
+    return isinstance(value, str) and value.strip().endswith("%")
 
 
 def unit_draws(n: int, d: int, seed: int = 0, sampling: str = "sobol") -> np.ndarray:
@@ -239,6 +275,19 @@ def draw(spreads: list[Spread], n: int, seed: int = 0, sampling: str = "sobol") 
     """(n, len(spreads)) values (SI) drawn from each spread (see :func:`unit_draws`)."""
     u = unit_draws(n, len(spreads), seed, sampling)
     return np.stack([s.from_unit(u[:, j]) for j, s in enumerate(spreads)], axis=1).reshape(n, len(spreads))
+
+
+def cloud(spreads: list[Spread], unit: np.ndarray, nominals: Mapping[str, float]) -> np.ndarray:
+    """(N, len(spreads)) values (SI) of one candidate's tolerance cloud: each spread about the candidate's
+    value of it (``nominals``, by spread name; a spread not named there about its own nominal), mapped from
+    the unit-cube points ``unit`` (N, len(spreads)). Every candidate given the same ``unit`` sees the same
+    draws (common random numbers): two candidates differ by their values, not by the luck of the draw."""
+    u = np.asarray(unit, dtype=np.float64).reshape(-1, len(spreads))
+    columns = [
+        (s.about(float(nominals[s.name])) if s.name in nominals else s).from_unit(u[:, j])
+        for j, s in enumerate(spreads)
+    ]
+    return np.stack(columns, axis=1).reshape(len(u), len(spreads))
 
 
 # --------------------------------------------------------------------------------------------- probability
@@ -317,8 +366,9 @@ def add_reliability(
 
 
 def described_reliability(ds: xr.Dataset) -> list[str]:
-    """Lines that report a tolerance study's probabilities (empty when the dataset has none)."""
-    if "probability_meets_criteria" not in ds:
+    """Lines that report a tolerance study's probabilities (empty when the dataset has none, or one per
+    candidate: a robust optimisation's, reported with its optimum)."""
+    if "probability_meets_criteria" not in ds or ds["probability_meets_criteria"].ndim:
         return []
     p = float(ds["probability_meets_criteria"].values)
     lo, hi = (float(v) for v in ds["probability_meets_criteria_interval"].values)

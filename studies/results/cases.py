@@ -245,6 +245,21 @@ def case_table(ds: xr.Dataset) -> CaseColumns:
     if "constraint_violation" in ds.data_vars:
         violation = flat("constraint_violation")[:, 0].astype(np.float64)
         t.add("constraint_violation", violation, "1", "number", False)
+    # a robust optimisation's candidates (studies.run.robust): judged on their tolerance clouds
+    robust = [
+        str(k) for k, v in ds.data_vars.items() if v.dims == ("case",) and str(k).endswith("_statistic")
+    ]
+    if "nominal_feasible" in ds.data_vars:
+        t.add("probability_meets_criteria", flat("probability_meets_criteria")[:, 0], "1", "number", True)
+        t.add("nominal_feasible", flat("nominal_feasible")[:, 0].astype(np.float64), "1", "bool", False)
+        for name in robust:
+            t.add(
+                name,
+                flat(name)[:, 0].astype(np.float64),
+                str(ds[name].attrs.get("units", "")),
+                "number",
+                True,
+            )
     _add_long_names(t, ds)
     return t
 

@@ -23,11 +23,12 @@ a saved one (same unit-box values) is told the saved objectives and constraints,
 again. The algorithm draws from its own seeded generator, so the replayed state is the uninterrupted run's
 and an interrupted run ends with the same cases, and the same optimum, as an uninterrupted one.
 
-The dataset (:func:`optimum_dataset`) is a sampled design of every evaluated case (``case`` dimension,
-parameters as coordinates) with ``generation``, ``feasible``, ``pareto`` and ``best`` per case and the
-optimum's summary in the ``optimisation`` attribute. ``best`` is the feasible case with the lowest first
-objective (with one objective: the optimum; with several: the end of the Pareto front that is best on the
-first objective).
+A robust design (``design.robust``) judges each candidate on its tolerance cloud: a generation of
+candidates runs as the candidates' nominal cases and their draws (:mod:`studies.run.robust`), and the
+optimiser is told the statistic of each objective over the cloud and the chance constraint.
+
+The dataset (:func:`studies.run.optimum.optimum_dataset`) holds every evaluated case with the optimum
+marked.
 """
 
 from __future__ import annotations
@@ -42,15 +43,17 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import xarray as xr
 
 from isolab.studies.inputs.study import Study
-from isolab.studies.quantities import output_values
 from isolab.studies.questions.criteria import add_criteria
-from isolab.studies.questions.designs import Design
 from isolab.studies.questions.goals import PENALTY, STALL_IMPROVEMENT, Goals, goal_values
 from isolab.studies.results.dataset import from_chunks, result_arrays, to_dataset
 from isolab.studies.results.store import Store, atomic_path
+from isolab.studies.run.optimum import describe_optimum as describe_optimum
+from isolab.studies.run.optimum import mark_optimum as mark_optimum
+from isolab.studies.run.optimum import non_dominated as non_dominated
+from isolab.studies.run.optimum import optimum_dataset
+from isolab.studies.run.robust import CloudPlan
 
 log = logging.getLogger(__name__)
 
@@ -150,7 +153,7 @@ def _fresh(goals: Goals) -> Any:
     problem = Problem(
         n_var=d,
         n_obj=len(goals.objectives),
-        n_ieq_constr=len(goals.constraint_names),
+        n_ieq_constr=len(goals.told_constraints),
         xl=np.zeros(d),
         xu=np.ones(d),
     )
@@ -232,11 +235,16 @@ class Outcome:
     def n_cases(self) -> int:
         return int(sum(len(g["u"]) for g in self.generations))
 
+    @property
+    def stopped(self) -> str:
+        """Why the run ended: ``stalled``, ``cancelled`` or ``budget``."""
+        return "stalled" if self.stalled else ("cancelled" if self.cancelled else "budget")
+
 
 def _sanitised(arrays: dict[str, np.ndarray], n: int, goals: Goals) -> dict[str, np.ndarray]:
     """``F`` and ``G`` as (n, k) float64, non-finite rows replaced by the penalty (never NaN to pymoo)."""
     F = np.asarray(arrays["F"], dtype=np.float64).reshape(n, len(goals.objectives))
-    G = np.asarray(arrays["G"], dtype=np.float64).reshape(n, len(goals.constraint_names))
+    G = np.asarray(arrays["G"], dtype=np.float64).reshape(n, len(goals.told_constraints))
     bad = ~np.isfinite(F).all(axis=1) | ~np.isfinite(G).all(axis=1)
     F, G = F.copy(), G.copy()
     F[bad], G[bad] = PENALTY, PENALTY
@@ -322,217 +330,6 @@ def stalled(F: list[np.ndarray], G: list[np.ndarray], generations: int) -> bool:
     return quiet >= generations
 
 
-# --------------------------------------------------------------------------------------------- optimum
-def non_dominated(F: np.ndarray) -> np.ndarray:
-    """(n,) bool: the rows of ``F`` (n, objectives; lower is better) that no other row dominates (no worse
-    in every objective and better in one). Equal rows do not dominate each other."""
-    F = np.asarray(F, dtype=np.float64)
-    keep = np.ones(len(F), dtype=bool)
-    for i in range(len(F)):
-        no_worse = (F <= F[i]).all(axis=1)
-        better = (F < F[i]).any(axis=1)
-        keep[i] = not (no_worse & better).any()
-    return keep
-
-
-def mark_optimum(
-    ds: xr.Dataset, F: np.ndarray, G: np.ndarray, generation: np.ndarray, goals: Goals
-) -> xr.Dataset:
-    """``ds`` (a sampled dataset of the evaluated cases, in order) with ``generation``, ``feasible``,
-    ``pareto``, ``best`` and ``constraint_violation`` per case, and the ``optimisation`` summary attribute
-    (algorithm, generations, best case and its parameter values and objectives)."""
-    n = len(F)
-    feasible = (np.asarray(G) <= 0.0).all(axis=1)
-    pareto = np.zeros(n, dtype=bool)
-    best = np.zeros(n, dtype=bool)
-    idx = np.flatnonzero(feasible)
-    if idx.size:
-        pareto[idx[non_dominated(F[idx])]] = True
-        front = np.flatnonzero(pareto)
-        best[front[np.lexsort(F[front].T[::-1])[0]]] = True  # lowest first objective (ties: the next ones)
-    out = ds.copy()
-    flags = {"flag_values": np.array([0, 1], dtype=np.int8), "flag_meanings": "false true"}
-    out["generation"] = xr.Variable(
-        "case", np.asarray(generation, dtype=np.int32), {"units": "1", "long_name": "optimiser generation"}
-    )
-    out["feasible"] = xr.Variable(
-        "case",
-        feasible,
-        {"units": "1", "long_name": "the case ended ok and meets every constraint of the design", **flags},
-    )
-    out["pareto"] = xr.Variable(
-        "case",
-        pareto,
-        {
-            "units": "1",
-            "long_name": "feasible and no other feasible case is better in every objective",
-            **flags,
-        },
-    )
-    rule = "lowest" if goals.objectives[0].sense == "minimize" else "highest"
-    out["best"] = xr.Variable(
-        "case",
-        best,
-        {
-            "units": "1",
-            "long_name": f"the feasible case of {rule} {goals.objectives[0].quantity}"
-            + (" (the Pareto front's end on the first objective)" if len(goals.objectives) > 1 else ""),
-            **flags,
-        },
-    )
-    out["constraint_violation"] = xr.Variable(
-        "case",
-        np.maximum(np.asarray(G, dtype=np.float64), 0.0).sum(axis=1),
-        {
-            "units": "1",
-            "long_name": "sum of the constraints' violations as fractions of their bounds (0: feasible; "
-            f"{PENALTY:g} per constraint for a case that failed)",
-        },
-    )
-    summary: dict[str, Any] = {
-        "algorithm": goals.algorithm,
-        "objectives": [o.text for o in goals.objectives],
-        "constraints": [c.text for c in goals.constraints],
-        "budget": goals.budget,
-        "population": goals.population,
-        "seed": goals.seed,
-        "generations": int(np.max(generation)) + 1 if n else 0,
-        "n_cases": n,
-        "n_feasible": int(feasible.sum()),
-        "n_pareto": int(pareto.sum()),
-        "best_rule": out["best"].attrs["long_name"],
-        "best_case": None,
-    }
-    if best.any():
-        b = int(np.flatnonzero(best)[0])
-        summary["best_case"] = b
-        summary["best_generation"] = int(generation[b])
-        summary["best_parameters"] = {f.name: float(out[f.name].values[b]) for f in goals.factors}
-        summary["parameter_units"] = {f.name: f.unit for f in goals.factors}
-        summary["best_objectives"] = {
-            o.quantity: float(F[b, k] if o.sense == "minimize" else -F[b, k])
-            for k, o in enumerate(goals.objectives)
-        }
-    out = mark_plateau(out, F, np.asarray(feasible, dtype=bool), best, goals, summary)
-    out.attrs["optimisation"] = json.dumps(summary)
-    return out
-
-
-LIMIT_SHARE = 0.01
-"""A variable whose best value lies within this share of its range from an end is flagged at that limit."""
-
-
-def unit_position(factor: Any, x: np.ndarray) -> np.ndarray:
-    """Where values ``x`` (SI) lie in ``factor``'s range: 0 at ``low``, 1 at ``high`` (in log space for a log
-    scale): the inverse of :meth:`studies.questions.designs.Factor.from_unit`."""
-    x = np.asarray(x, dtype=np.float64)
-    if factor.scale == "log":
-        return np.log(np.abs(x) / abs(factor.low)) / np.log(abs(factor.high) / abs(factor.low))
-    return (x - factor.low) / (factor.high - factor.low)
-
-
-def mark_plateau(
-    out: xr.Dataset,
-    F: np.ndarray,
-    feasible: np.ndarray,
-    best: np.ndarray,
-    goals: Goals,
-    summary: dict[str, Any],
-) -> xr.Dataset:
-    """``out`` with ``plateau`` per case (feasible, first objective within ``goals.plateau`` of the best's)
-    and ``at_range_limit`` per parameter (-1 the best sits at the low end of its range, +1 at the high end,
-    0 inside); ``summary`` gains the plateau's size and each variable's range over it, and the limits."""
-    n = len(F)
-    plateau = np.zeros(n, dtype=bool)
-    names = [f.name for f in goals.factors]
-    limit = np.zeros(len(names), dtype=np.int8)
-    if best.any():
-        b = int(np.flatnonzero(best)[0])
-        f0 = np.asarray(F, dtype=np.float64)[:, 0]
-        plateau = feasible & (f0 <= f0[b] + goals.plateau * abs(f0[b]))
-        for j, f in enumerate(goals.factors):
-            u = float(unit_position(f, out[f.name].values[b]))
-            limit[j] = -1 if u <= LIMIT_SHARE else (1 if u >= 1.0 - LIMIT_SHARE else 0)
-        summary["plateau"] = goals.plateau
-        summary["n_plateau"] = int(plateau.sum())
-        summary["plateau_ranges"] = {
-            name: [float(out[name].values[plateau].min()), float(out[name].values[plateau].max())]
-            for name in names
-        }
-        summary["at_limit"] = {
-            name: "low" if lim < 0 else "high" for name, lim in zip(names, limit, strict=True) if lim != 0
-        }
-    flags = {"flag_values": np.array([0, 1], dtype=np.int8), "flag_meanings": "false true"}
-    out["plateau"] = xr.Variable(
-        "case",
-        plateau,
-        {
-            "units": "1",
-            "long_name": f"feasible, with {goals.objectives[0].quantity} within {goals.plateau:.3g} of the "
-            "best case's (a share of it): the designs as good as the optimum",
-            **flags,
-        },
-    )
-    out = out.assign_coords(
-        parameter=xr.Variable(
-            "parameter", np.array(names, dtype=np.str_), {"units": "1", "long_name": "optimised parameter"}
-        )
-    )
-    out["at_range_limit"] = xr.Variable(
-        "parameter",
-        limit,
-        {
-            "units": "1",
-            "long_name": "the best case's value at an end of the parameter's range (within "
-            f"{LIMIT_SHARE:.0%} of it): -1 the low end, 1 the high end, 0 inside",
-            "flag_values": np.array([-1, 0, 1], dtype=np.int8),
-            "flag_meanings": "at_low_end inside at_high_end",
-        },
-    )
-    return out
-
-
-def optimum_dataset(
-    outcome: Outcome,
-    goals: Goals,
-    *,
-    isolator_names: list[str],
-    point_names: list[str],
-    criteria: Any = None,
-    attrs: dict[str, Any] | None = None,
-) -> xr.Dataset:
-    """The dataset of every case an optimisation evaluated (see the module docstring), from the arrays of
-    its generations (each holding ``x``, ``F``, ``G`` and the cases' result arrays)."""
-    gens = outcome.generations
-    sizes = [len(a["u"]) for a in gens]
-    starts = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-    chunks = [np.arange(starts[k], starts[k + 1], dtype=np.int64) for k in range(len(gens))]
-    result = from_chunks(
-        dict(enumerate(gens)), chunks, n_isolators=len(isolator_names), n_points=len(point_names)
-    )
-    x = np.concatenate([a["x"] for a in gens]) if gens else np.zeros((0, len(goals.factors)))
-    names = [f.name for f in goals.factors]
-    design = Design(
-        "sampled",
-        names,
-        {n: x[:, j] for j, n in enumerate(names)},
-        {},
-        {f.name: f.path for f in goals.factors},
-        {f.name: f.unit for f in goals.factors},
-    )
-    ds = to_dataset(result, design, isolator_names=isolator_names, point_names=point_names, attrs=attrs)
-    ds = add_criteria(ds, criteria)
-    F = np.concatenate([a["F"] for a in gens]) if gens else np.zeros((0, len(goals.objectives)))
-    G = np.concatenate([a["G"] for a in gens]) if gens else np.zeros((0, len(goals.constraint_names)))
-    generation = np.repeat(np.arange(len(gens)), sizes)
-    out = mark_optimum(ds, F, G, generation, goals)
-    summary = json.loads(out.attrs["optimisation"])
-    summary["stopped"] = "stalled" if outcome.stalled else ("cancelled" if outcome.cancelled else "budget")
-    summary["stall"] = goals.stall
-    out.attrs["optimisation"] = json.dumps(summary)
-    return out
-
-
 # ------------------------------------------------------------------------------------------ the runner
 def run_optimisation(
     study: Study,
@@ -572,16 +369,19 @@ def run_optimisation(
     goals = study.goals
     if goals is None:
         raise ValueError(f"study {study_id}: its design is not optimize (no goals)")
-    store.update(study_id, n_cases=goals.budget, generations=planned_generations(goals))
+    plan, per = CloudPlan.of(study), goals.cases_per_candidate  # a robust design: each candidate's cloud
+    store.update(study_id, n_cases=goals.budget * per, generations=planned_generations(goals))
     base = {k: v for k, v in json.loads(run_json).items() if k not in ("design", "design_spec")}
     checks = study.design()
     first = study_from_json(json.dumps({**base, "design": _list_design(checks.values, checks.names)}))
+    base = base if plan is None else plan.definition(base)
     seconds_per_case = estimate_seconds_per_case(first)
     iso_names, point_names = study_labels(study)
     counts = {"done": 0, "failed": 0}
     key_prefix = f"isolab-{study_id}"
 
-    def evaluate(g: int, values: dict[str, np.ndarray]) -> dict[str, np.ndarray] | None:
+    def evaluate(g: int, candidates: dict[str, np.ndarray]) -> dict[str, np.ndarray] | None:
+        values = candidates if plan is None else plan.cases(candidates)
         names = list(values)
         n = len(values[names[0]])
         gen_json = json.dumps({**base, "design": _list_design(values, names)})
@@ -598,7 +398,7 @@ def run_optimisation(
 
         def generation_progress(done: int, _total: int) -> None:
             if progress is not None:
-                progress(before["done"] + done, goals.budget)
+                progress(before["done"] + done, goals.budget * per)
 
         report = run_chunks(
             client,
@@ -617,17 +417,24 @@ def run_optimisation(
         arrays = result_arrays(result)
         counts["done"] += n
         counts["failed"] += int(np.count_nonzero(arrays["status"] != 0))
-        return {**arrays, "F": F, "G": G}
+        return {**arrays, "F": F, "G": G} if plan is None else plan.judge(arrays, F, G)
 
     def on_generation(g: int, evaluated: int) -> None:
-        counts["done"] = evaluated
-        store.update(study_id, generation=g, n_done=evaluated)
+        counts["done"] = evaluated * per
+        store.update(study_id, generation=g, n_done=evaluated * per)
 
     journal = Journal(store.chunk_dir(study_id))
     journal.directory.mkdir(parents=True, exist_ok=True)
     outcome = optimise(goals, evaluate, journal, cancel, on_generation)
-    done = outcome.n_cases
-    failed = int(sum(np.count_nonzero(np.asarray(a["status"]) != 0) for a in outcome.generations))
+    done = outcome.n_cases * per
+    failed = int(
+        sum(
+            np.sum(a["cases_failed"])
+            if "cases_failed" in a
+            else np.count_nonzero(np.asarray(a["status"]) != 0)
+            for a in outcome.generations
+        )
+    )
     if outcome.replayed:
         log.info("study %s: resumed, %d generations replayed from the store", study_id, outcome.replayed)
     if outcome.cancelled:
@@ -647,7 +454,15 @@ def run_optimisation(
         **model_attrs,
     }
     labels = {"isolator_names": iso_names, "point_names": point_names}
-    ds = optimum_dataset(outcome, goals, **labels, criteria=study.criteria, attrs=attrs)
+    ds = optimum_dataset(
+        outcome.generations,
+        goals,
+        stopped=outcome.stopped,
+        **labels,
+        criteria=study.criteria,
+        attrs=attrs,
+        cloud=plan,
+    )
     store.write_dataset(study_id, ds)
     store.clear_chunks(study_id)
     n_gen = len(outcome.generations)
@@ -664,34 +479,3 @@ def _list_design(values: dict[str, np.ndarray], names: list[str]) -> dict[str, A
     """A list design of the cases ``values`` (parameter name -> SI values), as a definition's block."""
     n = len(values[names[0]]) if names else 0
     return {"type": "list", "cases": [{k: float(values[k][i]) for k in names} for i in range(n)]}
-
-
-def describe_optimum(ds: xr.Dataset) -> list[str]:
-    """Lines that report an optimisation's dataset: algorithm and cases, the best case with its parameter
-    values and objectives (empty for a dataset that is not an optimisation's)."""
-    if "optimisation" not in ds.attrs:
-        return []
-    s = json.loads(ds.attrs["optimisation"])
-    lines = [
-        f"{s['algorithm']}: {s['generations']} generations, {s['n_cases']} cases, "
-        f"{s['n_feasible']} feasible, {s['n_pareto']} on the Pareto front"
-    ]
-    if s.get("best_case") is None:
-        return [*lines, "no feasible case: no optimum"]
-    units = s.get("parameter_units", {})
-    values = ", ".join(f"{k} = {v:.4g} {units.get(k, '')}".rstrip() for k, v in s["best_parameters"].items())
-    lines.append(f"best: case {s['best_case']} (generation {s['best_generation']}): {values}")
-    for q, v in s["best_objectives"].items():
-        unit = str(output_values(ds, q).attrs.get("units", ""))
-        lines.append(f"  {q} = {v:.6g} {'' if unit == '1' else unit}".rstrip())
-    for name, end in s.get("at_limit", {}).items():
-        lines.append(f"  {name} is at the {end} end of its range: the optimum may lie beyond it")
-    if "plateau_ranges" in s:
-        lines.append(
-            f"plateau: {s['n_plateau']} feasible cases within {s['plateau']:.3g} of the best objective, over"
-        )
-        for k, (lo, hi) in s["plateau_ranges"].items():
-            lines.append(f"  {k} = {lo:.4g} to {hi:.4g} {units.get(k, '')}".rstrip())
-    if s.get("stopped") == "stalled":
-        lines.append(f"stopped early: {s.get('stall')} generations without improving the best by 0.1 %")
-    return lines

@@ -3,6 +3,7 @@ Chromium under Playwright, a real ``isolab serve`` on loopback with a fresh stor
 
     .venv/bin/python -m tests.browser.screenshots            # writes docs/ui-*.png
     .venv/bin/python -m tests.browser.screenshots --out /tmp/shots
+    .venv/bin/python -m tests.browser.screenshots --scene   # only the scene page's
 """
 
 from __future__ import annotations
@@ -68,6 +69,8 @@ def take(out: Path) -> list[Path]:
         page.wait_for_selector("#comparison-table", timeout=60_000)
         shot(page, "compare")
 
+        shots.extend(scene_shots(page, base, out))
+
         # a sampled study with a log-sampled parameter: the sweep plot's log axis
         api = httpx.Client(base_url=base, timeout=60.0)
         lhs = api.get("/examples/lhs-10000").json()["text"]
@@ -100,6 +103,36 @@ def take(out: Path) -> list[Path]:
     return shots
 
 
+def scene_shots(page, base: str, out: Path) -> list[Path]:
+    """The scene page on the article's scriber: the whole page (:func:`scene_shot`), its plan view, and the
+    Y stage's form with the plot of its profile."""
+    whole = scene_shot(page, base, out)
+    plan = out / "ui-scene-plan.png"
+    page.locator("#plan").locator("xpath=..").screenshot(path=str(plan))
+    profile = out / "ui-scene-profile.png"
+    page.locator("#profile-plot-0").locator("xpath=..").screenshot(path=str(profile))
+    return [whole, plan, profile]
+
+
+def scene_shot(page, base: str, out: Path) -> Path:
+    """The scene page on the article's scriber: run twice (stiffer mounts the second time), the 3D view
+    paused during the playback of the run."""
+    page.goto(f"{base}/ui/scene?example=article-scriber")
+    page.wait_for_selector("#base-mass", timeout=60_000)
+    page.click("#run")
+    page.wait_for_selector("#traces[data-runs='1']", timeout=60_000)
+    page.fill('input[data-path=\'["isolators","f_vertical"]\']', "5 Hz")
+    page.wait_for_selector("#run:not([disabled])", timeout=60_000)
+    page.click("#run")
+    page.wait_for_selector("#traces[data-runs='2']", timeout=60_000)
+    page.fill("#exaggeration", "100")
+    page.eval_on_selector("#time", "s => { s.value = '320'; s.dispatchEvent(new Event('input')); }")
+    page.wait_for_timeout(600)
+    path = out / "ui-scene.png"
+    page.screenshot(path=str(path), full_page=True)
+    return path
+
+
 def submit_text(api: httpx.Client, text: str) -> str:
     """Check a study text and submit its definition, as the page does; the new study's id."""
     checked = api.post("/studies/validate", json={"text": text})
@@ -114,11 +147,23 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--out", type=Path, default=ROOT / "docs", help="folder for the PNG files")
+    parser.add_argument("--scene", action="store_true", help="only the scene page's shots")
     args = parser.parse_args()
     if not CHROMIUM.exists():
         sys.exit(f"no {CHROMIUM}: run `make browser` first")
-    for path in take(args.out):
+    for path in take_scene(args.out) if args.scene else take(args.out):
         print(path)
+
+
+def take_scene(out: Path) -> list[Path]:
+    """Only the scene page's shots (:func:`scene_shots`)."""
+    out.mkdir(parents=True, exist_ok=True)
+    with (
+        tempfile.TemporaryDirectory(prefix="isolab-shots-") as tmp,
+        service(Path(tmp)) as svc,
+        browser() as b,
+    ):
+        return scene_shots(b.new_page(viewport=VIEWPORT), svc.url, out)
 
 
 if __name__ == "__main__":

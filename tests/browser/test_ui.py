@@ -19,6 +19,7 @@ from ui_driver import (
     browser,
     plot_rendered,
     service,
+    settle,
     submit_example,
     wait_done,
     wait_until,
@@ -33,6 +34,10 @@ pytestmark = [
 
 TOKEN = "s3cret-token-of-the-shop-floor"
 VIEWPORT = {"width": 1300, "height": 900}
+YTITLES = "#traces text[class^='y'][class$='title']"
+"""The y-axis titles of a figure of several panels (plotly's ``ytitle``, ``y2title``...)."""
+LEGENDS = "#traces g.infolayer > g[class^='legend']"
+"""The legends of a figure (plotly's ``legend``, ``legend2``...)."""
 MOTIONS = re.compile(r"^(heave|pitch|roll|yaw|surge|sway)( \+ (heave|pitch|roll|yaw|surge|sway))?$")
 
 
@@ -75,18 +80,20 @@ def test_submit_watch_sweep_and_case(page, open_service: str) -> None:
     # the definition in the units the author wrote
     params = page.inner_text("#parameters")
     assert "0.5 g" in params and "2 g" in params and "active, air, elastomer" in params
-    # the error estimate and the model
+    # the error estimate and the model, drawn once
     page.wait_for_selector("#error-estimate")
     assert "rk4" in page.inner_text("#model")
-    # the sweep plot: drawn, then redrawn on other axes
+    settle(1.0)
+    assert page.locator("#model table").count() == 1 and page.locator("#model dl").count() == 1
+    # the sweep plot: drawn, then redrawn on other axes, labelled in words and units
     assert plot_rendered(page, "#sweep")
-    assert "stage_y_acceleration [g]" in page.text_content("#sweep .xtitle")
+    assert "stage y acceleration [g]" in page.text_content("#sweep .xtitle")
     page.select_option("#x", "isolator_type")
     page.select_option("#y", "peak_rotation_rx")
     page.select_option("#colour", "")
-    wait_until(page, "document.querySelector('#sweep .ytitle').textContent.includes('peak_rotation_rx')")
-    assert "isolator_type" in page.text_content("#sweep .xtitle")
-    assert "[mrad]" in page.text_content("#sweep .ytitle")
+    wait_until(page, "document.querySelector('#sweep .ytitle').textContent.includes('rotation')")
+    assert "isolator type" in page.text_content("#sweep .xtitle")
+    assert page.text_content("#sweep .ytitle") == "peak absolute rotation of the machine base, rx [mrad]"
     assert plot_rendered(page, "#sweep")
     # the case table and its filter language
     assert page.locator("#case-table tbody tr").count() == 12
@@ -114,7 +121,27 @@ def test_submit_watch_sweep_and_case(page, open_service: str) -> None:
     page.wait_for_selector("#traces svg.main-svg", timeout=60_000)
     assert plot_rendered(page, "#traces")
     titles = page.text_content("#traces")
-    assert "dynamic" in titles and "preload" in titles and "stage accel" in titles and "settled" in titles
+    assert "dynamic" in titles and "preload" in titles and "settled" in titles
+    # axes in words and the study's units: its accelerations were written in g
+    ytitles = [t.strip() for t in page.locator(YTITLES).all_text_contents()]
+    assert "stage accelerationalong its axis [g]" in ytitles, ytitles  # the <br> joins the two lines
+    assert any(t.endswith("c.g. [mm]") for t in ytitles) and any(t.endswith("[mrad]") for t in ytitles)
+    # one legend per panel, the isolators named by where they stand
+    panels = page.locator(YTITLES).count()
+    assert panels == 7 and page.locator(LEGENDS).count() == panels
+    legends = page.locator(LEGENDS).all_text_contents()
+    assert max(page.locator(LEGENDS).nth(k).locator("g.traces").count() for k in range(7)) == 12
+    assert any("front-left z" in t and "back-right x" in t for t in legends), legends
+    assert "front-left (x 0.20 m, y 0.30 m)" in page.inner_text("#isolators")
+    with page.expect_download() as traces_csv:  # every sample, in the units shown
+        page.click("#traces-csv")
+    rows = Path(traces_csv.value.path()).read_text().splitlines()
+    assert rows[0].startswith("time [s],") and "stage acceleration along its axis: stage y [g]" in rows[0]
+    column = rows[0].split(",").index("stage acceleration along its axis: stage y [g]")
+    written = re.search(r"stage_y_acceleration\s+([0-9.]+) g", page.inner_text("#facts"))
+    assert written, page.inner_text("#facts")
+    peak = max(abs(float(r.split(",")[column])) for r in rows[1:])
+    assert peak == pytest.approx(float(written.group(1)), rel=1e-6)  # the case's own, in g
     names = [page.inner_text(f"#mode-table tbody tr:nth-child({k}) td:nth-child(2)") for k in range(1, 7)]
     assert all(MOTIONS.match(n) for n in names), names
     assert "heave" in " ".join(names)
@@ -161,8 +188,28 @@ def test_comparison_and_reference_pages(page, open_service: str) -> None:
     assert page.locator("#comparison-table td.best").count() > 5
     page.goto(f"{base}/docs")
     page.wait_for_selector(".swagger-ui .info", timeout=30_000)
+    page.click("#isolab-back a")  # the reference leads back to the page
+    page.wait_for_url(f"{base}/ui/", timeout=30_000)
     page.goto(f"{base}/redoc")
     page.wait_for_selector("redoc .api-info, .redoc-wrap", timeout=30_000)
+    assert page.errors == []
+    only_local(page, base)
+
+
+def test_the_example_with_yaml_aliases_checks_and_compares(page, open_service: str) -> None:
+    """scriber-criteria.yaml repeats its floor spectrum per axis by a YAML alias: /ui/new checks it and
+    /ui/compare runs it, as the command line does."""
+    base = open_service
+    page.goto(f"{base}/ui/new?from=example:scriber-criteria")
+    page.wait_for_selector("#check.ok", timeout=30_000)
+    assert "scriber-criteria: 3 cases" in page.inner_text("#check")
+    assert "*site" in page.input_value("#text") and not page.is_disabled("#submit")
+    page.goto(f"{base}/ui/compare")
+    page.wait_for_selector("#source option[value='example:scriber-criteria']", state="attached")
+    page.select_option("#source", "example:scriber-criteria")
+    page.click("#run")
+    page.wait_for_selector("#comparison-table", timeout=60_000)
+    assert "margin" in page.inner_text("#comparison-table")
     assert page.errors == []
     only_local(page, base)
 

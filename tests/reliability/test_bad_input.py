@@ -637,6 +637,11 @@ NON_FINITE_BODIES: list[tuple[str, str, list]] = [
     ),
     ("/studies/validate", '{"text": NaN}', ["body", "text"]),
     ("/studies/validate", "[Infinity]", ["body", 0]),
+    ("/simulations", '{"scene": NaN}', ["body", "scene"]),
+    ("/simulations", '{"scene": {"machine": {"mass": Infinity}}}', ["body", "scene", "machine", "mass"]),
+    ("/scenes/check", '{"scene": {"machine": {"mass": -Infinity}}}', ["body", "scene", "machine", "mass"]),
+    ("/sizings", '{"scene": {}, "margin": NaN}', ["body", "margin"]),
+    ("/comparisons/floor", '{"scene": {}, "description": NaN}', ["body", "description"]),
 ]
 
 

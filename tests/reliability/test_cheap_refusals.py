@@ -5,16 +5,22 @@ never read as a quantity; a design's fields are those of its type; YAML keys are
 from __future__ import annotations
 
 import copy
+import gc
 import json
 import statistics
+import threading
 import time
+from types import SimpleNamespace
 from typing import Any
 
 import httpx
 import pytest
+from fastapi import APIRouter, Body, FastAPI
+from fastapi.testclient import TestClient
 
 from benchmarks.live_service import quick_scene, thread_server
 from benchmarks.refusals import post_and_probe
+from isolab.service.api import request_limits
 from isolab.service.api.app import create_app
 from isolab.service.settings import Settings
 from isolab.studies.authoring.authoring import MAX_DEPTH, check_text, parse_text
@@ -147,21 +153,71 @@ def test_the_models_state_the_bounds_too() -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    reason="FastAPI parses a JSON body on the event loop: 4.6 MB of mounts hold /health for 0.7 to 1.3 s",
-    strict=False,
-)
 def test_over_http_100000_mounts_are_a_fast_422_and_health_stays_fast(tmp_path) -> None:
     scene = quick_scene()
     scene["isolators"] = {"preset": "air", "list": mounts(100_000)}
     content = json.dumps(study(scene=scene), separators=(",", ":")).encode()
     with thread_server(create_app(Settings(data_dir=tmp_path, workers=1))) as url:
-        r, took, latencies = post_and_probe(url, content)
-        assert r.status_code == 422, r.text
-        assert r.json()["detail"][0]["loc"] == ["body", "scene", "isolators", "list"]
-        assert took < 2.0, f"422 after {took:.2f} s (upload included)"
-        assert statistics.median(latencies) < 0.1
-        assert max(latencies) < 1.0, f"/health took {max(latencies):.2f} s while the body was checked"
+        worst = 0.0
+        for _ in range(3):
+            r, took, latencies = post_and_probe(url, content)
+            assert r.status_code == 422, r.text
+            assert r.json()["detail"][0]["loc"] == ["body", "scene", "isolators", "list"]
+            assert took < 2.0, f"422 after {took:.2f} s (upload included)"
+            assert statistics.median(latencies) < 0.1
+            worst = max(worst, *latencies)
+        # Parsed on the loop: 0.32 to 0.83 s; off it, 0.09 to 0.17 s on a busy two-core machine, about 1 s
+        # when other test processes load both cores. Where the body is parsed is asserted without a clock
+        # by test_a_large_body_is_parsed_in_a_worker_thread_without_the_collector; this bound holds the
+        # 2.6 s stall of a list checked after parsing off, with room for a loaded machine.
+        assert worst < 1.5, f"/health took {worst:.2f} s while the body was checked"
+
+
+def test_a_large_body_is_parsed_in_a_worker_thread_without_the_collector(monkeypatch) -> None:
+    seen: list[tuple[int, bool]] = []
+
+    def watched(body: bytes) -> Any:
+        seen.append((threading.get_ident(), gc.isenabled()))
+        return json.loads(body)
+
+    # the parser as the module calls it: which thread, and whether the collector runs meanwhile
+    monkeypatch.setattr(request_limits, "json", SimpleNamespace(loads=watched))
+    loop_threads: list[int] = []
+    router = APIRouter(route_class=request_limits.JsonParsedOffLoop)
+
+    @router.post("/echo")
+    async def echo(body: dict[str, Any] = Body()) -> dict[str, int]:
+        loop_threads.append(threading.get_ident())
+        return {"mounts": len(body["list"])}
+
+    app = FastAPI()
+    app.include_router(router)
+    big = {"list": mounts(20_000)}
+    assert len(json.dumps(big)) > request_limits.LOOP_SCAN_BYTES
+    with TestClient(app) as http:
+        r = http.post("/echo", json=big)
+        assert r.status_code == 200 and r.json() == {"mounts": 20_000}
+        [(parser, collecting)] = seen
+        assert parser != loop_threads[0]  # not the event loop's thread
+        assert not collecting and gc.isenabled()  # paused while parsing, running again after
+        assert http.post("/echo", json={"list": mounts(3)}).json() == {"mounts": 3}
+        assert seen[1][0] == loop_threads[1]  # a small body is parsed on the loop
+        bad = http.post(
+            "/echo",
+            content=b'{"list": [' + b"1," * 200_000 + b"]}",
+            headers={"content-type": "application/json"},
+        )
+        assert bad.status_code == 422 and bad.json()["detail"][0]["type"] == "json_invalid"
+
+
+def test_overlapping_collector_pauses_end_with_the_last() -> None:
+    pause = request_limits.CollectorPause()
+    assert gc.isenabled()
+    with pause.paused():
+        with pause.paused():
+            assert not gc.isenabled()
+        assert not gc.isenabled()
+    assert gc.isenabled()
 
 
 # ------------------------------------------------------------------------------------- smaller ones

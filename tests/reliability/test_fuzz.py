@@ -16,8 +16,10 @@ must accept what its description allows.
 
 from __future__ import annotations
 
+import re
 import shutil
 import tempfile
+import tomllib
 import uuid
 from pathlib import Path
 
@@ -59,45 +61,17 @@ class OwnLifespan:
 
 TOKEN = "fuzz-token-of-the-lab"
 
-#: Operations that check their input beyond its JSON schema (a definition, YAML text, a scene, a
-#: measurement, columns of the stored study): an input the schema allows may be refused with a 422.
-CHECKED_BEYOND_THE_SCHEMA = [
-    ("POST", r"^/studies$"),
-    ("POST", r"^/studies/validate$"),
-    ("POST", r"^/comparisons$"),
-    ("POST", r"^/calibrations$"),
-    ("GET", r"^/studies/\{study_id\}/cases$"),
-    ("GET", r"^/studies/\{study_id\}/plot\.png$"),
-    ("GET", r"^/studies/\{study_id\}/cases/\{case\}/timeseries$"),
-    ("GET", r"^/studies/\{study_id\}/sensitivity(\.png)?$"),
-]
-
-
-#: schemathesis's default answers to an input the description forbids
-NEGATIVE_REFUSALS = ["400", "401", "403", "404", "405", "406", "409", "415", "422", "428", "429", "5xx"]
+#: What the fuzzer expects beyond the description, shared with ``schemathesis run`` from the checkout: the
+#: operations that check their input beyond its JSON schema (a definition, YAML text, a scene, a
+#: measurement, a point or the columns of the stored study) may refuse an input the schema allows with a
+#: 422, and a body too large for ISOLAB_MAX_BODY_BYTES is refused with the documented 413.
+PROJECT_CONFIG = Path(__file__).resolve().with_name("schemathesis.toml")
 
 
 def fuzz_config(token: str | None) -> SchemathesisConfig:
-    return SchemathesisConfig.from_dict(
-        {
-            "headers": {"Authorization": f"Bearer {token}"} if token else {},
-            # a body too large for ISOLAB_MAX_BODY_BYTES (a text of a million escaped characters) is
-            # refused with the documented 413 before it is read: that too is a refusal
-            "checks": {"negative_data_rejection": {"expected-statuses": [*NEGATIVE_REFUSALS, "413"]}},
-            "operations": [
-                {
-                    "include-method": method,
-                    "include-path-regex": path,
-                    "checks": {
-                        "positive_data_acceptance": {
-                            "expected-statuses": ["2xx", "3xx", "401", "403", "404", "409", "422", "429"]
-                        }
-                    },
-                }
-                for method, path in CHECKED_BEYOND_THE_SCHEMA
-            ],
-        }
-    )
+    config = tomllib.loads(PROJECT_CONFIG.read_text())
+    config["headers"] = {"Authorization": f"Bearer {token}"} if token else {}
+    return SchemathesisConfig.from_dict(config)
 
 
 # the data directory is made by the lifespan, so collecting this module leaves nothing behind
@@ -113,10 +87,11 @@ guarded_schema = schemathesis.openapi.from_asgi(
 @pytest.fixture(scope="module", autouse=True)
 def running_app():
     """The app's lifespan for the module (a 2-worker LocalCluster), with one finished study; the guarded
-    app shares its cluster and study queue."""
+    app shares its cluster, study queue and calibration jobs."""
     with TestClient(APP) as http:
         GUARDED.state.dask = APP.state.dask
         GUARDED.state.jobs = APP.state.jobs
+        GUARDED.state.calibrations = APP.state.calibrations
         r = http.post(
             "/studies",
             json={
@@ -127,7 +102,7 @@ def running_app():
         )
         assert r.status_code == 202, r.text
         yield APP
-        GUARDED.state.dask = GUARDED.state.jobs = None
+        GUARDED.state.dask = GUARDED.state.jobs = GUARDED.state.calibrations = None
     shutil.rmtree(DATA, ignore_errors=True)
 
 
@@ -158,3 +133,24 @@ def test_the_description_declares_the_token_only_when_one_is_set() -> None:
             for method, op in ops.items():
                 if "requestBody" in op:
                     assert {"413", "422"} <= set(op["responses"]), (method, path)
+
+
+def test_the_project_config_names_operations_the_description_holds() -> None:
+    """Each operation ``schemathesis.toml`` lets refuse a schema-valid input is one the description holds
+    (a renamed route would otherwise lose its exemption silently), and /comparisons/floor.png is one."""
+    spec = APP.openapi()
+    operations = [(m.upper(), p) for p, ops in spec["paths"].items() for m in ops]
+    exempt = tomllib.loads(PROJECT_CONFIG.read_text())["operations"]
+    for rule in exempt:
+        method, pattern = rule["include-method"], rule["include-path-regex"]
+        assert any(m == method and re.search(pattern, p) for m, p in operations), rule
+    assert any(re.search(r["include-path-regex"], "/comparisons/floor.png") for r in exempt)
+
+
+def test_a_route_of_the_store_documents_its_503() -> None:
+    spec = APP.openapi()
+    for path, ops in spec["paths"].items():
+        for method, op in ops.items():
+            if path.startswith(("/studies", "/calibrations")):
+                assert "503" in op["responses"], (method, path)
+    assert "503" in spec["paths"]["/calibrations/{calibration_id}"]["get"]["responses"]

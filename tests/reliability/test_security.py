@@ -48,6 +48,7 @@ ROUTES: dict[tuple[str, str], dict[str, Any]] = {
         "params": {"y": "peak_displacement_y", "x": "isolator_type"},
     },
     ("POST", "/comparisons"): {"status": 200, "json": EXAMPLE_COMPARISON},
+    ("POST", "/sizings"): {"status": 200, "json": {"scene": EXAMPLE_COMPARISON["scene"], "max_cases": 1}},
     ("POST", "/comparisons/floor.png"): {
         "status": 200,
         "json": {
@@ -56,6 +57,15 @@ ROUTES: dict[tuple[str, str], dict[str, Any]] = {
             "point": "tool",
         },
     },
+    ("POST", "/comparisons/floor"): {
+        "status": 200,
+        "json": {
+            **EXAMPLE_COMPARISON,
+            "scene": {**EXAMPLE_COMPARISON["scene"], "floor": {"spectrum": {"z": "VC-D"}}},
+        },
+    },
+    # the guarded study stands on no floor spectrum: answered (422, naming the case) with the token
+    ("GET", "/studies/{study_id}/cases/{case}/floor"): {"status": 422},
     # the guarded study has two cases, too few for an index: answered (422, naming the output) with the token
     ("GET", "/studies/{study_id}/sensitivity"): {"status": 422, "params": {"output": "peak_displacement.y"}},
     ("GET", "/studies/{study_id}/sensitivity.png"): {
@@ -73,6 +83,15 @@ ROUTES: dict[tuple[str, str], dict[str, Any]] = {
     ("GET", "/studies/{study_id}/definition.yaml"): {"status": 200},
     ("GET", "/studies/{study_id}/design"): {"status": 200},
     ("GET", "/studies/{study_id}/error-estimate"): {"status": 200},
+    ("GET", "/studies/{study_id}/answer"): {"status": 200},
+    ("GET", "/studies/{study_id}/report.html"): {"status": 200},
+    ("POST", "/simulations"): {
+        "status": 200,
+        "json": {"scene": EXAMPLE_COMPARISON["scene"], "max_points": 50},
+    },
+    ("POST", "/scenes/check"): {"status": 200, "json": {"scene": EXAMPLE_COMPARISON["scene"]}},
+    ("GET", "/scenes/examples"): {"status": 200},
+    ("GET", "/scenes/examples/{name}"): {"status": 200},
 }
 
 

@@ -445,6 +445,42 @@ def test_compare_refuses_bad_input_naming_the_field(http: TestClient) -> None:
     assert r.json()["detail"][0]["loc"] == ["body", "scene", "stages", 0, "mass"]
 
 
+# -------------------------------------------------------------------------------------- simulations
+def test_a_single_case_run_now_matches_the_studys_case_0(http: TestClient, grid: dict) -> None:
+    """POST /simulations of the scene of the grid's case 0 gives that case's stored row, to round-off."""
+    row = http.get(f"/studies/{grid['id']}/cases", params={"columns": "all", "limit": 1}).json()["rows"][0]
+    assert row["case"] == 0
+    s = scene()
+    s["isolators"]["preset"] = row["isolator_type"]
+    s["stages"][0]["profile"]["acceleration"] = row["stage_y_acceleration"]  # SI, as stored
+    r = http.post("/simulations", json={"scene": s, "max_points": 300})
+    assert r.status_code == 200, r.text
+    answer = r.json()
+    summary = answer["summary"]
+    compared = 0
+    for column, cell in summary.items():
+        if column not in row:
+            continue
+        if isinstance(cell["value"], float):
+            assert cell["value"] == pytest.approx(row[column], rel=1e-9, abs=1e-15), column
+        else:
+            assert cell["value"] == row[column], column
+        compared += 1
+    assert compared > 30 and "peak_displacement_y" in summary and "natural_frequency_1" in summary
+    assert summary["peak_displacement_y"]["unit"] == "m"
+    assert "displacement" in summary["peak_displacement_y"]["long_name"]
+    # 2 s at 2 ms: 1001 samples thinned to at most 300, every 4th, the first at t = 0
+    assert answer["n_samples"] == 1001 and answer["every"] == 4
+    traces = answer["traces"]
+    assert len(traces["time"]) == 251 and traces["time"][:2] == pytest.approx([0.0, 0.008])
+    assert len(traces["displacement"]["y"]) == 251 and traces["units"]["displacement"] == "m"
+    # the thinned trace never exceeds the peak of every step
+    assert max(abs(v) for v in traces["displacement"]["y"]) <= summary["peak_displacement_y"]["value"]
+    assert answer["isolators"]["mount_0"]["place"] == "front-left"
+    assert answer["isolators"]["mount_2"]["place"] == "back-right"
+    assert answer["model"] == {**answer["model"], "fidelity": "lti", "integrator": "exact", "dt": 0.002}
+
+
 # --------------------------------------------------------------------------------- catalog, delete
 def test_list_filters(http: TestClient, grid: dict) -> None:
     items = http.get("/studies", params={"name": "api-grid", "status": "done"}).json()

@@ -97,6 +97,12 @@ def test_post_recovers_the_mounts_and_draws_the_traces(http: TestClient) -> None
         (lambda b: b["scene"]["stages"][0].update(mass="-3 kg"), ["scene", "stages", 0, "mass"]),
         (lambda b: b.update(highpass="fast"), ["highpass"]),
         (lambda b: b["measurement"].update(csv="time,cg.y.displacement\n0,1"), ["measurement"]),
+        (lambda b: b.update(simulation={"dt": "0 s"}), ["simulation", "dt"]),
+        (lambda b: b.update(simulation={"dt": "0.2 s"}), ["simulation", "dt"]),
+        (lambda b: b.update(simulation={"auto_step": "yes"}), ["simulation", "auto_step"]),
+        (lambda b: b.update(noise={"cg.q.displacement": "1 mm"}), ["noise", "cg.q.displacement"]),
+        (lambda b: b.update(noise={"cg.y.displacement": "-1 mm"}), ["noise", "cg.y.displacement"]),
+        (lambda b: b.update(starts=0), ["starts"]),
     ],
 )
 def test_bad_input_is_422_naming_the_field(http: TestClient, change, loc) -> None:
@@ -115,7 +121,8 @@ def test_the_job_answers_what_the_calibration_itself_does(http: TestClient) -> N
     direct = calibrate_request(body).to_json()
     answer = wait_done(http, job["id"])["result"]
     assert answer["plot_png"] is None
-    for key in ("parameters", "time_offset", "channels", "residual_variance", "evaluations", "scene_yaml"):
+    keys = ("parameters", "time_offset", "channels", "residual_variance", "goodness_of_fit", "starts")
+    for key in (*keys, "evaluations", "scene_yaml"):
         assert answer[key] == direct[key], key
 
 
@@ -139,6 +146,18 @@ def costly_body() -> dict:
     ]
     body["offset"] = {"lower": "0 s", "upper": "0.2 s"}
     return body
+
+
+def test_csv_errors_in_a_request_name_the_line_and_the_column(http: TestClient) -> None:
+    body = copy.deepcopy(EXAMPLE_CALIBRATION)
+    lines = csv_text().splitlines()
+    lines[5] = lines[5].split(",")[0] + ",n/a"  # the file's sixth line, as an editor shows it
+    body["measurement"] = {"csv": "\n".join(lines)}
+    r = http.post("/calibrations", json=body)
+    assert r.status_code == 422, r.text
+    (d,) = r.json()["detail"]
+    assert d["loc"] == ["body", "measurement", "csv"]
+    assert d["msg"] == "line 6, column 'cg.y.displacement [mm]': 'n/a' is not a number", d
 
 
 def test_a_calibration_above_the_limit_is_refused_at_once(http: TestClient) -> None:

@@ -118,3 +118,121 @@ def test_a_study_stores_margins_and_filters_on_meets_criteria(http: TestClient, 
     assert ds["criterion_margin"].attrs["units"] == "1"
     assert list(ds["criterion"].values) == ["tool_displacement", "isolators_no_liftoff"]
     assert json.loads(ds.attrs["criteria"])["tool"]["displacement"] == pytest.approx(2e-3)
+
+
+# ------------------------------------------------------------------------------------ with tolerances
+def robust_scene(tolerances: dict | None) -> dict:
+    """2 mm of tool motion. The active mounts (2 Hz, 50 % damping) meet it with the larger margin, but
+    their margin hangs on the damping; the elastomer pads (8.5 Hz, 8 %) meet it by less, whatever their
+    damping. Damping +-60 %: the active mounts fail whenever it falls below about 27 %."""
+    s = scene({"tool": {"displacement": "2 mm"}})
+    s["isolators"]["tuning"] = {
+        "active": {"f_vertical": 2.0, "f_horizontal": 2.0, "zeta": 0.5},
+        "elastomer": {"f_vertical": 8.5, "f_horizontal": 8.5, "zeta": 0.08},
+    }
+    if tolerances is not None:
+        s["tolerances"] = tolerances
+    return s
+
+
+DAMPING = {"isolators.zeta": {"distribution": "uniform", "within": "60 %"}}
+
+
+def test_tolerances_recommend_the_type_most_likely_to_meet_the_criteria(http: TestClient) -> None:
+    import numpy as np
+
+    from isolab.studies.answers.tuning import worst_margins
+    from isolab.studies.questions.tolerances import clopper_pearson
+
+    request = {"isolator_types": ["active", "elastomer"], "cost_order": ["active", "elastomer"]}
+    plain = http.post("/comparisons", json={"scene": robust_scene(None), **request}).json()
+    rows = plain["rows"]
+    margin = {t: rows[t]["margin_tool_displacement"] for t in rows}
+    assert margin["active"] > margin["elastomer"] > 0  # the active mounts look the better choice as drawn
+    assert plain["recommendation"]["isolator_type"] == "active"
+    # without tolerances the answer is as it always was: no robustness, no probability in the answer
+    assert "robustness" not in plain and set(plain["recommendation"]) == {
+        "isolator_type",
+        "reason",
+        "cost_order",
+    }
+
+    r = http.post("/comparisons", json={"scene": robust_scene(DAMPING), "samples": 200, "seed": 3, **request})
+    assert r.status_code == 200, r.text
+    body = r.json()
+    assert body["rows"] == rows  # the table is the drawn design's, unchanged
+    judged = body["robustness"]["types"]
+    active, elastomer = judged["active"]["nominal"], judged["elastomer"]["nominal"]
+    assert active["cases"] == elastomer["cases"] == 200 and "tuned" not in judged["active"]
+    assert active["probability"] < 0.95 <= elastomer["probability"]
+    rec = body["recommendation"]
+    assert rec["isolator_type"] == "elastomer" and rec["basis"] == "probability" and rec["require"] == 0.95
+    assert "elastomer" in rec["reason"] and f"{active['probability']:.1%}" in rec["reason"]
+
+    # a separate Monte Carlo: 1,000 independent damping ratios, each case run on its own
+    zeta = np.random.default_rng(2026).uniform(0.5 * 0.4, 0.5 * 1.6, 1000)
+    x = np.column_stack([np.full_like(zeta, 2.0), np.full_like(zeta, 2.0), zeta])
+    k = int((worst_margins(robust_scene(None), "active", x) >= 0).sum())
+    lo, hi = active["interval"]
+    assert lo <= k / 1000 <= hi, (k, active)
+    low, high = clopper_pearson(k, 1000)
+    assert low <= active["probability"] <= high, (k, active)
+    assert 0.75 < k / 1000 < 0.95  # the damping below ~27 %: some 12 % of the machines
+
+    # a requirement no type reaches is said in words
+    strict = http.post(
+        "/comparisons",
+        json={"scene": robust_scene(DAMPING), "samples": 200, "seed": 3, "require": 1.0, **request},
+    ).json()["recommendation"]
+    if elastomer["probability"] < 1.0:
+        assert strict["isolator_type"] is None and "no type meets every criterion" in strict["reason"]
+
+
+@pytest.mark.parametrize(
+    ("extra", "tolerances", "loc"),
+    [
+        ({"require": 1.5}, DAMPING, ["body", "require"]),
+        ({"samples": 0}, DAMPING, ["body", "samples"]),
+        (
+            {},
+            {"isolators.colour": {"distribution": "uniform", "within": "1 %"}},
+            ["body", "scene", "tolerances"],
+        ),
+        (
+            {},
+            {"isolators.zeta": {"distribution": "normal", "sigma": "-5 %"}},
+            ["body", "scene", "tolerances"],
+        ),
+    ],
+)
+def test_bad_tolerance_requests_are_422_naming_the_field(
+    http: TestClient, extra: dict, tolerances: dict, loc: list
+) -> None:
+    r = http.post("/comparisons", json={"scene": robust_scene(tolerances), **extra})
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"]
+    assert any(d["loc"][: len(loc)] == loc for d in detail), detail
+
+
+def test_recommendation_on_probability_is_the_cheapest_type_that_reaches_the_requirement() -> None:
+    from isolab.studies.answers.robustness import Reliability, recommend_on_probability
+
+    def judged(**shares: int) -> dict:
+        return {t: Reliability(t, "nominal", k, 100, k / 100, (0.0, 1.0)) for t, k in shares.items()}
+
+    rows = {"air": {"margin_a": 0.3}, "elastomer": {"margin_a": 0.1}, "active": {"margin_a": 0.5}}
+    order = ["elastomer", "air", "active"]
+    # all three reach 95 %: the cheapest wins, and the dearer, surer types are named
+    pick = recommend_on_probability(rows, ["a"], judged(air=100, elastomer=96, active=99), cost_order=order)
+    assert pick["isolator_type"] == "elastomer", pick
+    assert "air (100.0%), active (99.0%) dearer and more probable still" in pick["reason"]
+    # the cheapest falls short: the next in cost order that reaches it, however probable a dearer one is
+    pick = recommend_on_probability(rows, ["a"], judged(air=95, elastomer=94, active=100), cost_order=order)
+    assert pick["isolator_type"] == "air" and "active (100.0%)" in pick["reason"]
+    # types of one cost (no order given): the most probable, then the larger smallest margin
+    pick = recommend_on_probability(rows, ["a"], judged(air=99, elastomer=99), cost_order=["air"])
+    assert pick["isolator_type"] == "air"
+    pick = recommend_on_probability(rows, ["a"], judged(air=90, elastomer=80, active=94), cost_order=order)
+    assert pick["isolator_type"] is None
+    assert "no type meets every criterion with the required probability 95%" in pick["reason"]
+    assert "Closest: active" in pick["reason"]

@@ -67,14 +67,32 @@ def test_a_problem_named_only_in_its_message_is_placed_too() -> None:
 def test_yaml_errors_aliases_depth_and_non_mappings_are_problems_not_crashes() -> None:
     (d,) = problems("name: x\nparameters: [1, 2\nscene: {}\n")
     assert d["type"] == "yaml_error" and d["line"] == 3
-    (d,) = problems("a: &big [1, 2]\nb: *big\n")
-    assert "alias" in d["msg"] and d["line"] == 2
+    (d,) = problems("name: x\na: &a [1, *a]\n")  # an alias inside the node it names: infinite data
+    assert "inside the node it names" in d["msg"]
+    # aliases of aliases: ten lines that would expand to 1.2e10 values, counted without expanding them:
+    # root, 2 + 10 keys and values, a0..a9 of 11, 111, ... 11,111,111,111 nodes
+    bomb = "name: x\na0: &a0 [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]\n" + "".join(
+        f"a{k}: &a{k} [{', '.join([f'*a{k - 1}'] * 10)}]\n" for k in range(1, 10)
+    )
+    (d,) = problems(bomb)
+    assert d["type"] == "too_large" and "12,345,679,023 values" in d["msg"] and "500,000" in d["msg"]
     (d,) = problems("[" * (MAX_DEPTH + 5) + "]" * (MAX_DEPTH + 5))
     assert "deeper" in d["msg"]
     (d,) = problems("- just\n- a list\n")
     assert "mapping" in d["msg"]
     (d,) = problems("name: x\nwhen: 2026-11-24\n")
     assert "value a study cannot have" in d["msg"]
+
+
+def test_yaml_aliases_are_accepted_as_the_command_line_accepts_them() -> None:
+    """scriber-criteria.yaml gives its floor spectrum once (``&site``) and repeats it per axis (``*site``):
+    the text checks as the file loads, each axis the same spectrum."""
+    text = example_text("scriber-criteria")
+    assert "*site" in text
+    answer = check_text(text, max_cases=1000, workers=2)
+    spectrum = answer["definition"]["floor"]["spectrum"]
+    assert spectrum["x"] == spectrum["y"] == spectrum["z"] == yaml.safe_load(text)["floor"]["spectrum"]["x"]
+    assert answer["n_cases"] == 3
 
 
 def test_a_stored_definition_reads_back_as_yaml() -> None:

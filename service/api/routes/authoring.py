@@ -11,7 +11,9 @@ from typing import Annotated
 from fastapi import APIRouter, Body, HTTPException, Request, Response
 from fastapi import Path as PathParam
 
+from isolab.service.api.request_limits import JsonParsedOffLoop
 from isolab.service.api.routes import (
+    INVALID,
     NOT_DONE,
     NOT_FOUND,
     SettingsDep,
@@ -40,8 +42,16 @@ from isolab.studies.authoring.authoring import (
     example_text,
     stored_error_estimate,
 )
+from isolab.studies.authoring.scene_view import (
+    SceneExample,
+    SceneRequest,
+    SceneView,
+    example_scene,
+    example_scene_names,
+    scene_view,
+)
 
-router = APIRouter(tags=["authoring"])
+router = APIRouter(tags=["authoring"], route_class=JsonParsedOffLoop)
 
 
 @router.get("/examples", response_model=ExampleList, summary="Example studies")
@@ -59,6 +69,39 @@ def list_examples() -> ExampleList:
 def get_example(name: Annotated[str, PathParam(description="example name, e.g. isolator-comparison")]):
     """The example as YAML text with its scene file inlined under ``scene:``, ready to check and submit."""
     return ExampleStudy(name=name, text=example_text(name))
+
+
+@router.get("/scenes/examples", response_model=ExampleList, summary="Examples that hold a scene")
+def list_example_scenes() -> ExampleList:
+    """Names of the shipped examples that hold a scene: scene files and example studies."""
+    return ExampleList(names=example_scene_names())
+
+
+@router.get(
+    "/scenes/examples/{name}",
+    response_model=SceneExample,
+    responses={404: {"model": MessageBody, "description": "no example scene of that name"}},
+    summary="The scene of an example, as data",
+)
+def get_example_scene(name: Annotated[str, PathParam(description="example name, e.g. article-scriber")]):
+    """The scene of a shipped example (a scene file, or an example study's scene) as written, its units
+    as text: ready to edit and to send to POST /scenes/check or POST /simulations."""
+    return SceneExample(**example_scene(name))
+
+
+@router.post(
+    "/scenes/check",
+    response_model=SceneView,
+    responses=INVALID,
+    summary="Check a scene and answer what follows from it: base mass, inertia, c.g., mounts, modes",
+)
+async def check_scene(request: Request, body: SceneRequest) -> SceneView:
+    """Check the scene as POST /simulations would (the same 422 details, nothing runs) and answer the
+    base's mass, inertia about its c.g. and c.g. (computed from size and density for a block), the box
+    it is drawn as, each mount's place, static load, stiffness, damping and frequencies on its load, each
+    stage at home with the ends of its travel, the points of interest, the natural modes with the stages at
+    home (each with its shape: the base's rigid-body motion), and the scene as YAML."""
+    return SceneView(**await run_heavy(request, scene_view, body.scene))
 
 
 @router.post(

@@ -16,6 +16,7 @@ from typing import Annotated, Any
 from anyio import to_thread
 from fastapi import APIRouter, Body, Depends, HTTPException, Request, Response
 
+from isolab.service.api.request_limits import JsonParsedOffLoop
 from isolab.service.api.routes import INVALID, Responses, run_heavy
 from isolab.service.api.schemas import (
     EXAMPLE_CALIBRATION,
@@ -27,7 +28,7 @@ from isolab.service.plots.calibration import calibration_notes, calibration_png
 from isolab.studies.answers.calibration.jobs import CalibrationJobs, price_request
 from isolab.studies.results.calibrations import CalibrationNotFound
 
-router = APIRouter(prefix="/calibrations", tags=["calibrations"])
+router = APIRouter(prefix="/calibrations", tags=["calibrations"], route_class=JsonParsedOffLoop)
 
 NO_CALIBRATION: Responses = {
     404: {"model": MessageBody, "description": "no calibration with this id (or a malformed id)"}
@@ -106,7 +107,7 @@ async def calibrate(
 @router.get(
     "/{calibration_id}",
     response_model=CalibrationJob,
-    responses=NO_CALIBRATION,
+    responses={**NO_CALIBRATION, **NOT_RUNNING},
     summary="A calibration: status, progress and its answer once done",
 )
 async def calibration(calibration_id: str, jobs: CalibrationsDep) -> CalibrationJob:
@@ -118,7 +119,7 @@ async def calibration(calibration_id: str, jobs: CalibrationsDep) -> Calibration
 @router.delete(
     "/{calibration_id}",
     status_code=204,
-    responses=NO_CALIBRATION,
+    responses={**NO_CALIBRATION, **NOT_RUNNING},
     summary="Cancel and remove a calibration",
 )
 async def delete_calibration(calibration_id: str, jobs: CalibrationsDep) -> Response:

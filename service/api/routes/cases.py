@@ -28,6 +28,7 @@ from isolab.service.api.routes import (
 from isolab.service.api.routes.studies import MAX_OFFSET, StudyId
 from isolab.service.api.schemas import CaseTable, Timeseries
 from isolab.service.plots import studies as plots
+from isolab.studies.answers.floor_response import FloorSpectra, point_spectra
 from isolab.studies.answers.history import (
     case_history,
     case_study,
@@ -60,7 +61,7 @@ def case_table_of(store: Store, study_id: str) -> CaseColumns:
 
 def stored_case_study(store: Store, study_id: str, case: int) -> Study:
     """The study of one case of a stored study; 404 when there is no such study or case."""
-    return case_study(study_row(store, study_id), case)
+    return case_study(study_row(store, study_id), case, store)
 
 
 @router.get(
@@ -131,6 +132,7 @@ def get_cases(
             "limit": limit,
             "columns": cols,
             "units": {c: table.units[c] for c in cols},
+            "long_names": {c: table.long_names[c] for c in cols if c in table.long_names},
             "rows": out_rows,
         }
     )
@@ -166,6 +168,27 @@ async def get_timeseries(
         )
     content = await run_heavy(request, history_json, study_id, case, h, every)
     return JSONResponse(content)
+
+
+@router.get(
+    "/{study_id}/cases/{case}/floor",
+    response_model=FloorSpectra,
+    responses={**NOT_FOUND, **NOT_DONE, **INVALID},
+    summary="Floor-induced velocity spectrum at every point of one case, with the VC curves",
+)
+async def get_case_floor(
+    request: Request,
+    study_id: StudyId,
+    case: Annotated[int, PathParam(description="case number")],
+    store: StoreDep,
+) -> FloorSpectra:
+    """The one-third-octave RMS velocity (m/s, bands in Hz) of every point of interest of one case per floor
+    axis under its scene's ``floor.spectrum``, on the case's own isolators, with the VC curves and the curve
+    each point's velocity criterion names (steady state, nothing integrated); 422 at ``case`` for a study
+    whose scene has no floor spectrum."""
+    require_done(study_row(store, study_id))
+    study = await run_heavy(request, stored_case_study, store, study_id, case)
+    return await run_heavy(request, point_spectra, study, None, case)
 
 
 @router.get(

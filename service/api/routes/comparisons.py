@@ -1,4 +1,8 @@
-"""``POST /comparisons``: one scene under several isolator types, side by side.
+"""Scenes run at once, in the API process: ``POST /simulations`` (one case: its summary and traces) and
+``POST /comparisons`` (one scene under several isolator types, side by side).
+
+A single case is :mod:`isolab.studies.answers.single_case`, sized before it runs and run in a worker
+thread under a time limit (:data:`SIMULATION_TIME_LIMIT`).
 
 The comparison itself is :mod:`isolab.studies.answers.comparisons` (a small grid study run directly through
 the
@@ -8,24 +12,85 @@ queueing them behind the studies on the Dask cluster would).
 
 from __future__ import annotations
 
-from fastapi import APIRouter, Body, Request, Response
+import anyio
+from anyio import to_thread
+from fastapi import APIRouter, Body, HTTPException, Request, Response
 
+from isolab.service.api.request_limits import JsonParsedOffLoop
 from isolab.service.api.routes import INVALID, PNG, invalid, run_heavy
 from isolab.service.api.schemas import (
     EXAMPLE_COMPARISON,
     EXAMPLE_FLOOR_PLOT,
+    EXAMPLE_SCENE,
     Comparison,
     ComparisonRequest,
     FloorPlotRequest,
+    MessageBody,
+    SimulationAnswer,
+    SimulationRequest,
 )
 from isolab.service.plots.studies import floor_velocity_png
 from isolab.studies.answers.comparisons import compare as run_compare
-from isolab.studies.answers.floor_response import velocity_spectra
+from isolab.studies.answers.floor_response import FloorSpectra, point_spectra, velocity_spectra
+from isolab.studies.answers.single_case import MAX_CASE_SECONDS, run_single_case, single_case_study
+from isolab.studies.answers.sizing import SizingAnswer, SizingRequest
+from isolab.studies.answers.sizing import size as run_size
 
-router = APIRouter(prefix="/comparisons", tags=["comparisons"])
+router = APIRouter(tags=["comparisons"], route_class=JsonParsedOffLoop)
+
+SIMULATION_TIME_LIMIT = 3.0 * MAX_CASE_SECONDS
+"""Longest a single case may run, s: three times the longest estimate it is admitted with. Past it the
+answer is a 503 at once; the engine's thread (which cannot be interrupted) runs to its end unheard."""
 
 
-@router.post("", response_model=Comparison, responses=INVALID, summary="Compare isolator types on one scene")
+@router.post(
+    "/simulations",
+    response_model=SimulationAnswer,
+    responses={
+        **INVALID,
+        503: {"model": MessageBody, "description": "the case ran past the time limit of a single case"},
+    },
+    summary="Run one scene now: its summary and traces",
+)
+async def simulate_scene(
+    http: Request,
+    request: SimulationRequest = Body(
+        openapi_examples={
+            "scriber": {
+                "summary": "the article's scriber on air isolators",
+                "value": {"scene": EXAMPLE_SCENE},
+            }
+        }
+    ),
+) -> SimulationAnswer:
+    """Run the scene as a one-case study, synchronously: its summary (the case-table columns a study's case
+    has: peaks, loads, natural frequencies, settling, the margins of the scene's criteria; SI, each with its
+    unit and long name), its modes, where each isolator stands, and its time traces thinned to at most
+    ``max_points`` samples. A case past 5 million recorded values (steps x series) or 10 s of estimated
+    engine time is refused with a 422 naming the limit and the field; one that runs past the time limit is
+    answered 503. A study runs larger cases."""
+    study = await run_heavy(http, single_case_study, request.scene, request.simulation)
+    limiter = getattr(http.app.state, "heavy_work", None)
+    try:
+        with anyio.fail_after(SIMULATION_TIME_LIMIT):
+            answer = await to_thread.run_sync(
+                run_single_case, study, request.max_points, abandon_on_cancel=True, limiter=limiter
+            )
+    except TimeoutError:
+        raise HTTPException(
+            status_code=503,
+            detail=f"the case ran past the {SIMULATION_TIME_LIMIT:g} s limit of a single case run at once; "
+            "submit it as a study (POST /studies)",
+        ) from None
+    return SimulationAnswer(**answer)
+
+
+@router.post(
+    "/comparisons",
+    response_model=Comparison,
+    responses=INVALID,
+    summary="Compare isolator types on one scene",
+)
 async def compare(
     http: Request,
     request: ComparisonRequest = Body(
@@ -41,7 +106,10 @@ async def compare(
     displacement and rotation per axis, peak isolator force, smallest isolator load and lift-off,
     settling time and natural frequencies, with the best type per column in ``best``; with design criteria
     in the scene, each type's margin to each and ``meets_criteria``, and the one ``recommendation``: the
-    cheapest type (``cost_order``) that meets them all."""
+    cheapest type (``cost_order``) that meets them all. With a ``tolerances:`` block in the scene, each
+    type is also judged on ``samples`` machines drawn from it (``robustness``: the probability of meeting
+    every criterion with its interval, as drawn and, with ``tune``, as tuned), and the recommendation is
+    the most probable type that reaches ``require``."""
     answer = await run_heavy(
         http,
         run_compare,
@@ -50,6 +118,9 @@ async def compare(
         request.simulation,
         request.cost_order,
         request.tune,
+        request.samples,
+        request.require,
+        request.seed,
     )
     if len(answer["isolator_types"]) != len(set(request.isolator_types)):
         raise invalid(["body", "isolator_types"], "the comparison did not produce one case per isolator type")
@@ -57,7 +128,7 @@ async def compare(
 
 
 @router.post(
-    "/floor.png",
+    "/comparisons/floor.png",
     response_class=Response,
     responses={**PNG, **INVALID},
     summary="Floor-induced velocity spectrum of a point, per isolator type, against the VC curves",
@@ -92,3 +163,72 @@ async def floor_png(
         simulation=request.simulation,
     )
     return Response(await run_heavy(http, floor_velocity_png, spectra), media_type="image/png")
+
+
+@router.post(
+    "/comparisons/floor",
+    response_model=FloorSpectra,
+    responses=INVALID,
+    summary="Floor-induced velocity spectrum at every point, per isolator type, with the VC curves",
+)
+async def floor_spectra(
+    http: Request,
+    request: ComparisonRequest = Body(
+        openapi_examples={
+            "VC-D floor": {
+                "summary": "the article's scriber on a VC-D floor, on all three isolator types",
+                "value": {key: v for key, v in EXAMPLE_FLOOR_PLOT.items() if key != "point"},
+            },
+        }
+    ),
+) -> FloorSpectra:
+    """The one-third-octave RMS velocity (m/s, bands in Hz) of every point of interest per floor axis under
+    the scene's ``floor.spectrum``, per isolator type, with the floor's own spectrum, each point's largest
+    band, the VC-A .. VC-G curves (and the ISO 2631-2 lines) and the curve each point's velocity criterion
+    names: what the page's floor view draws (:func:`isolab.studies.answers.floor_response.point_spectra`).
+    Steady state at the ``lti`` level; the comparison's tolerance fields are not used."""
+    if request.tune:
+        raise invalid(
+            ["body", "tune"],
+            "the floor spectra are of the isolators as the scene gives them; tune them with POST "
+            "/comparisons and write the tuning into the scene",
+        )
+    return await run_heavy(
+        http, point_spectra, request.scene, request.isolator_types, simulation=request.simulation
+    )
+
+
+@router.post(
+    "/sizings",
+    response_model=SizingAnswer,
+    responses=INVALID,
+    summary="Choose the isolators from a catalogue: product, count, pressure, margins",
+)
+async def sizing(
+    http: Request,
+    request: SizingRequest = Body(
+        openapi_examples={
+            "scriber": {
+                "summary": "the article's scriber sized from the shipped catalogue",
+                "value": {"scene": EXAMPLE_SCENE, "catalogue": "representative", "per_corner": [1, 2]},
+            },
+        }
+    ),
+) -> SizingAnswer:
+    """For each mount position the product of the catalogue (and the number side by side, of
+    ``per_corner``) that carries its static load inside the rated range with ``margin``, meets the scene's
+    criteria and costs least: candidate designs run cheapest first, at most ``max_cases`` of them. The
+    answer gives per mount the static load, load margin, air pressure (products with an effective area),
+    stroke used, and why each cheaper product fails; with no product fitting, ``feasible`` is false and
+    ``summary`` says why."""
+    answer = await run_heavy(
+        http,
+        run_size,
+        request.scene,
+        request.catalogue,
+        margin=request.margin,
+        per_corner=request.per_corner,
+        simulation=request.simulation,
+        max_cases=request.max_cases,
+    )
+    return SizingAnswer(**answer)

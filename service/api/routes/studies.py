@@ -14,9 +14,10 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, HTTPException, Query, Request, Response
 from fastapi import Path as PathParam
-from fastapi.responses import FileResponse
+from fastapi.responses import FileResponse, HTMLResponse
 
 from isolab.service.api.jobs import JobQueue
+from isolab.service.api.request_limits import JsonParsedOffLoop
 from isolab.service.api.routes import (
     INVALID,
     NOT_DONE,
@@ -42,11 +43,17 @@ from isolab.service.api.schemas import (
     StudyStatusName,
     StudySummary,
 )
+from isolab.service.plots import report
 from isolab.service.settings import Settings
+from isolab.studies.answers.history import case_history, case_study
+from isolab.studies.answers.study_answer import StudyAnswer, stored_study_answer
+from isolab.studies.authoring.authoring import design_summary, stored_error_estimate
 from isolab.studies.inputs.definitions import check_definition
+from isolab.studies.results.cases import CaseQueryError, stored_case_table
+from isolab.studies.results.catalog import StudyNotFound
 from isolab.studies.results.store import Store, StudyFilter, StudyRecord
 
-router = APIRouter(prefix="/studies", tags=["studies"])
+router = APIRouter(prefix="/studies", tags=["studies"], route_class=JsonParsedOffLoop)
 
 MAX_OFFSET = 1_000_000_000
 """Largest ``offset`` of a listing (SQLite integers stop at 2**63)."""
@@ -271,3 +278,60 @@ def get_dataset(study_id: StudyId, store: StoreDep) -> FileResponse:
     stem = re.sub(r"[^A-Za-z0-9_-]+", "_", row["name"]).strip("_-")[:100] or "study"
     filename = f"{stem}-{study_id}.nc"
     return FileResponse(path, media_type="application/x-netcdf", filename=filename)
+
+
+def stored_answer(store: Store, study_id: str) -> dict[str, Any]:
+    """What a done study answers; 404 when its dataset file is missing."""
+    try:
+        return stored_study_answer(store, study_id)
+    except (FileNotFoundError, StudyNotFound):
+        raise HTTPException(status_code=404, detail=f"study {study_id} has no dataset file") from None
+
+
+@router.get(
+    "/{study_id}/answer",
+    response_model=StudyAnswer,
+    responses={**NOT_FOUND, **NOT_DONE},
+    summary="What a done study answers: scene, question, margins, optimum",
+)
+async def get_answer(request: Request, study_id: StudyId, store: StoreDep) -> StudyAnswer:
+    """The machine in a few facts, the question (design, criteria, objectives), each case's margin to
+    each criterion with the value judged (at most 50 cases listed; the case of the largest smallest margin
+    always), and for an optimisation its best design, progress per generation, plateau and the parameters
+    at an end of their range (:mod:`isolab.studies.answers.study_answer`); SI, units beside."""
+    row = study_row(store, study_id)
+    require_done(row)
+    return StudyAnswer(**await run_heavy(request, stored_answer, store, study_id))
+
+
+@router.get(
+    "/{study_id}/report.html",
+    response_class=Response,
+    responses={**NOT_FOUND, **NOT_DONE, 200: {"content": {"text/html": {}}, "description": "the report"}},
+    summary="The design report: one HTML file to send or print",
+)
+async def get_report(request: Request, study_id: StudyId, store: StoreDep) -> HTMLResponse:
+    """The scene, the question, the answer and its margins, the plots (inline PNG) and the model with its
+    measured error, as one self-contained HTML page without script (print it to PDF from a browser); it
+    recomputes one case for its time response, so it takes a few seconds."""
+    row = study_row(store, study_id)
+    require_done(row)
+    answer = await run_heavy(request, stored_answer, store, study_id)
+    design = await run_heavy(request, design_summary, row)
+    try:
+        error = await run_heavy(request, stored_error_estimate, store.path(study_id))
+    except FileNotFoundError:
+        error = None
+    table = await run_heavy(request, stored_case_table, store, study_id)
+    case = report.report_case(answer)
+    try:
+        study = await run_heavy(request, case_study, row, case, store)
+        history = await run_heavy(request, case_history, study, case, 1)
+    except (CaseQueryError, LookupError, ValueError):  # a case too long to recompute: the report goes without
+        history = None
+    title = f"Time response of case {case}"
+    figures = await run_heavy(request, report.report_figures, answer, table, history, title)
+    html = report.design_report(answer, design, error, figures)
+    return HTMLResponse(
+        html, headers={"Content-Security-Policy": report.REPORT_POLICY, "Cache-Control": "no-cache"}
+    )

@@ -131,10 +131,28 @@ def new_page() -> FileResponse:
     return _page("new.html")
 
 
+@router.get("/ui/scene")
+def scene_page() -> FileResponse:
+    """Build or change a scene: forms with units, the machine in 3D, its modes, a run at once."""
+    return _page("scene.html")
+
+
 @router.get("/ui/compare")
 def compare_page() -> FileResponse:
     """Isolator types side by side on one scene."""
     return _page("compare.html")
+
+
+@router.get("/ui/calibrate")
+def calibrate_page() -> FileResponse:
+    """Start a calibration: a scene, a measurement (CSV) and the parameters to fit."""
+    return _page("calibration.html")
+
+
+@router.get("/ui/calibrations/{calibration_id}")
+def calibration_page(calibration_id: str) -> FileResponse:
+    """One calibration: progress, goodness of fit, fitted values, measured against fitted traces."""
+    return _page("calibration.html")
 
 
 @router.get("/ui/studies/{study_id}")
@@ -170,6 +188,20 @@ def redoc_js() -> Response:
     return Response(_redoc_bundle(), media_type="text/javascript; charset=utf-8")
 
 
+BACK_TO_PAGE = (
+    '<nav id="isolab-back" style="font: 14px system-ui, sans-serif; padding: 0.5em 1em; background: #1d2b3a">'
+    '<a href="/ui/" style="color: #fff; text-decoration: none">&larr; isolab: back to the studies</a></nav>'
+)
+"""The bar atop the API reference pages that leads back to the web page (markup only, no script)."""
+
+
+def with_link_back(page: HTMLResponse) -> HTMLResponse:
+    """``page`` with :data:`BACK_TO_PAGE` first in its body (its headers, the policy among them, kept)."""
+    html = bytes(page.body).decode().replace("<body>", "<body>\n" + BACK_TO_PAGE, 1)
+    headers = {k: v for k, v in page.headers.items() if k.lower() != "content-length"}
+    return HTMLResponse(html, headers=headers)
+
+
 @router.get("/docs")
 def swagger_ui() -> HTMLResponse:
     page = get_swagger_ui_html(
@@ -180,17 +212,19 @@ def swagger_ui() -> HTMLResponse:
         swagger_favicon_url=f"{DOCS_ASSETS}/favicon.png",
     )
     page.headers["Content-Security-Policy"] = policy_allowing_inline(bytes(page.body).decode())
-    return page
+    return with_link_back(page)
 
 
 @router.get("/redoc")
 def redoc() -> HTMLResponse:
-    return get_redoc_html(
-        openapi_url="/openapi.json",
-        title="isolab - API reference",
-        redoc_js_url=REDOC_JS,
-        redoc_favicon_url=f"{DOCS_ASSETS}/favicon.png",
-        with_google_fonts=False,
+    return with_link_back(
+        get_redoc_html(
+            openapi_url="/openapi.json",
+            title="isolab - API reference",
+            redoc_js_url=REDOC_JS,
+            redoc_favicon_url=f"{DOCS_ASSETS}/favicon.png",
+            with_google_fonts=False,
+        )
     )
 
 

@@ -36,7 +36,13 @@ function renderFacts(ts, design, studyName) {
       el("dt", {}, "last move ends"),
       el("dd", {}, ts.last_move_end === null ? "–" : `${fmt(ts.last_move_end, 3)} s`),
       el("dt", {}, "settling"),
-      el("dd", { id: "settling" }, settle)
+      el("dd", { id: "settling" }, settle),
+      el("dt", {}, "isolators"),
+      el(
+        "dd",
+        { id: "isolators" },
+        el("ul", { class: "plain" }, Object.entries(ts.isolators || {}).map(([name, iso]) => el("li", { title: name }, iso.label)))
+      )
     )
   );
 }
@@ -79,55 +85,93 @@ function thin(values, step) {
   return out;
 }
 
-function drawTraces(ts) {
-  const step = Math.max(1, Math.ceil(ts.time.length / MAX_POINTS));
-  const t = thin(ts.time, step);
-  const scale = (arr, f) => thin(arr, step).map((v) => (v === null ? null : v * f));
-  const panels = []; // [title, traces]
-  const line = (name, y, colour, dash, group) => ({
-    type: "scatter",
-    mode: "lines",
-    name,
-    x: t,
-    y,
-    line: { color: colour, dash: dash || "solid", width: 1.4 },
-    legendgroup: group,
-  });
-  panels.push(["c.g. [mm]", Object.entries(ts.displacement).map(([a, y]) => line(`c.g. ${a}`, scale(y, 1e3), AXIS_COLOURS[a], "solid", "cg"))]);
+// SI unit -> [unit shown, factor from SI]: the unit the study was written in for that quantity (a study
+// that writes its accelerations in g reads its stage accelerations in g), else the page's default.
+function studyUnits(design) {
+  const units = {};
+  for (const p of design.parameters) {
+    if (!p.categorical && p.display_scale !== 1 && p.unit && !(p.unit in units)) units[p.unit] = [p.display_unit, 1 / p.display_scale];
+  }
+  return (si) => units[si] || displayUnit(si);
+}
+
+function isolatorPlace(ts, iso) {
+  const found = ts.isolators && ts.isolators[iso];
+  return found ? found.place : iso;
+}
+
+// The panels of a case, each with its long name, unit and series (full resolution, display units).
+function casePanels(ts, unitOf) {
+  const panels = []; // {title, unit, series: [{name, y, colour, dash}]}
+  const panel = (title, si, series) => {
+    const [unit, factor] = unitOf(si);
+    panels.push({ title, unit, series: series.map((x) => ({ ...x, y: x.y.map((v) => (v === null ? null : v * factor)) })) });
+  };
+  panel("displacement of the machine c.g.", "m", Object.entries(ts.displacement).map(([a, y]) => ({ name: `c.g. ${a}`, y, colour: AXIS_COLOURS[a] })));
   const points = Object.entries(ts.point_displacement);
   if (points.length) {
-    panels.push([
-      "points [mm]",
-      points.flatMap(([p, axes], k) => Object.entries(axes).map(([a, y]) => line(`${p} ${a}`, scale(y, 1e3), AXIS_COLOURS[a], DASHES[(k + 1) % DASHES.length], "points"))),
-    ]);
+    panel(
+      "displacement of the points of interest",
+      "m",
+      points.flatMap(([p, axes], k) => Object.entries(axes).map(([a, y]) => ({ name: `${p} ${a}`, y, colour: AXIS_COLOURS[a], dash: DASHES[k % DASHES.length] })))
+    );
   }
-  panels.push(["rotation [mrad]", Object.entries(ts.rotation).map(([r, y]) => line(`rotation ${r}`, scale(y, 1e3), AXIS_COLOURS[r], "solid", "rot"))]);
-  panels.push([
-    "isolator force, dynamic<br>about the preload [N]",
-    Object.entries(ts.isolator_force).flatMap(([iso, axes], k) => Object.entries(axes).map(([a, y]) => line(`${iso} ${a}`, scale(y, 1), AXIS_COLOURS[a], DASHES[k % DASHES.length], "force"))),
-  ]);
+  panel("rotation of the machine base", "rad", Object.entries(ts.rotation).map(([r, y]) => ({ name: `rotation ${r}`, y, colour: AXIS_COLOURS[r] })));
+  panel(
+    "dynamic isolator force about the preload",
+    "N",
+    Object.entries(ts.isolator_force).flatMap(([iso, axes], k) =>
+      Object.entries(axes).map(([a, y]) => ({ name: `${isolatorPlace(ts, iso)} ${a}`, y, colour: AXIS_COLOURS[a], dash: DASHES[k % DASHES.length] }))
+    )
+  );
   const stages = Object.entries(ts.stages || {});
   const stageColours = (k) => PALETTE[(k + 3) % PALETTE.length];
   if (stages.length) {
-    panels.push(["stage position [mm]", stages.map(([s, p], k) => line(`stage ${s} position`, scale(p.position, 1e3), stageColours(k), "solid", "stages"))]);
-    panels.push(["stage velocity [m/s]", stages.map(([s, p], k) => line(`stage ${s} velocity`, scale(p.velocity, 1), stageColours(k), "solid", "stages"))]);
-    panels.push(["stage accel. [m/s²]", stages.map(([s, p], k) => line(`stage ${s} acceleration`, scale(p.acceleration, 1), stageColours(k), "solid", "stages"))]);
+    panel("stage position along its axis", "m", stages.map(([st, p], k) => ({ name: `stage ${st}`, y: p.position, colour: stageColours(k) })));
+    panel("stage velocity along its axis", "m/s", stages.map(([st, p], k) => ({ name: `stage ${st}`, y: p.velocity, colour: stageColours(k) })));
+    panel("stage acceleration along its axis", "m/s^2", stages.map(([st, p], k) => ({ name: `stage ${st}`, y: p.acceleration, colour: stageColours(k) })));
   }
+  return panels;
+}
+
+function drawTraces(ts, panels) {
+  const step = Math.max(1, Math.ceil(ts.time.length / MAX_POINTS));
+  const t = thin(ts.time, step);
   const n = panels.length;
+  const gap = 0.035;
   const traces = [];
   const layout = {
     height: 210 * n + 80,
     margin: { t: 30, r: 20, b: 50, l: 90 },
-    grid: { rows: n, columns: 1, pattern: "coupled", roworder: "top to bottom" },
-    legend: { orientation: "v", x: 1.01, y: 1, font: { size: 10 } },
     shapes: [],
     annotations: [],
-    xaxis: { title: { text: "time [s]" } },
+    xaxis: { title: { text: "time [s]" }, anchor: `y${n === 1 ? "" : n}` },
   };
-  panels.forEach(([title, ts_], i) => {
+  // one legend per panel, beside it: a panel's entries are read next to its lines
+  panels.forEach((p, i) => {
     const axis = i === 0 ? "y" : `y${i + 1}`;
-    for (const tr of ts_) traces.push({ ...tr, xaxis: "x", yaxis: axis });
-    layout[i === 0 ? "yaxis" : `yaxis${i + 1}`] = { title: { text: title, font: { size: 11 } }, zeroline: true };
+    const legend = i === 0 ? "legend" : `legend${i + 1}`;
+    const top = 1 - i / n;
+    const bottom = 1 - (i + 1) / n;
+    for (const sr of p.series) {
+      traces.push({
+        type: "scatter",
+        mode: "lines",
+        name: sr.name,
+        x: t,
+        y: thin(sr.y, step),
+        line: { color: sr.colour, dash: sr.dash || "solid", width: 1.4 },
+        xaxis: "x",
+        yaxis: axis,
+        legend,
+      });
+    }
+    layout[i === 0 ? "yaxis" : `yaxis${i + 1}`] = {
+      title: { text: `${p.title.replace(/ (of|about|along) /, "<br>$1 ")}${p.unit ? ` [${p.unit}]` : ""}`, font: { size: 10 } },
+      domain: [bottom + gap / 2, top - gap / 2],
+      zeroline: true,
+    };
+    layout[legend] = { x: 1.01, xanchor: "left", y: top - gap / 2, yanchor: "top", font: { size: 10 }, tracegroupgap: 2 };
   });
   const mark = (time, colour, text) => {
     layout.shapes.push({ type: "line", xref: "x", yref: "paper", x0: time, x1: time, y0: 0, y1: 1, line: { color: colour, width: 1.5, dash: "dash" } });
@@ -142,6 +186,25 @@ function drawTraces(ts) {
   Plotly.newPlot(node, traces, layout, PLOT_CONFIG);
 }
 
+// The traces as CSV, every sample, in the units the page shows them in.
+function tracesCsv(ts, panels) {
+  const cell = (v) => (v === null || v === undefined ? "" : String(v));
+  const quote = (text) => (/[",\n]/.test(text) ? `"${text.replaceAll('"', '""')}"` : text);
+  const columns = panels.flatMap((p) => p.series.map((sr) => [`${p.title}: ${sr.name}${p.unit ? ` [${p.unit}]` : ""}`, sr.y]));
+  const lines = [["time [s]", ...columns.map(([h]) => h)].map(quote).join(",")];
+  ts.time.forEach((time, i) => lines.push([cell(time), ...columns.map(([, y]) => cell(y[i]))].join(",")));
+  return lines.join("\n") + "\n";
+}
+
+function downloadText(text, filename, type) {
+  const url = URL.createObjectURL(new Blob([text], { type }));
+  const a = el("a", { href: url, download: filename });
+  document.body.appendChild(a);
+  a.click();
+  a.remove();
+  setTimeout(() => URL.revokeObjectURL(url), 10000);
+}
+
 async function main() {
   header("studies");
   $("#title").textContent = `Case ${caseNo}`;
@@ -152,7 +215,11 @@ async function main() {
     const ts = await apiJson(`/studies/${studyId}/cases/${caseNo}/timeseries`);
     renderFacts(ts, design, study.name);
     renderModes(ts);
-    drawTraces(ts);
+    const panels = casePanels(ts, studyUnits(design));
+    drawTraces(ts, panels);
+    const csv = $("#traces-csv");
+    csv.disabled = false;
+    csv.addEventListener("click", () => downloadText(tracesCsv(ts, panels), `${study.name}-case${caseNo}-traces.csv`, "text/csv"));
   } catch (err) {
     showError("#error", err);
     fill($("#facts"));

@@ -124,8 +124,10 @@ function showError(where, err) {
 function header(active) {
   const links = [
     ["studies", "/ui/", "Studies"],
+    ["scene", "/ui/scene", "Scene"],
     ["new", "/ui/new", "New study"],
     ["compare", "/ui/compare", "Compare isolators"],
+    ["calibrate", "/ui/calibrate", "Calibrate"],
     ["docs", "/docs", "API reference"],
   ];
   const nav = el(

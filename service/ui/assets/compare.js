@@ -14,6 +14,10 @@ const FAMILIES = [
 
 async function loadSources() {
   const select = $("#source");
+  // a scene handed over by the scene builder (/ui/scene: Compare types), kept in the tab's sessionStorage
+  if (new URLSearchParams(location.search).get("from") === "draft" && sessionStorage.getItem("isolab-draft-scene")) {
+    select.appendChild(el("option", { value: "draft:scene", selected: true }, "the scene from the builder"));
+  }
   const examples = await apiJson("/examples");
   select.appendChild(el("optgroup", { label: "Examples" }, examples.names.map((n) => el("option", { value: `example:${n}` }, n))));
   const stored = await apiJson("/studies?status=done&limit=100");
@@ -24,6 +28,7 @@ async function loadSources() {
 
 async function sceneOf(source) {
   const [kind, key] = source.split(/:(.*)/s);
+  if (kind === "draft") return { scene: JSON.parse(sessionStorage.getItem("isolab-draft-scene")), simulation: null };
   let definition;
   if (kind === "example") {
     const example = await apiJson(`/examples/${encodeURIComponent(key)}`);
@@ -31,7 +36,10 @@ async function sceneOf(source) {
   } else {
     definition = (await apiJson(`/studies/${encodeURIComponent(key)}`)).definition;
   }
-  return { scene: definition.scene, simulation: definition.simulation || null };
+  // a study's own floor and criteria replace its scene's (as when the study runs)
+  const scene = { ...definition.scene };
+  for (const key of ["floor", "criteria"]) if (definition[key]) scene[key] = definition[key];
+  return { scene, simulation: definition.simulation || null };
 }
 
 function renderTable(answer) {
@@ -49,14 +57,15 @@ function renderTable(answer) {
       el("td", { class: "muted" }, answer.criteria[c] ? `best: ${answer.criteria[c]}` : "")
     );
   });
+  // outputs, not criteria: the criteria (their margins and whether all are met) are the answer above
+  const outputs = Object.keys(answer.best).filter((c) => !c.startsWith("margin_") && c !== "meets_criteria");
   const tally = {};
-  for (const t of Object.values(answer.best)) tally[t] = (tally[t] || 0) + 1;
+  for (const c of outputs) tally[answer.best[c]] = (tally[answer.best[c]] || 0) + 1;
   const summary = Object.entries(tally)
     .sort((a, b) => b[1] - a[1])
-    .map(([t, n]) => `${t} is best on ${n} of ${Object.keys(answer.best).length} criteria`)
+    .map(([t, n]) => `${t} has the lowest (or best) value of ${n} of ${outputs.length} outputs`)
     .join("; ");
   fill($("#table"), 
-    answer.recommendation ? el("p", { class: "ok" }, `Recommendation: ${typeof answer.recommendation === "string" ? answer.recommendation : JSON.stringify(answer.recommendation)}`) : null,
     el("p", {}, summary + "."),
     el(
       "table",
@@ -107,6 +116,41 @@ function renderBars(answer) {
   Plotly.newPlot(node, traces, layout, PLOT_CONFIG);
 }
 
+// The floor-induced velocity of every point per type against the VC curves, for a scene standing on a
+// floor spectrum (/comparisons/floor), with the service's figure of one point as a PNG beside it.
+async function drawFloor(scene, types, simulation) {
+  const card = $("#floor-card");
+  const spectrum = scene.floor && scene.floor.spectrum;
+  const points = Object.keys(scene.points || {});
+  if (!spectrum || !points.length) {
+    card.hidden = true;
+    return;
+  }
+  card.hidden = false;
+  fill($("#floor"), el("p", { class: "muted" }, "Computing the spectra at each point…"));
+  const spectra = await postJson("/comparisons/floor", { scene, isolator_types: types, simulation });
+  const judged = Object.keys(spectra.criteria);
+  const point = judged.length ? judged[0] : spectra.points[0];
+  const png = el("button", { type: "button", class: "secondary", id: "floor-png" }, `Figure of ${point} (PNG)`);
+  png.addEventListener("click", () => downloadFloorPng(scene, types, simulation, point).catch((err) => showError("#state", err)));
+  renderFloorSpectra($("#floor"), spectra, png);
+}
+
+async function downloadFloorPng(scene, types, simulation, point) {
+  const response = await api("/comparisons/floor.png", {
+    method: "POST",
+    headers: { "content-type": "application/json" },
+    body: JSON.stringify({ scene, isolator_types: types, simulation, point }),
+  });
+  if (!response.ok) throw new ApiError(response.status, await response.json().catch(() => null));
+  const url = URL.createObjectURL(await response.blob());
+  const a = el("a", { href: url, download: `floor-${point}.png` });
+  document.body.appendChild(a);
+  a.click();
+  a.remove();
+  setTimeout(() => URL.revokeObjectURL(url), 10000);
+}
+
 async function run() {
   const types = [...document.querySelectorAll("input[name=type]:checked")].map((c) => c.value);
   if (!types.length) {
@@ -117,10 +161,14 @@ async function run() {
   $("#state").textContent = "Running…";
   try {
     const { scene, simulation } = await sceneOf($("#source").value);
-    const answer = await postJson("/comparisons", { scene, isolator_types: types, simulation });
+    const tune = $("#tune").checked;
+    $("#state").textContent = tune ? "Tuning each type, then running… (about a minute)" : "Running…";
+    const answer = await postJson("/comparisons", { scene, isolator_types: types, simulation, tune });
+    renderComparisonAnswer($("#answer"), answer);
     renderBars(answer);
     renderTable(answer);
     $("#state").textContent = "";
+    drawFloor(scene, types, simulation).catch((err) => showError("#floor", err));
   } catch (err) {
     showError("#state", err);
   } finally {

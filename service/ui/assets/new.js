@@ -166,7 +166,11 @@ $("#source").addEventListener("change", loadSource);
 $("#submit").addEventListener("click", submit);
 const preset = new URLSearchParams(location.search).get("from");
 loadSources().then(() => {
-  if (preset) {
+  if (preset === "draft") {
+    // a scene handed over by /ui/scene ("Start a study"), kept in this tab only
+    text().value = sessionStorage.getItem("isolab-draft") || "";
+    scheduleCheck();
+  } else if (preset) {
     $("#source").value = preset;
     loadSource();
   }

@@ -20,9 +20,16 @@ function columnUnit(name) {
   return { unit, factor, log: false };
 }
 
+// What a column holds, in words: an output's long name, a parameter's name in words ("stage y
+// acceleration"); with its unit.
+function longName(name) {
+  const known = table && table.long_names && table.long_names[name];
+  return known || name.replaceAll("_", " ");
+}
+
 function label(name) {
   const u = columnUnit(name).unit;
-  return u ? `${name} [${u}]` : name;
+  return u ? `${longName(name)} [${u}]` : longName(name);
 }
 
 function writtenValues(p) {
@@ -98,7 +105,10 @@ function renderDefinition() {
   );
 }
 
+let modelDrawn = 0; // the latest drawing of the model card: an older one still waiting adds nothing
+
 async function renderModel() {
+  const drawing = ++modelDrawn;
   const s = study;
   const facts = el(
     "dl",
@@ -114,6 +124,7 @@ async function renderModel() {
   if (s.status !== "done") return;
   try {
     const e = await apiJson(`/studies/${studyId}/error-estimate`);
+    if (drawing !== modelDrawn) return;
     const names = Object.keys(e.outputs);
     if (!names.length) {
       $("#model").appendChild(el("p", { class: "muted" }, "This study carries no error estimate."));
@@ -137,7 +148,7 @@ async function renderModel() {
       el("p", { class: "muted" }, `Measured on ${e.cases.length} sampled cases against the reference level (${e.method || "–"}).`)
     );
   } catch (err) {
-    $("#model").appendChild(el("p", { class: "error" }, err.message));
+    if (drawing === modelDrawn) $("#model").appendChild(el("p", { class: "error" }, err.message));
   }
 }
 
@@ -255,7 +266,7 @@ async function loadCases() {
     const p = design.parameters.find((q) => q.name === col);
     units[col] = p && !p.categorical ? [p.display_unit, 1 / p.display_scale] : displayUnit(page.units[col]);
   }
-  const head = el("tr", {}, page.columns.map((col) => el("th", { class: "num" }, units[col][0] ? `${col} [${units[col][0]}]` : col)));
+  const head = el("tr", {}, page.columns.map((col) => el("th", { class: "num", title: (page.long_names || {})[col] || null }, units[col][0] ? `${col} [${units[col][0]}]` : col)));
   const body = page.rows.map((r) =>
     el(
       "tr",
@@ -271,15 +282,104 @@ async function loadCases() {
   fill($("#cases"), el("table", { id: "case-table" }, el("thead", {}, head), el("tbody", {}, body)));
 }
 
+// ------------------------------------------------------------------------------------------- answer
+async function loadAnswer() {
+  const node = $("#answer");
+  try {
+    const answer = await apiJson(`/studies/${studyId}/answer`);
+    if (answer.optimisation) renderOptimisation(node, answer, design);
+    else if (answer.criteria) renderStudyCriteria(node, answer);
+    else fill(node, el("p", { class: "muted" }, "This study has no criteria or objective: its answer is the sweep and the case table below."));
+    const best = answer.optimisation ? answer.optimisation.best_case : answer.criteria && answer.criteria.best_case ? answer.criteria.best_case.case : null;
+    loadFloor(best === null || best === undefined ? 0 : best);
+  } catch (err) {
+    showError(node, err);
+  }
+  for (const id of ["#report", "#report-download"]) $(id).disabled = false;
+}
+
+async function openReport() {
+  const tab = window.open("", "_blank"); // opened while the click counts, filled when the report arrives
+  $("#report-state").textContent = "Writing the report (it recomputes one case)…";
+  try {
+    const response = await api(`/studies/${studyId}/report.html`);
+    if (!response.ok) throw new ApiError(response.status, await response.json().catch(() => null));
+    const url = URL.createObjectURL(new Blob([await response.text()], { type: "text/html" }));
+    if (tab) tab.location.href = url;
+    else location.href = url;
+    $("#report-state").textContent = "";
+  } catch (err) {
+    if (tab) tab.close();
+    showError("#report-state", err);
+  }
+}
+
+// ---------------------------------------------------------------------------------------------- floor
+// The study stands on a floor spectrum: each point's band velocity of one case (the best, at first).
+function hasFloorSpectrum() {
+  const d = (study && study.definition) || {};
+  const floor = d.floor || (d.scene && d.scene.floor);
+  return Boolean(floor && floor.spectrum);
+}
+
+async function loadFloor(caseNumber) {
+  if (!hasFloorSpectrum()) return;
+  $("#floor-card").hidden = false;
+  const input = el("input", { id: "floor-case", type: "number", min: "0", max: String(Math.max(study.progress.total - 1, 0)), value: String(caseNumber), size: "6" });
+  const show = el("button", { type: "button", class: "secondary", id: "floor-show" }, "Show");
+  show.addEventListener("click", () => loadFloor(Number(input.value)));
+  const chooser = el("label", {}, "case ", input, " ", show);
+  fill($("#floor"), el("p", { class: "muted" }, `Computing the spectra of case ${caseNumber}…`));
+  try {
+    renderFloorSpectra($("#floor"), await apiJson(`/studies/${studyId}/cases/${caseNumber}/floor`), chooser);
+  } catch (err) {
+    fill($("#floor"), el("div", { class: "controls" }, chooser), el("p", { class: "error" }, String(err.message || err)));
+  }
+}
+
+const SENSITIVITY_DESIGNS = ["saltelli", "lhs", "sobol", "random"];
+
+// The outputs offered for sensitivity indices: the c.g.'s peaks, settling, and each point's peaks.
+function sensitivityOutputs() {
+  const fixed = ["peak_displacement.y", "peak_displacement.x", "peak_displacement.z", "peak_rotation.rx", "settling_time", "natural_frequency.1", "min_isolator_load"];
+  const points = (table ? table.columns : [])
+    .map((c) => c.match(/^peak_point_displacement_(.+)_([xyz])$/))
+    .filter(Boolean)
+    .map((m) => `peak_point_displacement.${m[1]}.${m[2]}`);
+  return [...points, ...fixed];
+}
+
+async function drawSensitivityOf(output) {
+  fill($("#sensitivity-notes"));
+  try {
+    const result = await apiJson(`/studies/${studyId}/sensitivity?output=${encodeURIComponent(output)}`);
+    drawSensitivity($("#sensitivity"), result);
+    const unit = result.unit && result.unit !== "1" ? ` [${displayUnit(result.unit)[0]}]` : "";
+    $("#sensitivity-notes").textContent = `${result.method_name} of ${result.long_name}${unit}, from ${result.n_cases} of ${result.n_total} cases. ${(result.notes || []).join(" ")}`;
+  } catch (err) {
+    showError("#sensitivity", err);
+  }
+}
+
+function loadSensitivity() {
+  if (!SENSITIVITY_DESIGNS.includes(design.design.type) || !design.parameters.length) return;
+  $("#sensitivity-card").hidden = false;
+  const outputs = sensitivityOutputs();
+  fillSelect($("#sensitivity-output"), outputs, outputs[0]);
+  drawSensitivityOf(outputs[0]);
+}
+
 // ---------------------------------------------------------------------------------------------- flow
 async function loadDone() {
   loadedDone = true;
   renderModel();
+  loadAnswer();
   try {
     await loadSweep();
   } catch (err) {
     showError("#sweep", err);
   }
+  loadSensitivity();
   await loadCases();
 }
 
@@ -314,6 +414,11 @@ $("#query").addEventListener("submit", (e) => {
 $("#csv").addEventListener("click", () =>
   download(`/studies/${studyId}/cases?${queryString("csv", 100000)}`, `${study ? study.name : "study"}-cases.csv`).catch((err) => showError("#query-error", err))
 );
+$("#report").addEventListener("click", openReport);
+$("#report-download").addEventListener("click", () =>
+  download(`/studies/${studyId}/report.html`, `${study ? study.name : "study"}-report.html`).catch((err) => showError("#report-state", err))
+);
+$("#sensitivity-output").addEventListener("change", () => drawSensitivityOf($("#sensitivity-output").value));
 $("#netcdf").addEventListener("click", () =>
   download(`/studies/${studyId}/dataset`, `${study ? study.name : "study"}-${studyId}.nc`).catch((err) => showError("#query-error", err))
 );

@@ -29,13 +29,18 @@ bounded):
   engine's step smears a stage's acceleration jumps); 0 switches either off. Applied to both, the filters
   bias nothing. A filtered sample counts as the filter's noise gain of an independent one in the weights
   and the degrees of freedom;
-- **weights**: residuals are divided by each channel's noise, estimated from the residuals of a first fit
-  (weighted by the channels' RMS), then the fit is repeated. The residual variance ``s^2`` of the final fit
-  gives the covariance ``s^2 (J^T J)^-1`` and the 1-sigma uncertainty of every fitted value;
-- **identifiability**: a parameter whose Jacobian column is (near) zero, that is (near) collinear with
-  others (the singular values of the column-normalised Jacobian), or whose 1-sigma uncertainty exceeds a
-  quarter of its bounds' width or half its value is reported as not determined by this measurement, with
-  the reason, instead of a number; it keeps the scene's value and the others are fitted again without it.
+- **noise and weights**: residuals are divided by each channel's sensor noise, stated (``noise``) or
+  estimated from the record's own sample-to-sample scatter, then the fit is repeated with each channel's
+  noise inflated by its chi-square per degree of freedom and the correlation of its residuals
+  (:mod:`.uncertainty`). The covariance ``(J^T J)^-1`` of the Jacobian so weighted gives the 1-sigma
+  uncertainty of every fitted value; the chi-square against the noise, with its expected range and a
+  verdict, judges the fit (``goodness_of_fit``; ``residual_variance`` is its value per degree of freedom);
+- **starts**: the scene's values, and ``starts - 1`` Sobol' points within the bounds on request;
+- **identifiability**: a parameter whose Jacobian column is (near) zero per its bounds' width, that is
+  (near) collinear with others (the singular values of the column-normalised Jacobian), or whose
+  1-sigma uncertainty exceeds a quarter of its bounds' width or half its value is reported as not
+  determined by this measurement, with the reason, instead of a number; it keeps the scene's value and
+  the others are fitted again without it.
 
 The answer (:class:`Calibration`) holds the fitted values with uncertainties, the misfit (RMS residual)
 per channel before (the scene as given, aligned in time by the offset scan) and after, and the calibrated
@@ -44,7 +49,9 @@ details name the field (``loc``).
 
 The package's modules, lowest first: :mod:`.measurements` (channels, units, reading and writing
 measurements), :mod:`.parameters` (what is fitted, with bounds), :mod:`.model` (the simulated channels),
-:mod:`.fit` (the least-squares fit and its answer) and :mod:`.requests` (a request body of the API).
+:mod:`.starts` (where the fit starts), :mod:`.uncertainty` (noise, goodness of fit, honest
+uncertainties), :mod:`.scene_text` (the calibrated scene as text), :mod:`.fit` (the least-squares fit
+and its answer), :mod:`.requests` (a request body of the API) and :mod:`.jobs` (fits on the workers).
 """
 
 from isolab.studies.answers.calibration.fit import Calibration, ParameterFit, calibrate

@@ -8,21 +8,27 @@
 - **time offset**: one more fitted parameter; its start is the best of a scan over its bounds with the
   starting scene, and its Jacobian column is the (central-difference) time derivative of the simulated
   traces;
-- **weights**: residuals are divided by each channel's noise, estimated from the residuals of a first fit
-  (weighted by the channels' RMS), then the fit is repeated. A filtered sample counts as the filter's
-  noise gain of an independent one. The residual variance ``s^2`` of the final fit gives the covariance
-  ``s^2 (J^T J)^-1`` and the 1-sigma uncertainty of every fitted value;
-- **identifiability**: a parameter whose Jacobian column is (near) zero, that is (near) collinear with
-  others, or whose 1-sigma uncertainty exceeds a quarter of its bounds' width or half its value is
-  reported as not determined by this measurement, with the reason; it keeps the scene's value and the
-  others are fitted again without it.
+- **starts**: the scene's values (and, with ``starts: N``, ``N - 1`` Sobol' points within the bounds,
+  the best fit kept: :mod:`.starts`);
+- **weights**: residuals are divided by each channel's sensor noise, stated or estimated from the record
+  alone (:mod:`.uncertainty`). A filtered sample counts as the filter's noise gain of an independent
+  one. A second fit weights each channel by its noise inflated by what the first left: its chi-square
+  per degree of freedom and the correlation of its residuals. The covariance ``(J^T J)^-1`` of the
+  Jacobian so weighted gives the 1-sigma uncertainty of every fitted value, and the chi-square against
+  the noise (``residual_variance``, about 1 when the residuals are the noise) judges the fit;
+- **identifiability**: a parameter whose Jacobian column is (near) zero per bounds' width, that is
+  (near) collinear with others, or whose 1-sigma uncertainty exceeds a quarter of its bounds' width or
+  half its value is reported as not determined by this measurement, with the reason; it keeps the
+  scene's value and the others are fitted again without it.
 
 The answer is a :class:`Calibration` (SI units), one :class:`ParameterFit` per fitted quantity.
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
+import textwrap
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -32,13 +38,24 @@ import yaml
 from pydantic import ValidationError
 from scipy.optimize import least_squares
 
-from isolab.studies.answers.calibration.measurements import LOCATION_CG, Measurement
-from isolab.studies.answers.calibration.model import ChannelModel, simulation_choice
+from isolab.studies.answers.calibration.measurements import LOCATION_CG, Measurement, stated_noise
+from isolab.studies.answers.calibration.model import ChannelModel, check_step, simulation_choice
 from isolab.studies.answers.calibration.parameters import (
     BoundedParameter,
     FitSpec,
     fit_parameters,
     to_si_loc,
+)
+from isolab.studies.answers.calibration.scene_text import calibrated_text
+from isolab.studies.answers.calibration.starts import start_count, start_points, start_spread
+from isolab.studies.answers.calibration.uncertainty import (
+    ChannelMisfit,
+    channel_inflation,
+    filter_correlation_length,
+    goodness_of_fit,
+    parameter_verdict,
+    record_noise,
+    step_timing_error,
 )
 from isolab.studies.inputs.definitions import (
     DefinitionError,
@@ -57,14 +74,6 @@ DEFAULT_OFFSET_FRACTION = 0.25
 """Default bounds of the time offset: +- this fraction of the measurement's span."""
 FD_STEP = 1e-4
 """Forward-difference step of a parameter's Jacobian column, as a fraction of its bounds' width."""
-UNDETERMINED_WIDTH_FRACTION = 0.25
-"""A parameter whose 1-sigma uncertainty exceeds this fraction of its bounds' width is not determined."""
-UNDETERMINED_RELATIVE = 0.5
-"""... or exceeds this fraction of its fitted value's magnitude."""
-ZERO_COLUMN = 1e-9
-"""A Jacobian column shorter than this fraction of the longest is zero: the channels do not respond."""
-COLLINEAR = 1e-8
-"""Singular values of the column-normalised Jacobian below this fraction of the largest: collinear."""
 MAX_SIMULATED_SAMPLES = 60_000
 """Longest simulated history of one case (samples of the engine's output step): 60 s at 1 ms."""
 SCAN_POINTS = 801
@@ -114,6 +123,8 @@ class Calibration:
     identifiability: dict[str, Any]
     residual_variance: float
     degrees_of_freedom: float
+    goodness_of_fit: dict[str, Any]
+    starts: dict[str, Any]
     scene: dict[str, Any]
     scene_yaml: str
     simulation: dict[str, Any]
@@ -131,6 +142,8 @@ class Calibration:
             "identifiability": self.identifiability,
             "residual_variance": self.residual_variance,
             "degrees_of_freedom": self.degrees_of_freedom,
+            "goodness_of_fit": self.goodness_of_fit,
+            "starts": self.starts,
             "scene": self.scene,
             "scene_yaml": self.scene_yaml,
             "simulation": self.simulation,
@@ -147,108 +160,37 @@ def _finite_jac(J: np.ndarray | None) -> np.ndarray:
     return np.nan_to_num(J, nan=0.0, posinf=0.0, neginf=0.0)
 
 
-def _verdict(
-    J: np.ndarray,
-    s2: float,
-    x: np.ndarray,
-    lower: np.ndarray,
-    upper: np.ndarray,
-    free: list[int],
-    names: list[str],
-) -> tuple[np.ndarray, list[str], dict[str, Any]]:
-    """1-sigma uncertainties (NaN where not determined), reasons ("" where determined) and the
-    identifiability figures of the weighted Jacobian ``J`` (columns in the units of ``x``)."""
-    P = J.shape[1]
-    sigma = np.full(P, np.nan)
-    reasons = [""] * P
-    norms = np.linalg.norm(J, axis=0)
-    zero = norms <= ZERO_COLUMN * max(float(norms.max()), 1e-300)
-    for z in np.flatnonzero(zero):
-        reasons[int(z)] = "not determined by this measurement: the measured channels do not respond to it"
-    live = np.flatnonzero(~zero)
-    corr = np.full((P, P), np.nan)
-    sv: list[float] = []
-    if live.size:
-        Jn = J[:, live] / norms[live]
-        _, s, vt = np.linalg.svd(Jn, full_matrices=False)
-        sv = (s / s[0]).tolist()
-        small = s < COLLINEAR * s[0]
-        keep = ~small
-        inv = (vt[keep].T / s[keep] ** 2) @ vt[keep]  # pseudo-inverse of Jn^T Jn
-        cov_n = s2 * inv
-        d = np.sqrt(np.clip(np.diag(cov_n), 0.0, None))
-        sigma[live] = d / norms[live]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            corr[np.ix_(live, live)] = cov_n / np.outer(d, d)
-        for row in np.flatnonzero(small):
-            group = [int(live[q]) for q in np.flatnonzero(np.abs(vt[row]) > 0.1)]
-            for g in group:
-                others = ", ".join(names[j] for j in group if j != g)
-                reasons[g] = (
-                    "not determined by this measurement: collinear with "
-                    + (others or "the others")
-                    + " (only a combination of them is seen)"
-                )
-    width = upper - lower
-    for i in range(P):
-        if reasons[i]:
-            sigma[i] = np.nan
-            continue
-        big = sigma[i] > UNDETERMINED_WIDTH_FRACTION * width[i]
-        if names[i] != "time_offset":  # an offset near zero is a value like any other
-            big = big or sigma[i] > UNDETERMINED_RELATIVE * abs(x[i])
-        if big:
-            partner = ""
-            row = np.abs(np.nan_to_num(corr[i]))
-            row[i] = 0.0
-            if row.max() > 0.9:
-                j = int(row.argmax())
-                partner = f"; correlated with {names[j]} at {corr[i, j]:+.4f}"
-            reasons[i] = (
-                f"not determined by this measurement: 1-sigma uncertainty {sigma[i]:.3g} is more than "
-                f"{UNDETERMINED_WIDTH_FRACTION:g} of the bounds' width or "
-                f"{UNDETERMINED_RELATIVE:g} of the value" + partner
-            )
-            sigma[i] = np.nan
-    info = {
-        "names": names,
-        "fitted": list(names),
-        "singular_values": sv,
-        "condition_number": (1.0 / sv[-1]) if sv and sv[-1] > 0 else None,
-        "correlation": [[None if not np.isfinite(v) else float(v) for v in row] for row in corr],
-    }
-    return sigma, reasons, info
-
-
 @dataclass
 class PreparedFit:
     """A checked calibration, ready to fit: its channel model (:attr:`model`, whose ``duration``,
-    ``choice`` and ``params`` size its cost), the fitted parameters and the time offset's bounds."""
+    ``choice`` and ``params`` size its cost), the fitted parameters, the time offset's bounds, each
+    channel's stated noise (SI, NaN where the record's own scatter estimates it), the number of starts
+    and the scene's text (its file, or the data as given) the calibrated scene is written into."""
 
     model: ChannelModel
     params: list[BoundedParameter]
     offset: tuple[float, float, Any]
     offset_fixed: bool
     prefix: Loc
+    noise: np.ndarray
+    starts: int
+    scene_text: str
 
     def run(self) -> Calibration:
         """The least-squares fit (see :func:`calibrate`)."""
-        return _fit(self.model, self.params, self.offset, self.offset_fixed, self.prefix)
+        return _fit(self)
 
 
 def calibrate(
     scene: Mapping[str, Any] | Scene,
     measurement: Measurement,
     fit: Sequence[FitSpec | Mapping[str, Any]],
-    offset: Mapping[str, Any] | None = None,
-    simulation: Mapping[str, Any] | None = None,
-    highpass: Any = None,
-    lowpass: Any = None,
-    prefix: Loc | None = None,
+    **options: Any,
 ) -> Calibration:
     """Fit ``fit``'s parameters of ``scene`` (and the time offset) to ``measurement``: see
-    :func:`prepare_calibration` for the arguments; raises :class:`DefinitionError` on bad input."""
-    return prepare_calibration(scene, measurement, fit, offset, simulation, highpass, lowpass, prefix).run()
+    :func:`prepare_calibration` for the arguments and ``options``; raises :class:`DefinitionError` on bad
+    input."""
+    return prepare_calibration(scene, measurement, fit, **options).run()
 
 
 def prepare_calibration(
@@ -260,6 +202,9 @@ def prepare_calibration(
     highpass: Any = None,
     lowpass: Any = None,
     prefix: Loc | None = None,
+    noise: Mapping[str, Any] | None = None,
+    starts: Any = 1,
+    scene_text: str | None = None,
 ) -> PreparedFit:
     """Check a calibration of ``fit``'s parameters of ``scene`` (and the time offset) against
     ``measurement``, without running the engine; :meth:`PreparedFit.run` fits it.
@@ -274,8 +219,16 @@ def prepare_calibration(
             scene's; ltv with rk4 at 1 ms where the scene has an accuracy request instead).
         highpass: corner of the acceleration channels' high-pass filter, Hz (default 0.5 Hz; 0: none).
         lowpass: corner of their low-pass filter, Hz (default a fifth of the measurement's sample rate, at
-            most a tenth of the simulation's, ``0.1 / dt``; 0: none).
+            most ``0.03 / dt``; 0: none).
         prefix: where the request's fields live, for error locations (default ``["body"]``).
+        noise: each channel's sensor noise (standard deviation of one sample), by channel name: a number
+            in the channel's unit or text with units. A channel not named has its noise estimated from
+            the record's own sample-to-sample scatter (:func:`.uncertainty.record_noise`).
+        starts: fits started from the scene's values and ``starts - 1`` more points of a Sobol'
+            sequence within the bounds; the best is kept and the spread reported (default 1).
+        scene_text: the scene's file as written (YAML or JSON); the calibrated scene is this text with
+            the fitted values written in, in the units the scene used, and its comments kept (default the
+            scene data as given, dumped as YAML).
 
     Raises:
         DefinitionError: bad input, each detail naming the field.
@@ -342,17 +295,27 @@ def prepare_calibration(
                 )
             ]
         )
+    check_step(sc, measurement, choice, pre)
+    stated = stated_noise(measurement, noise, pre)
+    n_starts = start_count(starts, [*pre, "starts"])
+    if scene_text is None:
+        data = scene_dict(sc) if isinstance(scene, Scene) else dict(scene)
+        scene_text = yaml.safe_dump(data, sort_keys=False)
     model = ChannelModel(sc, params, measurement, choice, (o_lo, o_hi), hp, lp, pre)
-    return PreparedFit(model, params, (o_lo, o_hi, off.get("start")), fixed_offset is not None, pre)
+    return PreparedFit(
+        model,
+        params,
+        (o_lo, o_hi, off.get("start")),
+        fixed_offset is not None,
+        pre,
+        stated,
+        n_starts,
+        scene_text,
+    )
 
 
-def _fit(
-    model: ChannelModel,
-    params: list[BoundedParameter],
-    offset: tuple[float, float, Any],
-    offset_fixed: bool,
-    pre: Loc,
-) -> Calibration:
+def _fit(prep: PreparedFit) -> Calibration:
+    model, params, offset, pre = prep.model, prep.params, prep.offset, prep.prefix
     P = len(params)
     names = [p.target.path for p in params] + ["time_offset"]
     lower = np.array([p.lower for p in params] + [offset[0]])
@@ -360,24 +323,42 @@ def _fit(
     scale = upper - lower
     start = np.array([p.start for p in params] + [0.0])
     y = model.measured
+    nch = y.shape[1]
 
-    # ---- the starting scene: one case, and the offset scan
+    # ---- each channel's noise: stated, or the record's own scatter; what a filtered sample counts for
+    raw = np.stack([c.values for c in model.meas.channels], axis=1)
+    stated = np.isfinite(prep.noise)
+    sigma_raw = np.where(stated, prep.noise, [record_noise(raw[:, k]) for k in range(nch)])
+    sigma_raw = np.maximum(sigma_raw, 1e-9 * np.sqrt(np.mean(y**2, axis=0)) + 1e-300)  # a noiseless record
+    gain = model.gain  # a filtered sample counts as ``gain`` of an independent one
+    samples = gain * y.shape[0]
+    noise_f = sigma_raw * np.sqrt(gain)
+    reference = np.where(
+        [c.order == 2 for c in model.meas.channels],
+        filter_correlation_length(model.sos, y.shape[0]),
+        1.0,
+    )
+
+    def scan(hist: tuple[np.ndarray, np.ndarray]) -> float:
+        """The offset that best aligns ``hist`` with the measurement (a scan over its bounds)."""
+        if offset[2] is not None:
+            tau = to_si_loc(offset[2], "time", [*pre, "offset", "start"])
+        else:
+            taus = np.linspace(offset[0], offset[1], SCAN_POINTS) if not prep.offset_fixed else offset[:1]
+            rms0 = np.sqrt(np.mean(y**2, axis=0)) + 1e-300
+            cost = [float(np.sum(((model.predict(hist, t) - y) / rms0) ** 2)) for t in taus]
+            tau = float(taus[int(np.argmin(cost))])
+        return min(max(tau, lower[P]), upper[P])
+
     base = model.histories(start[None, :P])[0]
     if base is None:
         raise DefinitionError(
             [detail([*pre, "scene"], "the scene as given does not simulate (unstable, tipping or invalid)")]
         )
-    if offset[2] is not None:
-        tau0 = to_si_loc(offset[2], "time", [*pre, "offset", "start"])
-    else:
-        taus = np.linspace(offset[0], offset[1], SCAN_POINTS) if not offset_fixed else np.array([offset[0]])
-        rms0 = np.sqrt(np.mean(y**2, axis=0)) + 1e-300
-        cost = [float(np.sum(((model.predict(base, tau) - y) / rms0) ** 2)) for tau in taus]
-        tau0 = float(taus[int(np.argmin(cost))])
-    start[P] = min(max(tau0, lower[P]), upper[P])
+    start[P] = scan(base)
     before = model.predict(base, start[P])
 
-    free = list(range(P)) + ([] if offset_fixed else [P])
+    free = list(range(P)) + ([] if prep.offset_fixed else [P])
     cache: dict[bytes, tuple[np.ndarray, np.ndarray | None]] = {}
 
     def full(xf: np.ndarray) -> np.ndarray:
@@ -386,7 +367,7 @@ def _fit(
         return x
 
     def evaluate(xf: np.ndarray, weights: np.ndarray, with_jac: bool) -> tuple[np.ndarray, np.ndarray | None]:
-        key = xf.tobytes() + weights.tobytes()
+        key = xf.tobytes() + hashlib.blake2b(weights.tobytes(), digest_size=16).digest()
         hit = cache.get(key)
         if hit is not None and (hit[1] is not None or not with_jac):
             return hit
@@ -430,53 +411,76 @@ def _fit(
         lo = lower[free] / scale[free]
         hi = upper[free] / scale[free]
         try:
-            return _solve(weights, x0, lo, hi)
+            return least_squares(
+                lambda z: evaluate(z, weights, False)[0],
+                np.clip(x0[free] / scale[free], lo, hi),
+                jac=lambda z: _finite_jac(evaluate(z, weights, True)[1]),
+                bounds=(lo, hi),
+                method="trf",
+                x_scale=1.0,
+                xtol=1e-8,
+                ftol=1e-8,
+                gtol=1e-8,
+                max_nfev=60,
+            )
         except (ValueError, np.linalg.LinAlgError) as err:
             raise DefinitionError(
                 [detail([*pre, "measurement"], f"the fit cannot go on from this measurement: {err}")]
             ) from None
 
-    def _solve(weights: np.ndarray, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> Any:
-        return least_squares(
-            lambda z: evaluate(z, weights, False)[0],
-            np.clip(x0[free] / scale[free], lo, hi),
-            jac=lambda z: _finite_jac(evaluate(z, weights, True)[1]),
-            bounds=(lo, hi),
-            method="trf",
-            x_scale=1.0,
-            xtol=1e-8,
-            ftol=1e-8,
-            gtol=1e-8,
-            max_nfev=60,
-        )
+    shape = 1.0 / np.sqrt(model.profile)  # a filtered sample near the record's ends is noisier
 
-    # pass 1: weights from each channel's RMS; pass 2: from each channel's residual (its noise)
-    # a filtered channel's samples are not independent: each counts as ``gain`` of one (its weight is
-    # sqrt(gain) / noise, the degrees of freedom sum gain over the samples)
-    gain = model.gain
-    nch = y.shape[1]
-    n_eff = float(np.sum(gain) * y.shape[0])
-    w = np.sqrt(gain) / (np.sqrt(np.mean(y**2, axis=0)) + 1e-300)
+    def misfits(fun: np.ndarray, weights: np.ndarray) -> list[ChannelMisfit]:
+        r = fun.reshape(y.shape) / weights
+        return channel_inflation(r * shape, noise_f, samples, reference, len(free))
+
+    def inflated(ms: list[ChannelMisfit]) -> np.ndarray:
+        """(N, ch) weights of the samples: each channel's noise, inflated by its misfit and correlation (a
+        noise estimated from the record yields to the residuals where they are smaller)."""
+        c = np.array(
+            [
+                (max(1.0, m.reduced) if stated[k] else max(m.reduced, 1e-12)) * max(1.0, m.correlation)
+                for k, m in enumerate(ms)
+            ]
+        )
+        return shape / (sigma_raw * np.sqrt(c))
+
+    # pass 1 weights each channel by its noise; pass 2 by its noise inflated by what pass 1 left
+    w = shape / sigma_raw
     n_fev = n_jev = 0
     undetermined: dict[int, str] = {}
     x = start.copy()
     res: Any = None
-    for _ in range(P + 2):
-        for _pass in range(2 if nch > 1 else 1):  # one channel: its weight changes nothing
-            res = run(w[None, :], x)
+    points = start_points(start[:P], lower[:P], upper[:P], prep.starts)
+    ends = np.tile(start[:P], (len(points), 1))
+    costs: list[float] = []
+    best = 0
+    for attempt in range(P + 2):
+        for _pass in range(2 if nch > 1 else 1):
+            if attempt == 0 and _pass == 0:
+                for j, pt in enumerate(points):
+                    hist = base if j == 0 else model.histories(pt[None, :])[0]
+                    if hist is None:  # this start does not simulate: it ends where it began
+                        costs.append(math.inf)
+                        continue
+                    rj = run(w, np.concatenate([pt, [scan(hist) if j else start[P]]]))
+                    n_fev += rj.nfev
+                    n_jev += rj.njev or 0
+                    ends[j] = full(rj.x)[:P]
+                    costs.append(2.0 * float(rj.cost))
+                    if res is None or rj.cost < res.cost:
+                        res, best = rj, j
+                x = full(res.x)
+                w = inflated(misfits(res.fun, w))
+                continue
+            res = run(w, x)
             n_fev += res.nfev
             n_jev += res.njev or 0
             x = full(res.x)
-            r = res.fun.reshape(y.shape) / w[None, :]
-            noise = np.sqrt(np.mean(r**2, axis=0))
-            w = np.sqrt(gain) / np.maximum(noise, 1e-12 * (np.sqrt(np.mean(y**2, axis=0)) + 1e-300))
-        rr, J = evaluate(res.x, w[None, :], True)
-        dof = max(n_eff - len(free), 1.0)
-        s2 = float(np.sum(rr**2) / dof)
+            w = inflated(misfits(res.fun, w))
+        _, J = evaluate((x[free] / scale[free]), w, True)
         Jx = (J if J is not None else np.zeros((y.size, 0))) / scale[free]
-        sig_free, reasons_free, info = _verdict(
-            Jx, s2, x[free], lower[free], upper[free], free, [names[i] for i in free]
-        )
+        sig_free, reasons_free, info = parameter_verdict(Jx, scale[free], x[free], [names[i] for i in free])
         new = {free[k]: reasons_free[k] for k in range(len(free)) if reasons_free[k]}
         if not new:
             break
@@ -490,15 +494,24 @@ def _fit(
     final = model.histories(x[None, :P])[0]
     assert final is not None
     after = model.predict(final, x[P])
+    final_misfits = channel_inflation((after - y) * shape, noise_f, samples, reference, len(free))
+    fit_quality = goodness_of_fit(
+        [c.name for c in model.meas.channels],
+        final_misfits,
+        ["stated" if s else "estimated" for s in stated],
+        len(free),
+        y.shape[0],
+    )
     if not free:
-        dof = n_eff
-        s2 = float(np.sum(((after - y) * w) ** 2) / dof)
         sig_free, info = (
             np.zeros(0),
             {"names": [], "fitted": [], "singular_values": [], "condition_number": None, "correlation": []},
         )
 
     sigma = {free[k]: float(sig_free[k]) for k in range(len(free))}
+    timing = step_timing_error(model.choice.dt) if any(c.order == 2 for c in model.meas.channels) else 0.0
+    if P in sigma and math.isfinite(sigma[P]):  # the engine places an acceleration jump within a step
+        sigma[P] = math.hypot(sigma[P], timing)
     fits = []
     for i in range(P + 1):
         p = params[i].target if i < P else None
@@ -518,6 +531,9 @@ def _fit(
                 estimate=float(x[i]),
             )
         )
+    spread = start_spread(
+        names[:P], points, ends, costs, best, np.array([sigma.get(i, math.nan) for i in range(P)])
+    )
     channels = []
     for k, c in enumerate(model.meas.channels):
         channels.append(
@@ -530,7 +546,9 @@ def _fit(
                 "si_unit": c.si_unit,
                 "samples": int(y.shape[0]),
                 "filtered": bool(c.order == 2 and model.sos is not None),
-                "effective_samples": float(gain[k] * y.shape[0]),
+                "effective_samples": float(samples[k]),
+                "noise": float(sigma_raw[k]),
+                "noise_source": "stated" if stated[k] else "estimated",
                 "rms_measured": float(np.sqrt(np.mean(y[:, k] ** 2))),
                 "rms_before": float(np.sqrt(np.mean((before[:, k] - y[:, k]) ** 2))),
                 "rms_after": float(np.sqrt(np.mean((after[:, k] - y[:, k]) ** 2))),
@@ -548,15 +566,18 @@ def _fit(
             header.append(
                 f"#   {f.path}: not determined by this measurement (left at {f.start:.6g} {f.unit})".rstrip()
             )
-    text = "\n".join(header) + "\n" + yaml.safe_dump(out_scene, sort_keys=False)
+    header += ["#   " + line for line in textwrap.wrap(fit_quality["verdict"], 100)]
+    text = calibrated_text(prep.scene_text, header, [(params[i].target, float(x[i])) for i in kept])
     choice = model.choice
     return Calibration(
         parameters=fits[:P],
         time_offset=fits[P],
         channels=channels,
         identifiability=info,
-        residual_variance=s2,
-        degrees_of_freedom=float(dof),
+        residual_variance=float(fit_quality["reduced_chi_square"]),
+        degrees_of_freedom=float(fit_quality["dof"]),
+        goodness_of_fit=fit_quality,
+        starts=spread,
         scene=out_scene,
         scene_yaml=text,
         simulation={

@@ -25,6 +25,9 @@ from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from typing import Any
 
+import numpy as np
+from pydantic import BaseModel, Field
+
 from isolab.studies.answers.calibration.fit import PreparedFit
 from isolab.studies.answers.calibration.requests import prepare_request
 from isolab.studies.inputs.definitions import DefinitionError, detail
@@ -42,6 +45,8 @@ CALL_OVERHEAD = 0.08
 """Fixed time of one engine batch of a calibration (building the batch, interpolating, filtering), s."""
 PROGRESS_INTERVAL = 1.0
 """How often the service reads the running jobs' progress, s."""
+MAX_TRACE_POINTS = 2000
+"""Most samples per trace a stored answer keeps (:func:`decimated_traces`)."""
 
 Draw = Callable[[dict[str, Any], dict[str, Any]], bytes]
 """``draw(traces, answer)``: a PNG of measured against simulated traces."""
@@ -73,15 +78,65 @@ class CalibrationCost:
         return asdict(self)
 
 
+class ChannelTrace(BaseModel):
+    """One measured channel against the simulation, as the fit saw it (SI)."""
+
+    name: str = Field(description="the channel, e.g. cg.y")
+    unit: str = Field(description="the unit the measurement was written in")
+    factor: float = Field(description="SI per that unit: divide a value by it to read it in that unit")
+    measured: list[float | None] = Field(description="the measurement, SI")
+    before: list[float | None] = Field(description="the scene as given (aligned by the offset scan), SI")
+    after: list[float | None] = Field(description="the calibrated scene, SI")
+
+
+class CalibrationTraces(BaseModel):
+    """Measured against simulated traces of a calibration, every ``every``-th sample."""
+
+    time: list[float] = Field(description="measurement time, s")
+    every: int = Field(description="one sample kept in every this many of the fit's")
+    channels: list[ChannelTrace]
+
+
+def _values(a: Any, every: int) -> list[float | None]:
+    x = np.asarray(a, dtype=np.float64).reshape(-1)[::every]
+    return [float(v) if np.isfinite(v) else None for v in x]
+
+
+def decimated_traces(traces: Mapping[str, Any], max_points: int = MAX_TRACE_POINTS) -> dict[str, Any]:
+    """The traces of a fit (:attr:`isolab.studies.answers.calibration.Calibration.traces`) as JSON-able
+    data (:class:`CalibrationTraces`), every ``every``-th sample kept so that at most ``max_points``
+    remain (the traces are the filtered ones the fit compared, so thinning them draws the same lines)."""
+    t = np.asarray(traces["time"], dtype=np.float64).reshape(-1)
+    every = max(1, -(-t.size // max(int(max_points), 1)))
+    return {
+        "time": [float(v) for v in t[::every]],
+        "every": every,
+        "channels": [
+            {
+                "name": str(ch["name"]),
+                "unit": str(ch.get("unit") or ""),
+                "factor": float(ch.get("factor") or 1.0),
+                "measured": _values(ch["measured"], every),
+                "before": _values(ch["before"], every),
+                "after": _values(ch["after"], every),
+            }
+            for ch in traces["channels"]
+        ],
+    }
+
+
 def estimate_cost(prepared: PreparedFit) -> CalibrationCost:
     """The engine work of ``prepared``'s fit: with ``P`` fitted parameters, about ``2 (P+1)(P+4)`` engine
     batches of ``(P+1)(P+2)(P+4)`` cases in all (more parameters take more iterations, and one that the
-    measurement does not determine takes a fit again without it), each case ``duration / dt`` steps at
-    :func:`studies.run.costs.step_cost` of the fit's model. Rough: a factor of two either way."""
+    measurement does not determine takes a fit again without it), and about half that again for each
+    start beyond the first (``starts``: one fit each, without the second pass), each case
+    ``duration / dt`` steps at :func:`studies.run.costs.step_cost` of the fit's model. Rough: a factor of
+    two either way."""
     model = prepared.model
     p = len(prepared.params)
-    calls = 2 * (p + 1) * (p + 4)
-    cases = (p + 1) * (p + 2) * (p + 4)
+    extra = prepared.starts - 1  # each further start: one case to scan its offset, then about a fit
+    calls = 2 * (p + 1) * (p + 4) + extra * (1 + (p + 1) * (p + 4))
+    cases = (p + 1) * (p + 2) * (p + 4) + extra * (1 + (p + 1) * (p + 2) * (p + 4) // 2)
     steps = max(1, round(model.duration / model.choice.dt))
     per_case = steps * step_cost(model.choice.fidelity, model.choice.integrator) + 1e-3
     return CalibrationCost(calls * CALL_OVERHEAD + cases * per_case, calls, cases, steps)
@@ -144,6 +199,7 @@ def calibration_task(
     prepared.model.watch = watch
     result = prepared.run()
     answer = result.to_json()
+    answer["traces"] = decimated_traces(result.traces)
     answer["plot_png"] = None
     if body.get("plot", True) and draw is not None:
         answer["plot_png"] = base64.b64encode(draw(result.traces, answer)).decode("ascii")

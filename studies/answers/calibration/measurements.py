@@ -155,7 +155,7 @@ def parse_channel(name: str, unit: str, values: Any, loc: Loc, value_loc: Loc | 
             [
                 detail(
                     value_loc or loc,
-                    f"channel {name!r}: sample {int(np.flatnonzero(bad)[0])} is not a finite number",
+                    f"channel {name!r}: values[{int(np.flatnonzero(bad)[0])}] is not a finite number",
                 )
             ]
         )
@@ -194,7 +194,9 @@ def _check_measurement(m: Measurement, prefix: Loc) -> Measurement:
         )
     if np.any(np.diff(t) <= 0):
         i = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1
-        raise DefinitionError([detail([*prefix, "time"], f"times must increase; sample {i} does not")])
+        raise DefinitionError(
+            [detail([*prefix, "time"], f"times must increase: time[{i}] is not after time[{i - 1}]")]
+        )
     if not m.channels:
         raise DefinitionError([detail([*prefix, "channels"], "no channel: give at least one")])
     if len(m.channels) > MAX_CHANNELS:
@@ -248,30 +250,77 @@ def measurement_from_csv(text: str, prefix: Loc | None = None, source: str = "CS
     ``cg.z.displacement [mm]`` ...), then one row per sample. Comma, semicolon or tab separated; lines
     starting with ``#`` are comments."""
     pre: Loc = ["body", "measurement"] if prefix is None else list(prefix)
-    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
-    if len(lines) < 2:
-        raise DefinitionError([detail([*pre, "csv"], "a header row and at least one row of samples")])
-    sep = next((s for s in (",", ";", "\t") if s in lines[0]), ",")
-    header = [h.strip() for h in lines[0].split(sep)]
+    loc = [*pre, "csv"]
+    numbered = [
+        (n, ln)
+        for n, ln in enumerate(text.splitlines(), start=1)
+        if ln.strip() and not ln.lstrip().startswith("#")
+    ]
+    if len(numbered) < 2:
+        raise DefinitionError([detail(loc, "a header row and at least one row of samples")])
+    head_line, head = numbered[0]
+    sep = next((s for s in (",", ";", "\t") if s in head), ",")
+    header = [h.strip() for h in head.split(sep)]
     if len(header) < 2:
-        raise DefinitionError([detail([*pre, "csv"], "the header names time and at least one channel")])
+        raise DefinitionError([detail(loc, "the header names time and at least one channel")])
+    rows = numbered[1:]
     try:
-        data = np.loadtxt(io.StringIO("\n".join(lines[1:])), delimiter=sep, ndmin=2, dtype=np.float64)
-    except ValueError as err:
-        raise DefinitionError([detail([*pre, "csv"], f"cannot read the samples as numbers: {err}")]) from None
-    if data.shape[1] != len(header):
-        raise DefinitionError(
-            [detail([*pre, "csv"], f"the header has {len(header)} columns, the rows {data.shape[1]}")]
+        data = np.loadtxt(
+            io.StringIO("\n".join(ln for _, ln in rows)), delimiter=sep, ndmin=2, dtype=np.float64
         )
-    tname, tunit = parse_header(header[0], [*pre, "csv"])
+        readable = data.shape[1] == len(header)
+    except ValueError:
+        readable = False
+    if not readable:
+        raise DefinitionError([detail(loc, _csv_problem(rows, header, sep, head_line))])
+    bad = ~np.isfinite(data)
+    if bad.any():
+        r, c = (int(v) for v in np.argwhere(bad)[0])
+        cell = rows[r][1].split(sep)[c].strip()
+        raise DefinitionError(
+            [detail(loc, f"line {rows[r][0]}, column {header[c]!r}: {cell!r} is not a finite number")]
+        )
+    tname, tunit = parse_header(header[0], loc)
     if tname.lower() not in TIME_NAMES:
-        raise DefinitionError([detail([*pre, "csv"], f"the first column must be time, got {tname!r}")])
-    t = _time_values(data[:, 0], tunit or "s", [*pre, "csv"])
+        raise DefinitionError([detail(loc, f"the first column must be time, got {tname!r}")])
+    t = _time_values(data[:, 0], tunit or "s", loc)
+    back = np.flatnonzero(np.diff(t) <= 0)
+    if back.size:
+        r = int(back[0]) + 1
+        raise DefinitionError(
+            [
+                detail(
+                    loc,
+                    f"line {rows[r][0]}, column {header[0]!r}: times must increase, and "
+                    f"{rows[r][1].split(sep)[0].strip()} does not follow "
+                    f"{rows[r - 1][1].split(sep)[0].strip()} (line {rows[r - 1][0]})",
+                )
+            ]
+        )
     channels = []
     for i, h in enumerate(header[1:], start=1):
-        name, unit = parse_header(h, [*pre, "csv"])
-        channels.append(parse_channel(name, unit, data[:, i], [*pre, "csv"]))
-    return _check_measurement(Measurement(t, channels, source), [*pre, "csv"])
+        name, unit = parse_header(h, loc)
+        channels.append(parse_channel(name, unit, data[:, i], loc))
+    return _check_measurement(Measurement(t, channels, source), loc)
+
+
+def _csv_problem(rows: Sequence[tuple[int, str]], header: list[str], sep: str, head_line: int) -> str:
+    """Why the CSV's samples cannot be read, at the first line and column that fails, in a user's words
+    (lines counted from 1 as a text editor shows them)."""
+    for line, text in rows:
+        cells = [c.strip() for c in text.split(sep)]
+        if len(cells) != len(header):
+            return (
+                f"line {line} has {len(cells)} value{'' if len(cells) == 1 else 's'}, but the header "
+                f"(line {head_line}) names {len(header)} columns ({', '.join(header)})"
+            )
+        for name, cell in zip(header, cells, strict=True):
+            try:
+                float(cell)
+            except ValueError:
+                why = "it is empty" if not cell else f"{cell!r} is not a number"
+                return f"line {line}, column {name!r}: {why}"
+    return "cannot read the samples as numbers"
 
 
 def measurement_from_netcdf(path: str | Path) -> Measurement:
@@ -325,3 +374,45 @@ def measurement_csv(m: Measurement, units: Mapping[str, str] | None = None) -> s
     buf = io.StringIO()
     np.savetxt(buf, np.column_stack(cols), delimiter=",", header=",".join(header), comments="", fmt="%.10g")
     return buf.getvalue()
+
+
+def stated_noise(m: Measurement, noise: Mapping[str, Any] | None, prefix: Loc) -> np.ndarray:
+    """(ch,) each channel's stated sensor noise (standard deviation of one sample) in SI, NaN where
+    ``noise`` (channel name -> a number in the channel's unit, or text with units) does not name it.
+
+    Raises:
+        DefinitionError: an unknown channel, or a noise that is not a positive finite quantity of the
+            channel's kind, at ``prefix + ["noise", name]``.
+    """
+    out = np.full(len(m.channels), np.nan)
+    if noise is None:
+        return out
+    if not isinstance(noise, Mapping):
+        raise DefinitionError([detail([*prefix, "noise"], "a mapping of channel name -> its noise")])
+    index = {c.name: k for k, c in enumerate(m.channels)}
+    for name, value in noise.items():
+        loc = [*prefix, "noise", name]
+        key = str(name).strip()
+        if key not in index:
+            raise DefinitionError(
+                [detail(loc, f"no channel {key!r} in the measurement ({', '.join(index)})")]
+            )
+        c = m.channels[index[key]]
+        if isinstance(value, bool) or not isinstance(value, int | float | str):
+            raise DefinitionError([detail(loc, "must be a number in the channel's unit, or text with units")])
+        if isinstance(value, str):
+            amount, _, unit = value.strip().partition(" ")
+            try:
+                number = float(amount)
+            except ValueError:
+                raise DefinitionError(
+                    [detail(loc, f"{value!r}: write a number and a unit, e.g. '0.01 mm'")]
+                ) from None
+            factor = _unit_factor(unit.strip(), c.quantity, c.rotational, loc) if unit.strip() else c.factor
+        else:
+            number, factor = float(value), c.factor
+        si = number * factor
+        if not (np.isfinite(si) and si > 0):
+            raise DefinitionError([detail(loc, f"must be a positive noise, got {value!r}")])
+        out[index[key]] = si
+    return out

@@ -85,6 +85,9 @@ class ChannelModel:
         self.lowpass = 0.0
         self.accel = [k for k, c in enumerate(meas.channels) if c.order == 2]
         self.gain = np.ones(len(meas.channels))
+        self.profile = np.ones((meas.time.size, len(meas.channels)))
+        """(N, ch) variance of each sample's filtered noise over a sample's in mid-record (1 unfiltered):
+        near the ends of the record the band-pass's transients make it several times larger."""
         if self.accel:
             step = np.diff(self.t)
             fs = 1.0 / float(step.mean())
@@ -128,6 +131,9 @@ class ChannelModel:
                         ]
                     )
                 self.gain[self.accel] = _noise_gain(self.sos, self.t.size)
+                self.profile[:, self.accel] = (
+                    noise_profile(self.sos, self.t.size) / self.gain[self.accel[0]]
+                )[:, None]
         self.cases = 0
         self.calls = 0
         self.watch: Callable[[int, int], None] | None = None
@@ -227,6 +233,27 @@ class ChannelModel:
         return self.filtered(self.sample(hist, offset))
 
 
+PROFILE_PROBES = 48
+"""Random probes of :func:`noise_profile` (its relative error per sample, after smoothing, is a few %)."""
+PROFILE_SMOOTHING = 31
+"""Samples of the moving average that smooths :func:`noise_profile`."""
+
+
+def noise_profile(sos: np.ndarray, n: int) -> np.ndarray:
+    """(n,) variance of each sample of white noise of unit variance after the acceleration channels'
+    processing (a straight line removed, then the zero-phase filter ``sos``), estimated from random
+    +-1 probes (fixed seed) and smoothed: about the noise gain in mid-record, larger at the ends."""
+    rng = np.random.default_rng(0)
+    acc = np.zeros(n)
+    for _ in range(PROFILE_PROBES // 8):
+        z = rng.choice([-1.0, 1.0], size=(n, 8))
+        acc += np.sum(sosfiltfilt(sos, detrend(z, axis=0), axis=0) ** 2, axis=1)
+    acc /= 8 * (PROFILE_PROBES // 8)
+    w = min(PROFILE_SMOOTHING, n)
+    padded = np.pad(acc, (w // 2, w - 1 - w // 2), mode="edge")
+    return np.convolve(padded, np.ones(w) / w, mode="valid")
+
+
 def _noise_gain(sos: np.ndarray, n: int) -> float:
     """Variance of white noise of unit variance after the zero-phase filter ``sos`` (sum of the squared
     impulse response): the fraction of a filtered channel's samples that count as independent."""
@@ -234,6 +261,58 @@ def _noise_gain(sos: np.ndarray, n: int) -> float:
     x = np.zeros(m)
     x[m // 2] = 1.0
     return float(np.clip(np.sum(sosfiltfilt(sos, x) ** 2), 1e-6, 1.0))
+
+
+DEFAULT_DT = 1e-3
+"""The step a calibration simulates with where neither the request nor the scene gives one, s."""
+STEPS_PER_PERIOD = 20
+"""Fewest engine steps per period of the scene's fastest mode a calibration simulates with."""
+
+
+def check_step(scene: Scene, meas: Measurement, choice: SimulationChoice, prefix: Loc) -> None:
+    """Refuse a step too coarse for the record (longer than its sample interval: the simulated traces
+    would be straight lines between the measured samples) or for the model (fewer than
+    :data:`STEPS_PER_PERIOD` steps per period of the scene's fastest mode).
+
+    Raises:
+        DefinitionError: at ``prefix + ["simulation", "dt"]``, naming the limit.
+    """
+    loc = [*prefix, "simulation", "dt"]
+    interval = float(np.median(np.diff(meas.time)))
+    if choice.dt > interval * (1 + 1e-9):
+        raise DefinitionError(
+            [
+                detail(
+                    loc,
+                    f"{choice.dt:g} s is longer than the measurement's sample interval ({interval:g} s): "
+                    f"take a step of at most {interval:g} s",
+                )
+            ]
+        )
+    from isolab.engine import modal
+    from isolab.engine import model as engine_model
+
+    batch = build_batch([scene])
+    try:
+        md = modal.modes(
+            engine_model.mass_matrix(batch),
+            engine_model.stiffness_matrix(batch),
+            engine_model.damping_matrix(batch),
+        )
+    except np.linalg.LinAlgError:
+        return
+    f_max = float(np.nanmax(md.frequency)) if np.size(md.frequency) else 0.0
+    if f_max > 0 and choice.dt > 1.0 / (STEPS_PER_PERIOD * f_max):
+        limit = 1.0 / (STEPS_PER_PERIOD * f_max)
+        raise DefinitionError(
+            [
+                detail(
+                    loc,
+                    f"{choice.dt:g} s is too coarse for the scene's fastest mode ({f_max:.3g} Hz): take a "
+                    f"step of at most {limit:.3g} s ({STEPS_PER_PERIOD} steps per period)",
+                )
+            ]
+        )
 
 
 def simulation_choice(scene: Scene, simulation: Mapping[str, Any] | None, prefix: Loc) -> SimulationChoice:
@@ -259,11 +338,21 @@ def simulation_choice(scene: Scene, simulation: Mapping[str, Any] | None, prefix
         data[k] = v
     if data["dt"] is not None:
         data["dt"] = to_si_loc(data["dt"], "time", [*prefix, "simulation", "dt"])
+    if not isinstance(data["auto_step"], bool):
+        raise DefinitionError(
+            [
+                detail(
+                    [*prefix, "simulation", "auto_step"], f"must be true or false, got {data['auto_step']!r}"
+                )
+            ]
+        )
     fidelity = data["fidelity"] or "ltv"
     integrator = data["integrator"] or ("exact" if fidelity == "lti" else "rk4")
-    dt = float(data["dt"] or 1e-3)
+    dt = DEFAULT_DT if data["dt"] is None else float(data["dt"])
     if not (math.isfinite(dt) and dt > 0):
-        raise DefinitionError([detail([*prefix, "simulation", "dt"], "must be a positive step in s")])
+        raise DefinitionError(
+            [detail([*prefix, "simulation", "dt"], f"must be a positive step, got {dt:g} s")]
+        )
     from isolab.engine import check_choice
 
     try:

@@ -13,6 +13,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 from pydantic import ValidationError
 
 from isolab.studies.inputs.definitions import DefinitionError, Loc, detail, validation_details
@@ -73,7 +74,9 @@ def _plain(value: Any, target: Target, loc: Loc) -> float:
 
 
 def _scene_value(scene: Scene, target: Target) -> float | None:
-    """The value ``target`` has in ``scene`` (a preset's figure where the scene leaves it to the preset)."""
+    """The value ``target`` has in ``scene``: a preset's figure where the scene leaves it to the preset,
+    the mounts' stiffness or damping along an axis (their mean where they differ) where the scene sets
+    them by frequencies."""
     node: Any = scene_dict(scene)
     parts = target.writes[0].split(".")
     for i, part in enumerate(parts):
@@ -92,6 +95,10 @@ def _scene_value(scene: Scene, target: Target) -> float | None:
         return float(node)
     iso = scene.isolators
     key = parts[-1]
+    if parts[0] == "isolators" and len(parts) == 3 and parts[1] in ("k", "c") and key in "xyz":
+        batch = build_batch([scene])  # what the mounts have along that axis (from their frequencies)
+        values = (batch.iso_k if parts[1] == "k" else batch.iso_c)[0, :, "xyz".index(key)]
+        return float(np.mean(values))
     if parts[0] == "isolators" and key in ("f_vertical", "f_horizontal", "zeta"):
         if parts[1] == "list" and iso.mounts is not None:
             mount = iso.mounts[int(parts[2])]

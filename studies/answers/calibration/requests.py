@@ -30,7 +30,8 @@ def request_measurement(data: Mapping[str, Any], prefix: Loc | None = None) -> M
 
 def calibrate_request(body: Mapping[str, Any]) -> Calibration:
     """:func:`calibrate` of a request body (``scene``, ``measurement``, ``fit``, and optionally
-    ``offset``, ``simulation``, ``highpass``, ``lowpass``), errors located under ``body``."""
+    ``offset``, ``simulation``, ``highpass``, ``lowpass``, ``noise``, ``starts``), errors located under
+    ``body``."""
     return prepare_request(body).run()
 
 
@@ -47,4 +48,6 @@ def prepare_request(body: Mapping[str, Any]) -> PreparedFit:
         simulation=body.get("simulation"),
         highpass=body.get("highpass"),
         lowpass=body.get("lowpass"),
+        noise=body.get("noise"),
+        starts=body.get("starts", 1),
     )

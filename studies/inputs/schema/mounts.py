@@ -9,6 +9,14 @@ from typing import Annotated, Any
 import numpy as np
 from pydantic import Field, model_validator
 
+from isolab.studies.inputs.catalogues import (
+    MAX_PER_CORNER,
+    Catalogue,
+    ProductId,
+    UnknownProductError,
+    product_figures,
+    scene_catalogue,
+)
 from isolab.studies.inputs.isolators import (
     PRESETS,
     CollinearIsolatorsError,
@@ -30,7 +38,7 @@ from isolab.studies.inputs.schema.fields import (
     tested_range,
     within,
 )
-from isolab.studies.inputs.schema.scene_paths import AXIS_ALIASES
+from isolab.studies.inputs.schema.scene_paths import AXIS_ALIASES, ISOLATORS
 from isolab.studies.units import Dimensionless, Force, Frequency, Length
 
 
@@ -134,6 +142,9 @@ class Mount(InputModel):
     overrides and preset."""
 
     position: Position = Field(description="point of action, m")
+    model: ProductId | None = Field(
+        None, description="a product of the catalogue: its type and figures, unless given here"
+    )
     preset: PresetName | None = None
     f_vertical: MountFrequency | None = None
     f_horizontal: MountFrequency | None = None
@@ -172,6 +183,20 @@ class Isolators(InputModel):
     """
 
     preset: PresetName = "air"
+    model: ProductId | None = Field(
+        None, description="a product of the catalogue for every mount: its type and figures, unless given"
+    )
+    catalogue: str | Catalogue | None = Field(
+        None,
+        description="the catalogue model: names: a shipped one (representative, the default), a file (read "
+        "when the scene file is loaded) or the catalogue inline",
+    )
+    per_corner: list[Annotated[int, Field(ge=1, le=MAX_PER_CORNER)]] | None = Field(
+        None,
+        min_length=1,
+        max_length=MAX_PER_CORNER,
+        description="how many isolators side by side a mount position may take when sized (default [1])",
+    )
     tuning: dict[PresetName, PresetTuning] = Field(default_factory=dict)
     f_vertical: MountFrequency | None = None
     f_horizontal: MountFrequency | None = None
@@ -197,6 +222,32 @@ class Isolators(InputModel):
                 load_share(xy, xy.mean(axis=0), 1.0)
             except CollinearIsolatorsError as err:
                 raise ValueError(str(err)) from None
+        return self
+
+    @model_validator(mode="after")
+    def _products(self) -> Isolators:
+        """Apply each ``model:`` (group and listed mounts): the product's type as the preset and its
+        figures wherever the block leaves them unset. A scene without ``model:`` is left as it is."""
+        named = [(ISOLATORS, self)] + [(f"{ISOLATORS}.list[{j}]", m) for j, m in enumerate(self.listed)]
+        if all(block.model is None for _, block in named):
+            return self
+        catalogue = scene_catalogue(self.catalogue, f"{ISOLATORS}.catalogue")
+        for where, block in named:
+            if block.model is None:
+                continue
+            try:
+                product = catalogue.product(block.model, f"{where}.model")
+            except UnknownProductError as err:
+                raise ValueError(str(err)) from None
+            figures = product_figures(product)
+            if "preset" in block.model_fields_set and block.preset != product.type:
+                raise ValueError(
+                    f"{where}.preset: product {product.id!r} is {product.type}; leave preset out or give "
+                    f"{product.type}"
+                )
+            for key, value in figures.items():
+                if getattr(block, key) is None or key == "preset":
+                    setattr(block, key, value)
         return self
 
     @property

@@ -44,6 +44,30 @@ class ParameterSpec(InputModel):
         return self
 
 
+MAX_ROBUST_SAMPLES = 10_000
+"""Most draws a robust design judges each candidate on."""
+
+
+class RobustSpec(InputModel):
+    """An optimize design's ``robust`` block: each candidate judged on ``samples`` draws of the study's
+    tolerances (the same draws for every candidate), the objective on a statistic of them and the
+    constraints as a chance constraint (:mod:`studies.run.robust`)."""
+
+    samples: int = Field(ge=2, le=MAX_ROBUST_SAMPLES, description="draws of the tolerances per candidate")
+    require: Value = Field(
+        description="the least probability of meeting every constraint of the design, e.g. 95 % or 0.95"
+    )
+    statistic: Literal["mean", "quantile"] = Field(
+        "mean", description="what the objective is over each candidate's draws: mean or quantile"
+    )
+    quantile: Value | None = Field(
+        None, description="statistic quantile: its share, e.g. 90 % (default 90 %)"
+    )
+    sampling: Literal["sobol", "random"] = Field(
+        "sobol", description="the draws: a scrambled Sobol' sequence (sobol) or independent (random)"
+    )
+
+
 class DesignSpec(InputModel):
     """How cases are drawn: full factorial ``grid``, ``lhs``, ``sobol``, ``random``, ``saltelli`` (Sobol'
     indices: ``samples`` is the base sample N and the study runs N (D + 2) cases, N (2D + 2) with
@@ -96,6 +120,12 @@ class DesignSpec(InputModel):
         le=10_000,
         description="optimize: stop once this many generations in a row improve the best feasible objective "
         "by less than 0.1 % (default: run the whole budget)",
+    )
+
+    robust: RobustSpec | None = Field(
+        None,
+        description="optimize: judge each candidate on its tolerance cloud (samples, require, statistic, "
+        "quantile); needs a tolerances block",
     )
 
     @model_validator(mode="after")

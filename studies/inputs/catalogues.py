@@ -1,0 +1,292 @@
+"""Isolator catalogues: products with their rated load range and the figures a scene's mount takes.
+
+A catalogue is a YAML (or JSON) file of products, each quantity written with its unit as in the scene
+files (``rated_load: {min: 8 kN, max: 30 kN}``; a load may also be written as a mass, ``2000 kg``, read
+as its weight under standard gravity). A mount names a product by ``model: <id>``; the scene then uses
+the product's natural frequencies and damping ratio (:func:`product_figures`), as if they were written
+on the mount. The shipped catalogue (:data:`SHIPPED_CATALOGUES`) holds representative figures from
+public datasheets; users bring their own.
+"""
+
+from __future__ import annotations
+
+import difflib
+import json
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator, model_validator
+
+from isolab.studies.units import (
+    STANDARD_GRAVITY,
+    Area,
+    Dimensionless,
+    Frequency,
+    Length,
+    Pressure,
+    Time,
+    to_si,
+)
+
+CATALOGUE_DIR = Path(__file__).resolve().parent.parent / "catalogues"
+"""Where the shipped catalogues live (package data of ``isolab.studies``)."""
+SHIPPED_CATALOGUES: dict[str, Path] = {"representative": CATALOGUE_DIR / "representative.yaml"}
+"""The catalogues installed with isolab, by name."""
+DEFAULT_CATALOGUE = "representative"
+"""The catalogue a ``model:`` reads when the scene names none."""
+MAX_PRODUCTS = 1000
+"""Most products of one catalogue."""
+MAX_PER_CORNER = 8
+"""Most isolators one mount position may take side by side."""
+CATALOGUE_SUFFIXES = (".yaml", ".yml", ".json")
+"""Endings of a catalogue file name (a ``catalogue:`` naming no shipped catalogue but a file)."""
+
+ProductId = Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$", max_length=64)]
+"""A product's id: letters, digits and ``_ . + -``, starting with a letter or digit."""
+IsolatorType = Literal["active", "air", "elastomer"]
+
+
+def _load_in_newtons(value: Any) -> Any:
+    """A load as a force (``25 kN``) or as the mass it carries (``2500 kg``: its standard weight), N."""
+    if value is None:
+        return value
+    try:
+        return to_si(value, "force", "load")
+    except ValueError:
+        if isinstance(value, str):
+            try:
+                return to_si(value, "mass", "load") * STANDARD_GRAVITY
+            except ValueError:
+                pass
+        raise ValueError(f"expected a load in N (or a mass such as '2500 kg'), got {value!r}") from None
+
+
+Load = Annotated[float, BeforeValidator(_load_in_newtons)]
+"""A static load, N (a mass is read as its weight under standard gravity)."""
+
+
+class CatalogueModel(BaseModel):
+    """A block of a catalogue file: unknown keys are refused."""
+
+    model_config = ConfigDict(extra="forbid")
+
+
+class RatedLoad(CatalogueModel):
+    """The static load range one isolator is rated for, N."""
+
+    min: Annotated[Load, Field(ge=0)] = Field(description="smallest rated static load per isolator, N")
+    max: Annotated[Load, Field(gt=0)] = Field(description="largest rated static load per isolator, N")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> RatedLoad:
+        if not self.max > self.min:
+            raise ValueError(f"max: must exceed min ({self.min:.6g} N), got {self.max:.6g} N")
+        return self
+
+
+class Product(CatalogueModel):
+    """One isolator product: what it carries, the figures it gives its load, and what it costs.
+
+    ``f_vertical``, ``f_horizontal`` and ``zeta`` are the natural frequencies and the damping ratio the
+    maker quotes at rated load; a mount naming the product uses them at whatever load it carries within
+    the rated range (a levelled air spring keeps its frequency as its pressure follows the load).
+    ``effective_area`` (air springs) gives the gauge pressure ``p = F / A`` at a load ``F``.
+    """
+
+    id: ProductId
+    type: IsolatorType = Field(description="active, air or elastomer: the model a mount naming it runs")
+    maker: str = Field(min_length=1, max_length=200)
+    series: str = Field(min_length=1, max_length=200)
+    source: str | None = Field(None, max_length=500, description="the datasheet the figures come from")
+    note: str | None = Field(None, max_length=1000, description="how the figures were read")
+    rated_load: RatedLoad
+    f_vertical: Annotated[Frequency, Field(gt=0)] = Field(description="vertical natural frequency, Hz")
+    f_horizontal: Annotated[Frequency, Field(gt=0)] = Field(description="horizontal natural frequency, Hz")
+    zeta: Annotated[Dimensionless, Field(ge=0, le=2)] = Field(description="damping ratio, 1")
+    stroke: Annotated[Length, Field(gt=0)] | None = Field(
+        None, description="usable travel each way from the working height, m"
+    )
+    max_load: Annotated[Load, Field(gt=0)] | None = Field(
+        None, description="largest load one isolator survives (static plus dynamic), N"
+    )
+    footprint: tuple[Annotated[Length, Field(gt=0)], Annotated[Length, Field(gt=0)]] | None = Field(
+        None, description="[x, y] size of the base plate, m"
+    )
+    effective_area: Annotated[Area, Field(gt=0)] | None = Field(
+        None, description="effective area of an air spring, m^2 (pressure = load / area)"
+    )
+    max_pressure: Annotated[Pressure, Field(gt=0)] | None = Field(
+        None, description="largest gauge supply pressure, Pa"
+    )
+    price: Annotated[float, Field(ge=0)] | None = Field(None, description="price of one isolator")
+    lead_time: Annotated[Time, Field(ge=0)] | None = Field(None, description="delivery time, s")
+
+    @field_validator("f_vertical", "f_horizontal")
+    @classmethod
+    def _tested_frequency(cls, value: float) -> float:
+        from isolab.studies.inputs.schema.fields import MAX_MOUNT_FREQUENCY, MIN_MOUNT_FREQUENCY
+
+        if not MIN_MOUNT_FREQUENCY <= value <= MAX_MOUNT_FREQUENCY:
+            raise ValueError(
+                f"must lie between {MIN_MOUNT_FREQUENCY:g} Hz and {MAX_MOUNT_FREQUENCY:g} Hz (the range the "
+                f"engine is tested over), got {value:.6g} Hz"
+            )
+        return value
+
+    @model_validator(mode="after")
+    def _max_load(self) -> Product:
+        if self.max_load is not None and self.max_load < self.rated_load.max:
+            raise ValueError(
+                f"max_load: must be at least rated_load.max ({self.rated_load.max:.6g} N), got "
+                f"{self.max_load:.6g} N"
+            )
+        return self
+
+    def pressure(self, load: float) -> float | None:
+        """Gauge pressure ``load / effective_area`` at a load per isolator (N), Pa; None without an area."""
+        return None if self.effective_area is None else float(load) / self.effective_area
+
+    def label(self) -> str:
+        """The product in words: ``id (maker series)``."""
+        return f"{self.id} ({self.maker} {self.series})"
+
+
+class Catalogue(CatalogueModel):
+    """A list of isolator products, each with a unique ``id``."""
+
+    name: str = Field("catalogue", max_length=200)
+    description: str | None = Field(None, max_length=4000)
+    currency: str = Field("EUR", max_length=16, description="the unit of every product's price")
+    products: list[Product] = Field(min_length=1, max_length=MAX_PRODUCTS)
+
+    @model_validator(mode="after")
+    def _unique_ids(self) -> Catalogue:
+        seen: dict[str, int] = {}
+        for i, p in enumerate(self.products):
+            if p.id in seen:
+                raise ValueError(f"products[{i}].id: {p.id!r} repeats products[{seen[p.id]}]")
+            seen[p.id] = i
+        return self
+
+    @property
+    def ids(self) -> list[str]:
+        return [p.id for p in self.products]
+
+    def product(self, product_id: str, field: str = "model") -> Product:
+        """The product called ``product_id``.
+
+        Raises:
+            UnknownProductError: naming ``field`` and the closest ids of the catalogue.
+        """
+        for p in self.products:
+            if p.id == product_id:
+                return p
+        raise UnknownProductError(field, product_id, self)
+
+
+class UnknownProductError(ValueError):
+    """A ``model:`` naming no product of the catalogue; the message names the field and the closest ids."""
+
+    def __init__(self, field: str, product_id: str, catalogue: Catalogue):
+        close = difflib.get_close_matches(product_id, catalogue.ids, n=3, cutoff=0.4)
+        hint = f"; closest: {', '.join(close)}" if close else f"; products: {', '.join(catalogue.ids[:10])}"
+        super().__init__(f"{field}: no product {product_id!r} in catalogue {catalogue.name!r}{hint}")
+
+
+def read_catalogue_file(path: str | Path) -> dict[str, Any]:
+    """The mapping in a catalogue file (YAML or JSON).
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: not a mapping at the top level.
+    """
+    import yaml
+
+    p = Path(path)
+    text = p.read_text(encoding="utf-8")
+    data = json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
+    if not isinstance(data, Mapping):
+        raise ValueError(f"{p}: expected a mapping at the top level, got {type(data).__name__}")
+    return dict(data)
+
+
+def shipped_catalogue(name: str = DEFAULT_CATALOGUE) -> Catalogue:
+    """The shipped catalogue ``name`` (:data:`SHIPPED_CATALOGUES`).
+
+    Raises:
+        KeyError: no shipped catalogue of that name.
+    """
+    return Catalogue.model_validate(read_catalogue_file(SHIPPED_CATALOGUES[name]))
+
+
+def load_catalogue(source: str | Path | Mapping[str, Any] | Catalogue) -> Catalogue:
+    """A validated catalogue from a shipped name, a file or data.
+
+    Raises:
+        pydantic.ValidationError: naming the field (``products.2.rated_load.max``).
+        FileNotFoundError: a name that is neither a shipped catalogue nor a file.
+    """
+    if isinstance(source, Catalogue):
+        return source
+    if isinstance(source, Mapping):
+        return Catalogue.model_validate(dict(source))
+    if str(source) in SHIPPED_CATALOGUES:
+        return shipped_catalogue(str(source))
+    path = Path(source)
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"catalogue: no file {path} (shipped catalogues: {', '.join(SHIPPED_CATALOGUES)})"
+        )
+    return Catalogue.model_validate(read_catalogue_file(path))
+
+
+def scene_catalogue(reference: str | Catalogue | None, field: str = "isolators.catalogue") -> Catalogue:
+    """The catalogue a scene's ``catalogue:`` names: inline, a shipped name, or (none) the default.
+    A file name is read only when a scene or study file is loaded (:func:`inline_catalogue_file`);
+    validation itself never reads a user's file.
+
+    Raises:
+        ValueError: ``field`` naming no shipped catalogue.
+    """
+    if isinstance(reference, Catalogue):
+        return reference
+    name = DEFAULT_CATALOGUE if reference is None else reference
+    if name not in SHIPPED_CATALOGUES:
+        raise ValueError(
+            f"{field}: {name!r} is not a shipped catalogue ({', '.join(SHIPPED_CATALOGUES)}); a catalogue "
+            "file is read when a scene or study file is loaded (isolab simulate, run, size); over the API "
+            "it is given inline"
+        )
+    return shipped_catalogue(name)
+
+
+def product_figures(product: Product) -> dict[str, Any]:
+    """What a mount naming ``product`` takes: its type as ``preset`` and its ``f_vertical``,
+    ``f_horizontal`` (Hz) and ``zeta`` (1)."""
+    return {
+        "preset": product.type,
+        "f_vertical": product.f_vertical,
+        "f_horizontal": product.f_horizontal,
+        "zeta": product.zeta,
+    }
+
+
+def inline_catalogue_file(scene: Any, here: str | Path) -> Any:
+    """``scene`` (a scene definition as data) with an ``isolators.catalogue`` that names a file (relative to
+    ``here``) replaced by the file's contents; anything else is returned as it is.
+
+    Raises:
+        FileNotFoundError: the named file does not exist.
+    """
+    if not isinstance(scene, Mapping):
+        return scene
+    iso = scene.get("isolators")
+    ref = iso.get("catalogue") if isinstance(iso, Mapping) else None
+    if not isinstance(ref, str) or ref in SHIPPED_CATALOGUES or not ref.lower().endswith(CATALOGUE_SUFFIXES):
+        return scene
+    path = Path(here) / ref
+    if not path.is_file():
+        raise FileNotFoundError(f"isolators.catalogue: no file {path}")
+    assert isinstance(iso, Mapping)
+    return {**scene, "isolators": {**iso, "catalogue": read_catalogue_file(path)}}
