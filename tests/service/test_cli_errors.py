@@ -176,11 +176,11 @@ def test_messages_name_stages_and_keys_as_the_file_writes_them() -> None:
 # ----------------------------------------------------------------------------------- the compile notice
 def test_simulate_says_when_it_compiles(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     path = write(tmp_path / "scene.yaml", scene())
-    monkeypatch.setattr("isolab.studies.run.kernel_cache.kernels_cached", lambda integrators: False)
+    monkeypatch.setattr("isolab.studies.run.kernel_cache.kernels_cached", lambda integrators, **_: False)
     r = invoke("simulate", str(path))
     assert r.exit_code == 0, r.output
     assert r.stderr.splitlines() == [local_commands.COMPILING] and "ok" in r.stdout
-    monkeypatch.setattr("isolab.studies.run.kernel_cache.kernels_cached", lambda integrators: True)
+    monkeypatch.setattr("isolab.studies.run.kernel_cache.kernels_cached", lambda integrators, **_: True)
     r = invoke("simulate", str(path))
     assert r.exit_code == 0 and r.stderr == ""
 
@@ -266,7 +266,7 @@ def test_run_writes_the_dataset_with_the_umask_mode(
     asked = []
     monkeypatch.setattr(
         "isolab.studies.run.kernel_cache.kernels_cached",
-        lambda integrators: asked.append(integrators) or False,
+        lambda integrators, **_: asked.append(integrators) or False,
     )
     path = study(tmp_path)
     out = tmp_path / "out.nc"
