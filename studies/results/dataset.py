@@ -53,7 +53,6 @@ from isolab.studies.questions.designs import Design
 
 if TYPE_CHECKING:  # xarray and dask load with the first dataset built: a single case needs neither
     import xarray as xr
-
 CONVENTIONS = "CF-1.10"
 
 _BOOL_ENCODING = {"dtype": "int8", "_FillValue": np.int8(-1)}
@@ -672,15 +671,13 @@ def add_error_estimate(
     -1 when none could be compared) and the attributes ``error_estimate_cases`` (the sampled cases),
     ``error_estimate_excluded`` (case -> why it could not be compared) and ``error_estimate_method``.
     A NaN value means no sampled case could be compared."""
-    import xarray as xr
-
     out = ds.copy()
     for name, value in values.items():
         case = worst_case.get(name)
-        out[ERROR_ESTIMATE_PREFIX + name] = xr.Variable(
+        out[ERROR_ESTIMATE_PREFIX + name] = (  # (dimensions, value, attributes): a variable
             (),
             np.float64(value),
-            attrs={
+            {
                 "units": units.get(name, "1"),
                 "long_name": f"{meaning.get(name, name)}, over the sampled cases against the reference level",
                 "case": np.int64(-1 if case is None else case),

@@ -39,9 +39,10 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
+import xarray as xr
 
 from isolab.studies.inputs.study import Study
 from isolab.studies.quantities import output_values
@@ -50,9 +51,6 @@ from isolab.studies.questions.designs import Design
 from isolab.studies.questions.goals import PENALTY, STALL_IMPROVEMENT, Goals, goal_values
 from isolab.studies.results.dataset import from_chunks, result_arrays, to_dataset
 from isolab.studies.results.store import Store, atomic_path
-
-if TYPE_CHECKING:  # xarray loads with the first dataset built
-    import xarray as xr
 
 log = logging.getLogger(__name__)
 
@@ -343,8 +341,6 @@ def mark_optimum(
     """``ds`` (a sampled dataset of the evaluated cases, in order) with ``generation``, ``feasible``,
     ``pareto``, ``best`` and ``constraint_violation`` per case, and the ``optimisation`` summary attribute
     (algorithm, generations, best case and its parameter values and objectives)."""
-    import xarray as xr
-
     n = len(F)
     feasible = (np.asarray(G) <= 0.0).all(axis=1)
     pareto = np.zeros(n, dtype=bool)
@@ -446,8 +442,6 @@ def mark_plateau(
     """``out`` with ``plateau`` per case (feasible, first objective within ``goals.plateau`` of the best's)
     and ``at_range_limit`` per parameter (-1 the best sits at the low end of its range, +1 at the high end,
     0 inside); ``summary`` gains the plateau's size and each variable's range over it, and the limits."""
-    import xarray as xr
-
     n = len(F)
     plateau = np.zeros(n, dtype=bool)
     names = [f.name for f in goals.factors]
