@@ -26,7 +26,7 @@ from isolab.service.client import Client, read_study_file
 from isolab.studies.inputs.definitions import DefinitionError, check_definition
 from isolab.studies.inputs.file_checks import in_user_words
 from isolab.studies.results.store import copy_atomic, new_file_mode
-from isolab.studies.run.kernel_cache import kernels_cached
+from isolab.studies.run.kernel_cache import entry_kernels, kernels_cached
 
 BAR = "━"  # what rich draws a progress bar with
 
@@ -183,6 +183,23 @@ def test_simulate_says_when_it_compiles(tmp_path: Path, monkeypatch: pytest.Monk
     monkeypatch.setattr("isolab.studies.run.kernel_cache.kernels_cached", lambda integrators, **_: True)
     r = invoke("simulate", str(path))
     assert r.exit_code == 0 and r.stderr == ""
+
+
+def test_simulate_asks_for_its_own_pair(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # one cached driver per method and level: the notice asks about the pair the scene runs at, so a cache
+    # that holds ltv/rk4 alone does not make a warm ltv/rk4 run say it compiles
+    path = write(tmp_path / "scene.yaml", scene())
+    asked = []
+    monkeypatch.setattr(
+        "isolab.studies.run.kernel_cache.kernels_cached",
+        lambda integrators, fidelity=None: asked.append((list(integrators), fidelity)) or True,
+    )
+    r = invoke("simulate", str(path), "--fidelity", "lti", "--integrator", "exact")
+    assert r.exit_code == 0, r.output
+    assert asked == [(["exact"], "lti")]
+    assert len(entry_kernels("rk4", "ltv")) == 1 and len(entry_kernels("exact", "lti")) == 1
+    assert len(entry_kernels("rk4")) == 3 and len(entry_kernels("euler")) == 3
+    assert entry_kernels("rk4", "ltv")[0] is not entry_kernels("rk4", "lti")[0]
 
 
 def test_kernels_cached_reads_the_numba_index(tmp_path: Path) -> None:
