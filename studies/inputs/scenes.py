@@ -293,7 +293,11 @@ def _shaped(pc: profiles.Pieces, cases: _Cases, i: int) -> profiles.Pieces:
     """Stage ``i``'s profile ``pc`` through its input shaper, tuned per case (engine.profiles.shape)."""
     q = profile_shaper(cases.scenes[0].stages[i].name)
     kinds = cases.each(lambda s: cast(ShaperSpec, s.stages[i].profile.shaper).type)
-    figs = [cases.get(f"{q}.{k}", lambda s, k=k: getattr(s.stages[i].profile.shaper, k)) for k in SHAPER_KEYS]
+
+    def figure(key: str) -> np.ndarray:
+        return cases.get(f"{q}.{key}", lambda s: getattr(s.stages[i].profile.shaper, key))
+
+    figs = [figure(k) for k in SHAPER_KEYS]
     f, z = (np.broadcast_to(x, (cases.c,)) for x in figs)
     t, a = np.zeros((cases.c, profiles.SHAPER_IMPULSES)), np.zeros((cases.c, profiles.SHAPER_IMPULSES))
     for kind in set(kinds):

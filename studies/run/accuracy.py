@@ -15,9 +15,11 @@ relative to the largest preload); an absolute one (metres) to the peak displacem
 tolerance (``tolerance: {settling_time: 5 ms, peak_point_displacement: 1 %}``) bounds instead the worst
 component of each named output
 (:func:`~isolab.studies.run.error_estimate.component_errors`). A candidate the stability guard would
-sub-step on a pilot case is never chosen. ``fast`` allows 5 %, ``balanced`` 0.5 %; ``reference`` runs
-the nonlinear level with the reference integrator at the requested step (default 1 ms). When no candidate
-meets the tolerance the reference itself is chosen. Choices are cached per study definition.
+sub-step on a pilot case is never chosen, nor, for a relative tolerance, RK4 at a step whose damping of the
+pilot cases' fastest mode per cycle exceeds the tolerance (:func:`rk4_step_too_long`). ``fast`` allows
+5 %, ``balanced`` 0.5 %; ``reference`` runs the nonlinear level with the reference integrator at the
+requested step (default 1 ms). When no candidate meets the tolerance the reference itself is chosen.
+Choices are cached per study definition.
 
 How an error is measured, and the error estimate every stored study carries, are
 :mod:`isolab.studies.run.error_estimate`'s.
