@@ -14,6 +14,7 @@ from isolab.engine import GRAVITY, model, simulate
 from isolab.engine.kernels.dynamics import accel
 from isolab.engine.kernels.params import NONLINEAR
 from isolab.engine.kernels.structs import kernel_struct
+from isolab.engine.scene import SceneError
 
 M = 10_000.0
 SIZE = (2.6, 4.2, 0.34)
@@ -150,6 +151,13 @@ def test_balanced_preload_has_no_rocking_stiffness_from_preload_and_weight() -> 
     np.testing.assert_allclose(w2, closed, rtol=1e-6)
     # and the rocking mode is stiffer than with the vertical preload (-W h gone)
     assert w2[-1] > np.sort(_closed_form(False))[-1] * 1.01
+
+
+def test_balanced_and_base_preload_together_are_refused() -> None:
+    b = _balanced()
+    b.preload_with_base = True
+    with pytest.raises(SceneError, match="preload_balanced"):
+        simulate(b, "nonlinear", "rk4", dt=1e-3)
 
 
 def test_balanced_preload_follows_the_linear_model_without_gravity_stiffness() -> None:
