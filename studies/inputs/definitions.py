@@ -24,6 +24,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
+from isolab.studies.inputs.schema.errors import join_paths
 from isolab.studies.inputs.schema.fields import (
     MAX_CRITERIA,
     MAX_MOUNTS,
@@ -292,7 +293,7 @@ def validation_details(err: ValidationError, prefix: Loc) -> list[dict[str, Any]
         if not loc:
             loc = named
         elif named and e["type"] == "value_error":  # a model's check naming a field below it
-            loc = loc[:-1] + named if named[0] == loc[-1] else loc + named
+            loc = join_paths(loc, named)
         out.append(detail([*prefix, *loc], msg, str(e["type"])))
     return out
 

@@ -389,7 +389,9 @@ def _error_estimate(
         k: np.concatenate([np.asarray(p["reference"][k]) for p in parts]) for k in parts[0]["reference"]
     }
     method = "nonlinear level, reference integrator (DOP853, rtol 1e-10), sampled at the step each case used"
-    return estimate_errors(ours, reference, cases, outputs, method=method)
+    return estimate_errors(
+        ours, reference, cases, outputs, method=method, integrator=study.simulation.integrator
+    )
 
 
 def _counts(arrays: dict[str, np.ndarray]) -> tuple[int, int]:

@@ -495,3 +495,18 @@ def test_scene_dict_is_not_mutated_by_validation():
     before = copy.deepcopy(d)
     Scene.model_validate(d)
     assert d == before
+
+
+def test_a_check_naming_a_field_below_its_own_is_located_once():
+    """A per-output tolerance check is raised at ``simulation.tolerance`` and names the output below it: the
+    file check and the REST detail say where once, never ``simulation.tolerance.simulation.tolerance...``."""
+    from isolab.studies.inputs.definitions import DefinitionError, check_definition
+
+    scene = base_scene()
+    scene["simulation"]["tolerance"] = {"peak_foo": "1 %"}
+    (line,) = errors(scene)
+    assert line.startswith("simulation.tolerance.peak_foo: unknown output 'peak_foo'"), line
+    with pytest.raises(DefinitionError) as info:
+        check_definition({"name": "t", "scene": scene, "design": {"type": "grid"}, "parameters": []})
+    locs = [d["loc"] for d in info.value.details]
+    assert ["body", "scene", "simulation", "tolerance", "peak_foo"] in locs, locs
