@@ -186,15 +186,104 @@ def static_offset(b: SceneBatch, fidelity: str, rho: np.ndarray | None = None) -
     f = np.zeros((b.n_cases, 6))
     f[:, 3] = -b.g * np.einsum("cm,cm->c", b.stage_mass, ds[..., 1])
     f[:, 4] = b.g * np.einsum("cm,cm->c", b.stage_mass, ds[..., 0])
-    weight = np.asarray(b.iso_ff_weight, dtype=float) * np.asarray(b.iso_ff_gain, dtype=float)  # (C, n)
-    if np.any(weight != 0.0) and b.n_stages:
-        # at rest the low-pass has settled on the reversed weight moment, -f: each mount's clipped share
-        lim = np.asarray(b.iso_ff_limit, dtype=float)[..., None]
-        share = np.einsum("cnkq,cq->cnk", feedforward_distribution(b), -f) * weight[..., None]
-        share = np.clip(share, -lim, lim)
+    share = _rest_feedforward(b, f)
+    if share is not None:
         f[:, :3] += share.sum(axis=1)
         f[:, 3:] += np.cross(d, share).sum(axis=1)
     q = np.einsum("cij,cj->ci", np.linalg.pinv(K, hermitian=True), f)
+    if fidelity == "nonlinear":
+        q = static_equilibrium(b, rho_f, q, share)
+    return q
+
+
+def _rest_feedforward(b: SceneBatch, f: np.ndarray) -> np.ndarray | None:
+    """Each mount's actuator force at rest (C, n, 3), N, machine axes, under the change ``f`` (C, 6) of the
+    stages' weight moment (``f[:, 3:]``, N m), or None when no mount feeds the weight forward: the low-pass
+    has settled on the reversed weight moment, ``-f``, and each mount applies its clipped share."""
+    weight = np.asarray(b.iso_ff_weight, dtype=float) * np.asarray(b.iso_ff_gain, dtype=float)  # (C, n)
+    if not (np.any(weight != 0.0) and b.n_stages):
+        return None
+    lim = np.asarray(b.iso_ff_limit, dtype=float)[..., None]
+    share = np.einsum("cnkq,cq->cnk", feedforward_distribution(b), -f) * weight[..., None]
+    return np.clip(share, -lim, lim)
+
+
+def rotation_matrices(phi: np.ndarray) -> np.ndarray:
+    """Rotation matrices (C, 3, 3) of the rotation vectors ``phi`` (C, 3), rad (Rodrigues' formula)."""
+    phi = np.asarray(phi, dtype=float)
+    a = np.linalg.norm(phi, axis=-1)[:, None, None]
+    S = skew(phi)
+    small = a < 1e-8
+    s1 = np.where(small, 1.0 - a**2 / 6.0, np.sin(a) / np.where(small, 1.0, a))
+    s2 = np.where(small, 0.5 - a**2 / 24.0, (1.0 - np.cos(a)) / np.where(small, 1.0, a) ** 2)
+    return np.eye(3) + s1 * S + s2 * (S @ S)
+
+
+def static_residual(b: SceneBatch, rho: np.ndarray, q: np.ndarray, share: np.ndarray | None) -> np.ndarray:
+    """The nonlinear level's generalised force at rest (C, 6): the net force on the base (floor frame, N)
+    and moment about its c.g. (body frame, N m), with the c.g. displaced by ``q[:, :3]`` (m), the base
+    turned by the rotation vector ``q[:, 3:]`` (rad), the stages parked at ``rho`` (C, m, 3) and the mounts'
+    actuators at rest pushing ``share`` (C, n, 3) (or None). Zero at the static equilibrium. The same forces
+    as the nonlinear kernel's (``engine.kernels.dynamics.nonlinear_acc``) with every rate zero and no floor
+    motion."""
+    d, _, _ = relative_geometry(b)
+    R = rotation_matrices(q[:, 3:])
+    off = np.einsum("cij,cnj->cni", R, d) - d
+    F = -b.iso_k * (q[:, None, :3] + off)  # (C, n, 3) floor frame
+    p = preload(b)  # (C, n)
+    force = F.sum(axis=1)
+    if b.preload_with_base:
+        force += (p[..., None] * (R[:, None, :, 2] - np.array([0.0, 0.0, 1.0]))).sum(axis=1)
+        G = np.einsum("cji,cnj->cni", R, F)
+        G[..., 2] += p
+    else:
+        T = F.copy()
+        T[..., 2] += p
+        G = np.einsum("cji,cnj->cni", R, T)
+    moment = np.cross(d, G).sum(axis=1)
+    SR = np.einsum("cm,cmi->ci", b.stage_mass, rho)
+    if b.preload_balanced:
+        # the preloads and the home weights cancel in every attitude: take out their moment V x R^T e_z
+        _, rho_h, _ = relative_geometry(b)
+        V = np.einsum("cn,cni->ci", p, d) - b.g * np.einsum("cm,cmi->ci", b.stage_mass, rho_h)
+        moment -= np.cross(V, R[:, 2, :])
+    moment += np.cross(SR, -b.g * R[:, 2, :])  # the stages' weight, R^T (0, 0, -g) in the body
+    if share is not None:
+        force += np.einsum("cij,cj->ci", R, share.sum(axis=1))
+        moment += np.cross(d, share).sum(axis=1)
+    return np.concatenate([force, moment], axis=1)
+
+
+def static_equilibrium(
+    b: SceneBatch, rho: np.ndarray, q0: np.ndarray, share: np.ndarray | None, tol: float = 1e-14
+) -> np.ndarray:
+    """The nonlinear level's static c.g. displacement and rotation vector (C, 6), m and rad, with the
+    stages parked at ``rho`` (C, m, 3): Newton's method on :func:`static_residual` from the linear offset
+    ``q0`` (C, 6), with a central-difference Jacobian. A case whose iteration does not converge (a base
+    that tips) keeps ``q0``."""
+    q = np.array(q0, dtype=float)
+    C = q.shape[0]
+    done = np.zeros(C, dtype=bool)
+    for _ in range(30):
+        r = static_residual(b, rho, q, share)
+        J = np.empty((C, 6, 6))
+        for k in range(6):
+            e = np.zeros(6)
+            e[k] = 1e-6
+            J[:, :, k] = (
+                static_residual(b, rho, q + e, share) - static_residual(b, rho, q - e, share)
+            ) / 2e-6
+        try:
+            step = np.linalg.solve(J, -r[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            step = np.einsum("cij,cj->ci", np.linalg.pinv(J), -r)
+        step[done] = 0.0
+        q += step
+        done |= np.abs(step).max(axis=1) <= tol * np.maximum(1.0, np.abs(q).max(axis=1))
+        if done.all():
+            break
+    bad = ~np.isfinite(q).all(axis=1) | (np.abs(q[:, :3]).max(axis=1) > 1.0) | ~done
+    q[bad] = np.asarray(q0)[bad]
     return q
 
 
@@ -218,6 +307,20 @@ def rest_offsets(b: SceneBatch, fidelity: str) -> tuple[np.ndarray, np.ndarray, 
         rho = placed_positions(b, positions_at(b, when))
         target[has, k] = static_offset(b, fidelity, rho)[has]
     return bounds, count, target
+
+
+def point_rest_offsets(b: SceneBatch, offset: np.ndarray) -> np.ndarray:
+    """What the nonlinear level's static displacement of each point of interest adds to the linearised
+    ``u + theta x p`` of the static ``offset`` (..., C, 6) (m, rad; ``theta`` a rotation vector):
+    ``(R - I) p - theta x p`` (..., C, p, 3), m, second order in the rotation."""
+    _, _, pts = relative_geometry(b)
+    q = np.asarray(offset, dtype=float)
+    flat = q.reshape(-1, q.shape[-2], 6)
+    out = np.zeros(flat.shape[:2] + (b.n_points, 3))
+    for i in range(flat.shape[0]):
+        R = rotation_matrices(flat[i, :, 3:])
+        out[i] = np.einsum("cij,cpj->cpi", R, pts) - pts - np.cross(flat[i, :, None, 3:], pts)
+    return out.reshape(q.shape[:-1] + (b.n_points, 3))
 
 
 def feedforward_distribution(b: SceneBatch) -> np.ndarray:
@@ -308,7 +411,7 @@ def _params(b: SceneBatch) -> Params:
         fftb=fftb,
         ffA=np.zeros((b.n_cases, n, fftb.shape[1], 6)),
         ffwt=f64(b.iso_ff_weight, dtype=float),
-        pbase=bool(b.preload_with_base),
+        pbase=2 if b.preload_balanced else int(bool(b.preload_with_base)),
     )
 
 
@@ -336,7 +439,7 @@ def work(b: SceneBatch) -> Work:
         # (``engine.kernels.cached_terms.time_terms``)
         key=np.concatenate([[-1.0, -1.0, np.nan, 0.0], np.zeros(m)]),
         tc=np.zeros((21, 3)),
-        cc=np.concatenate([[-1.0], np.zeros(21)]),
+        cc=np.concatenate([[-1.0], np.zeros(24)]),
         cs=np.zeros((m, 8 + 5 * b.prof_t.shape[-1])),
         cm=np.zeros((n, 11)),
         cK=np.zeros((12, 6)),

@@ -404,6 +404,94 @@ def scan(
 
 
 # ---------------------------------------------------------------------------------------------------------
+# input shaping
+
+SHAPERS = ("zv", "zvd", "ei")
+"""Input shapers (docs/physics.md, "Input shaping"): zero vibration, zero vibration and derivative, extra
+insensitive (5 % vibration tolerated at the tuned frequency)."""
+SHAPER_IMPULSES = 3
+"""Impulses of every shaper (a ZV shaper's third has zero amplitude), so that shaped profiles of one
+stage share their piece count whatever the shaper."""
+EI_TOLERANCE = 0.05
+"""The residual vibration an EI shaper tolerates at its tuned frequency, 1."""
+
+
+def shaper_impulses(kind: str, frequency: ArrayLike, damping: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Impulse times (C, 3), s, and amplitudes (C, 3), 1 (summing to 1), of a shaper tuned to a mode of
+    ``frequency`` (Hz) and damping ratio ``damping`` (1, below 1).
+
+    With ``K = exp(-zeta pi / sqrt(1 - zeta^2))`` and the damped half period ``T = 1 / (2 f sqrt(1 -
+    zeta^2))``: ZV ``[1, K] / (1 + K)`` at ``[0, T]``; ZVD ``[1, 2K, K^2] / (1 + K)^2`` at ``[0, T, 2T]``; EI
+    ``[(1 + V)/4, (1 - V)/2 K, (1 + V)/4 K^2]`` normalised, at ``[0, T, 2T]`` (``V`` :data:`EI_TOLERANCE`;
+    the undamped EI shaper, weighted by the damping as ZVD is).
+    """
+    if kind not in SHAPERS:
+        raise SceneError("shaper.type", f"must be one of {', '.join(SHAPERS)}, got {kind!r}")
+    named = {"shaper.frequency": _positive("shaper.frequency", frequency)}
+    named["shaper.damping"] = _non_negative("shaper.damping", damping)
+    f, z = _cases(named)
+    if np.any(z >= 1.0):
+        raise SceneError("shaper.damping", f"must be below 1 (an underdamped mode), got {z.max():g}")
+    root = np.sqrt(1.0 - z * z)
+    K = np.exp(-z * np.pi / root)
+    half = 1.0 / (2.0 * f * root)
+    zero = np.zeros_like(f)
+    if kind == "zv":
+        t = np.stack([zero, half, half], axis=-1)
+        a = np.stack([np.ones_like(K), K, zero], axis=-1)
+    else:
+        t = np.stack([zero, half, 2.0 * half], axis=-1)
+        w = (
+            (1.0, 2.0, 1.0)
+            if kind == "zvd"
+            else ((1 + EI_TOLERANCE) / 4, (1 - EI_TOLERANCE) / 2, (1 + EI_TOLERANCE) / 4)
+        )
+        a = np.stack([w[0] * np.ones_like(K), w[1] * K, w[2] * K * K], axis=-1)
+    return t, a / a.sum(axis=-1, keepdims=True)
+
+
+def shape(p: Pieces, times: np.ndarray, amplitudes: np.ndarray) -> Pieces:
+    """The profile ``p`` (C, K) convolved with the impulses ``amplitudes`` (C, N), 1, at ``times`` (C, N),
+    s, from 0: ``s_shaped(t) = sum_i A_i s(t - t_i)``. Its acceleration is the profile's convolved with the
+    impulses, it ends where the profile ends (``sum A_i = 1``; the final position is set exactly), and the
+    move lasts longer by the last impulse's time. The result has ``K N`` pieces (at every ``t_k + t_i``,
+    sorted; coinciding breakpoints keep zero-length pieces), each cubic as the profile's are."""
+    tk = np.asarray(p.t, dtype=np.float64)
+    C, K = tk.shape
+    times = np.broadcast_to(np.asarray(times, dtype=np.float64), (C, np.shape(times)[-1]))
+    amps = np.broadcast_to(np.asarray(amplitudes, dtype=np.float64), times.shape)
+    N = times.shape[1]
+    starts = np.sort((tk[:, :, None] + times[:, None, :]).reshape(C, K * N), axis=1)
+    cols = [starts, np.zeros((C, K * N)), np.zeros((C, K * N)), np.zeros((C, K * N)), np.zeros((C, K * N))]
+    for i in range(N):
+        # the copy's piece at each breakpoint (right limit), compared in shifted times, which are the
+        # breakpoints' own sums: a copy's own breakpoints find their piece exactly, whatever the rounding
+        shifted = tk + times[:, i : i + 1]
+        idx = np.zeros((C, K * N), dtype=np.intp)
+        for k in range(1, K):
+            idx += shifted[:, k : k + 1] <= starts
+        pick = [np.take_along_axis(np.asarray(x, dtype=np.float64), idx, axis=1) for x in p]
+        tau = starts - np.take_along_axis(shifted, idx, axis=1)
+        s, v, a = _advance(pick[1], pick[2], pick[3], pick[4], tau)
+        j = pick[4]
+        before = starts < shifted[:, :1]  # at rest before the profile starts
+        s = np.where(before, p.s[:, :1], s)
+        v, a, j = (np.where(before, 0.0, x) for x in (v, a, j))
+        A = amps[:, i : i + 1]
+        for col, x in zip(cols[1:], (s, v, a, j), strict=True):
+            col += A * x
+    cols[1][:, -1] = p.s[:, -1]
+    for col in cols[2:]:
+        col[:, -1] = 0.0
+    return Pieces(*cols)
+
+
+def shaped_move_time(p: Pieces, shaped: Pieces) -> np.ndarray:
+    """What shaping costs in move time (C,), s: the end of the shaped motion minus the profile's."""
+    return end_time(shaped) - end_time(p)
+
+
+# ---------------------------------------------------------------------------------------------------------
 # evaluation and batching
 
 

@@ -75,6 +75,9 @@ class SceneBatch:
             moment (a stage that has travelled), not only their inertial wrench (default False).
         preload_with_base: the nonlinear level's preloads turn with the base (mounts that tilt with it)
             instead of staying vertical in the floor frame (the default, False).
+        preload_balanced: the nonlinear level's preloads balance the weights (with the stages at home) in
+            every attitude: no rocking stiffness from them, only the stages' travel tilts the base (default
+            False; not together with ``preload_with_base``).
     """
 
     mass: np.ndarray
@@ -110,6 +113,7 @@ class SceneBatch:
     iso_ff_limit: np.ndarray | None = None
     iso_ff_weight: np.ndarray | None = None
     preload_with_base: bool = False
+    preload_balanced: bool = False
 
     def __post_init__(self) -> None:
         c = np.shape(self.mass)[0] if np.ndim(self.mass) else 1
@@ -166,7 +170,14 @@ class SceneBatch:
 
     def take(self, index: np.ndarray | slice | list[int]) -> SceneBatch:
         """The cases at ``index`` as a new batch (scene-level fields are shared)."""
-        shared = {"stage_parent", "floor_t", "gravity_stiffness", "g", "preload_with_base"}
+        shared = {
+            "stage_parent",
+            "floor_t",
+            "gravity_stiffness",
+            "g",
+            "preload_with_base",
+            "preload_balanced",
+        }
         kw: dict[str, Any] = {}
         for f in fields(self):
             v = getattr(self, f.name)
@@ -223,7 +234,7 @@ class SceneBatch:
 def concat(batches: list[SceneBatch]) -> SceneBatch:
     """Join batches of the same scene shape along the case dimension."""
     first = batches[0]
-    shared = {"stage_parent", "floor_t", "gravity_stiffness", "g", "preload_with_base"}
+    shared = {"stage_parent", "floor_t", "gravity_stiffness", "g", "preload_with_base", "preload_balanced"}
     kw = {}
     for f in fields(first):
         if f.name in shared:

@@ -43,6 +43,29 @@ def substep_message(dt: float, step: float, n_div: int, integrator: str, fastest
     )
 
 
+SAMPLED_PEAKS = "peaks sampled"
+"""How the part of an ``ok`` case's message begins that says its peaks were taken at the output steps only."""
+
+
+def sampled_peak_message(step: np.ndarray, h_interp: np.ndarray) -> list[str]:
+    """Per case, what its message says when its step ``step`` (C,), s, exceeds ``h_interp`` (C,), s (1/omega
+    of the fastest mode): the peaks are then the output samples', not refined between steps, and may be
+    low by up to ``1 - cos(omega h / 2)`` of a mode's amplitude. Empty where the peaks are refined."""
+    out = []
+    for h, lim in zip(np.asarray(step, dtype=float), np.asarray(h_interp, dtype=float), strict=True):
+        if not h > lim:
+            out.append("")
+            continue
+        loss = 1.0 - np.cos(min(h / lim, np.pi) / 2.0)
+        out.append(
+            f"{SAMPLED_PEAKS} at the output steps only: the step {h * 1e3:.3g} ms exceeds 1/omega of the "
+            f"fastest mode ({1e3 * lim:.3g} ms, {1.0 / (2.0 * np.pi * lim):.4g} Hz), so peaks are not "
+            f"refined between steps and may be low by up to {loss * 100:.2g} % of that mode's amplitude; "
+            f"choose dt <= {1e3 * lim:.3g} ms for refined peaks"
+        )
+    return out
+
+
 def _divergence_cause(integrator: str, step: float) -> str:
     """Why a case that passed the stability guard still ran away (the message after "diverged at t")."""
     where = (
@@ -177,7 +200,18 @@ def simulate(
         point_tol=batch.point_settle_tol,
         # a peak between output times is interpolated over intervals of at most 1/omega of the fastest mode
         h_interp=1.0 / (2.0 * np.pi * np.maximum(np.asarray(md.frequency).max(axis=1), 1e-300)),
+        # the nonlinear level's rest of a point is u + (R - I) p, not the linearised u + theta x p
+        point_offset=model.point_rest_offsets(batch, target) if fidelity == "nonlinear" else None,
+        rest_point_offset=(
+            np.moveaxis(model.point_rest_offsets(batch, np.moveaxis(rest_target, 1, 0)), 0, 1)
+            if fidelity == "nonlinear"
+            else None
+        ),
     )
+    sampled = sampled_peak_message(steps, np.asarray(O.h_interp))
+    for c in np.flatnonzero(status == OK).tolist():
+        if sampled[c]:
+            message[c] = f"{message[c]}; {sampled[c]}" if message[c] else sampled[c]
     W = model.work(batch)
     run_status = status.copy()
     method.run(P, level, steps, n_steps, O, W, run_status, messages=message)
@@ -189,7 +223,7 @@ def simulate(
             message[c] = f"diverged at t = {O.diverged[c]:.4g} s: " + _divergence_cause(integrator, steps[c])
         elif run_status[c] == FAILED:
             status[c] = FAILED
-            failed_why = message[c] if not message[c].startswith(SUB_STEPPED) else ""
+            failed_why = message[c] if not message[c].startswith((SUB_STEPPED, SAMPLED_PEAKS)) else ""
             message[c] = failed_why or (
                 "the mass matrix lost positive definiteness (the base turned "
                 "beyond the range the model holds)"

@@ -103,3 +103,14 @@ def subdivisions(
                 low = mid
         out[c] = hi
     return out
+
+
+def rk4_cycle_loss(omega_h: np.ndarray | float) -> np.ndarray:
+    """The amplitude classical RK4 loses over one cycle of an undamped mode (1), at ``w h`` (1) per step:
+    ``|1 - |R(i w h)|^(2 pi / (w h))|``, ``R(z) = 1 + z + z^2/2 + z^3/6 + z^4/24`` (about
+    ``2 pi (w h)^5 / 144``). Its numerical damping lowers a fast mode's peaks by about this much per cycle
+    of the mode: 0.49 % at 104 Hz and 1 ms, 0.016 % at 0.5 ms."""
+    z = np.maximum(np.asarray(omega_h, dtype=float), 1e-300)
+    r = np.abs(1.0 - z**2 / 2.0 + z**4 / 24.0 + 1j * (z - z**3 / 6.0))
+    # past the stability limit (w h > 2 sqrt 2) the amplitude grows: as large an error, the other way
+    return np.abs(1.0 - r ** (2.0 * np.pi / z))

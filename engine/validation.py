@@ -26,6 +26,8 @@ def validate(b: SceneBatch) -> None:
     C = b.n_cases
     if C < 1:
         raise SceneError("cases", "a batch needs at least one case")
+    if b.preload_with_base and b.preload_balanced:
+        raise SceneError("preload_balanced", "the preload either turns with the base or balances the weights")
     for f in fields(b):
         v = getattr(b, f.name)
         if isinstance(v, np.ndarray) and v.dtype.kind == "f":

@@ -27,13 +27,12 @@ from typing import TYPE_CHECKING, Any
 
 import httpx
 
+from isolab.service.settings import DEFAULT_URL, URL_ENV
+
 if TYPE_CHECKING:
     import pandas as pd
     import xarray as xr
 
-DEFAULT_URL = "http://127.0.0.1:8000"
-"""Where ``isolab serve`` listens by default; ``ISOLAB_URL`` (or the commands' ``--url``) names another."""
-URL_ENV = "ISOLAB_URL"
 KEEPALIVE_S = 2.0
 """Seconds an idle connection is kept for reuse (uvicorn closes idle connections after 5 s)."""
 FINISHED = ("done", "failed", "cancelled")

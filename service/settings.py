@@ -26,6 +26,11 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+DEFAULT_URL = "http://127.0.0.1:8000"
+"""Where ``isolab serve`` listens by default; ``ISOLAB_URL`` (or the commands' ``--url``) names another."""
+URL_ENV = "ISOLAB_URL"
+"""The environment variable the command line and the Python client read the service's address from."""
+
 MIB = 1024 * 1024
 
 #: Environment variable read for each :class:`Settings` field.

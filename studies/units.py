@@ -237,7 +237,10 @@ def parsed_unit_problem(unit: str) -> str | None:
 
 
 def _magnitude_problem(text: str) -> str | None:
-    """The units parser's reading of a screened text: None unless its number overflows a float."""
+    """The units parser's reading of a screened text: None unless its number overflows a float (a text
+    without a digit, a word such as ``air``, holds no number: read without building the parser)."""
+    if not any(ch.isdigit() for ch in text):
+        return None
     try:
         q = unit_registry().Quantity(text)
         magnitude = q.magnitude if hasattr(q, "magnitude") else q

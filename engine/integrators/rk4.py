@@ -41,9 +41,9 @@ def step(P, c, level, t, h, x, S, idx, W):
 
     At the time-varying levels the terms that depend on time only are evaluated at ``t``, ``t + h/2`` and
     ``t + h`` (``engine.kernels.cached_terms.time_terms``; those at ``t`` are usually still there from the
-    previous step's end), and the slopes read them through arrays bound once per step."""
-    if level == LTI:
-        return _step_lti(P, c, t, h, x, S, idx, W)
+    previous step's end), and the slopes read them through arrays bound once per step. The time-varying
+    levels only: :func:`step_lti` steps the LTI level (the driver calls the one of its level, so numba
+    compiles only that one)."""
     nx = x.shape[0]
     xs = S[0]
     # The workspace's arrays bound once, and only functions that call no other (whose own references
@@ -82,7 +82,7 @@ def step(P, c, level, t, h, x, S, idx, W):
 
 
 @njit(cache=True)
-def _step_lti(P, c, t, h, x, S, idx, W):
+def step_lti(P, c, t, h, x, S, idx, W):
     """:func:`step` at the LTI level (each slope through ``engine.kernels.dynamics.derivative``)."""
     nx = x.shape[0]
     xs, k1, k2, k3, k4 = S[0], S[1], S[2], S[3], S[4]

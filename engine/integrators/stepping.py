@@ -1,14 +1,19 @@
 """The one driver loop of the fixed-step integrators: cases, steps, breakpoints, peaks, status.
 
-Like scipy's ``OdeSolver.step`` over each method's ``_step_impl``, :func:`drive` owns everything that is
-the same for every method: the loop over cases and output steps, splitting a step where a stage enters a
-new piece of its motion profile, observing the outputs after each step, and the status of each case. A
-method supplies only its step (``euler.step``, ``rk4.step``, ``exact.step``) and, for ``exact``, where
-its sub-steps end and the maps it prepared. The method is named by a code (:data:`EULER`, :data:`RK4`,
-:data:`EXACT`): numba compiles a driver that takes the step kernel as an argument (or a closure over it
-from a factory) anew in every process, since neither is cacheable, while a driver specialised on the
-literal code and level (``numba.literally``) is cached, one compiled loop per method and level with no
-branch on either left inside.
+Like scipy's ``OdeSolver.step`` over each method's ``_step_impl``, the driver owns everything that is the
+same for every method: the loop over cases and output steps, splitting a step where a stage enters a new
+piece of its motion profile, observing the outputs after each step, and the status of each case. A method
+supplies only its step (``euler.step``, ``rk4.step`` and ``rk4.step_lti``, ``exact.step``) and, for
+``exact``, where its sub-steps end and the maps it prepared. The method is named by a code (:data:`EULER`,
+:data:`RK4`, :data:`EXACT`).
+
+Each (method, level) pair has a driver of its own (:func:`pair_driver`, in :data:`ENTRIES`): the method's
+and the level's codes are constants of the driver's closure, so numba drops the branches of the other
+methods and levels before it types the loop, and an empty kernel cache compiles the kernels of the pair a
+run steps and no others. Each driver is cached (numba keys a closure's cache entry by its constants). A
+driver taking the step kernel as an argument, or a closure over a kernel, would be compiled anew in every
+process (neither is cacheable); codes passed as plain ints from Python would go through numba's literal
+dispatch on every call and leave every branch to be compiled.
 
 The adaptive ``reference`` method is not stepped here: scipy's ``solve_ivp`` owns its own loop between
 breakpoints (``engine.integrators.reference``).
@@ -16,13 +21,15 @@ breakpoints (``engine.integrators.reference``).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
-from numba import literally, njit
+from numba import njit
 
 from isolab.engine.integrators import euler, exact, rk4
 from isolab.engine.kernels import output_map
 from isolab.engine.kernels.excitation import advance_pieces, next_breakpoint
-from isolab.engine.kernels.params import LTI, LTV, NONLINEAR, Params, Work
+from isolab.engine.kernels.params import FIDELITIES, LTI, NONLINEAR, Params, Work
 from isolab.engine.kernels.peaks import Peaks, observe
 from isolab.engine.kernels.structs import kernel_struct
 from isolab.engine.results import FAILED, OK, UNSTABLE
@@ -31,146 +38,141 @@ EULER, RK4, EXACT = 0, 1, 2
 """Codes of the stepped methods inside the driver."""
 
 
-@njit(cache=True, nogil=True)
-def drive(method, P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap):
-    """Integrate every case ``c`` whose ``status[c]`` is OK over ``n_steps[c]`` steps of ``dt[c]`` s.
+def pair_driver(method: int, level: int) -> Any:
+    """The cached driver loop of ``method`` (:data:`EULER`, :data:`RK4`, :data:`EXACT`) at ``level``
+    (``engine.kernels.params``): a numba kernel ``drive(P, dt, n_steps, O, W, status, full, ev, sub_b,
+    sub_a, deg, osc, outmap)``."""
 
-    Each step ``[k h, (k + 1) h]`` is split at the breakpoints inside it, so every sub-step sees one
-    polynomial piece of every profile; the outputs are observed at the end of each step. ``status[c]``
-    becomes UNSTABLE when the base runs away (``engine.kernels.peaks.observe``) and FAILED on a singular mass
-    matrix; the case stops there. ``full``, ``ev``, ``sub_b``, ``sub_a``, ``deg``, ``osc`` are the exact
-    method's prepared maps (empty for the others). ``outmap`` is the linear output map ``(G, KF, target,
-    rest_target, still)`` (``engine.kernels.output_map``; empty at the nonlinear level), through which the
-    linear levels observe every case whose floor stands still and that is not recorded.
-    """
-    literally(method)  # one compiled (and cached) loop per method and level, with no branch on either
-    literally(level)
-    C = dt.shape[0]
-    nx = 13 if level == NONLINEAR else 12
-    z = np.zeros(nx + 6 * (deg + 1))  # the state, then exact's forcing derivatives carried between steps
-    x = z[:nx]
-    Fv = z[nx:]
-    S = np.zeros((rk4.SCRATCH_ROWS, nx))  # RK4's stage state and slopes
-    xn = np.zeros(nx)  # exact: the new state
-    idx = np.zeros(P.sm.shape[1], dtype=np.int64)
-    G, KF, tgt, rtgt, still = outmap
-    m = G.shape[2]
-    # exact: a whole step inside one piece with no actuator, oscillator or recorded floor input takes the
-    # lean path (exact.full_step)
-    lean = not P.ffon and not osc and P.ft.shape[0] == 0
-    Smap = np.zeros((10, max(m, 1)))  # the output map's running state and scratch (output_map.observe)
-    Vmap = np.zeros((9, max(m, 1)))
-    Qmap = np.zeros(13)
-    F0, rest, ptol = P.f0, O.rest, O.point_tol
-    for c in range(C):
-        if status[c] != OK:
-            continue
-        linear = level != NONLINEAR and m > 0 and still[c] and O.slot[c] < 0
-        if linear:
-            output_map.start(O, c, Smap, Qmap)
-        x[:] = 0.0
-        if level == NONLINEAR:
-            x[3] = 1.0
-        Fv[:] = 0.0
-        idx[:] = -1
-        h = dt[c]
-        tol = 1e-6 * h
-        passed = 0
-        piece_end = -np.inf  # the earliest start of a stage's next piece, s
-        if linear:
-            output_map.observe(c, 0.0, x, 0, G, KF, F0, tgt, rtgt, rest, ptol, Smap, Vmap, Qmap)
-        else:
-            observe(P, c, level, 0.0, x, W, O, 0)
-        ET = full[c if method == EXACT else 0]
-        for k in range(n_steps[c]):
-            t0 = k * h
-            t1 = (k + 1) * h
-            ta = t0
-            while True:
-                fresh = piece_end <= ta + tol  # a stage enters a new piece (always at the case's start)
-                if fresh:
-                    advance_pieces(P, c, ta, idx, tol)
-                    piece_end = next_breakpoint(P, c, idx, np.inf, tol)
-                if method == EXACT:
-                    tb = exact.next_split(ev, c, passed, t1, tol)
-                    if lean and tb == t1 and ta == t0 and not fresh:
-                        exact.full_step(ET, z, Fv, deg, t1 - t0)  # as exact.step shifts: bit for bit
-                        ok = True
-                    else:
-                        ok = exact.step(
-                            P,
-                            c,
-                            ta,
-                            tb,
-                            t0,
-                            t1,
-                            fresh,
-                            passed,
-                            z,
-                            Fv,
-                            xn,
-                            idx,
-                            W,
-                            full,
-                            sub_b,
-                            sub_a,
-                            deg,
-                            osc,
-                        )
-                else:
-                    tb = piece_end if piece_end < t1 - tol else t1
-                    if method == RK4:
-                        ok = rk4.step(P, c, level, ta, tb - ta, x, S, idx, W)
-                    else:
-                        ok = euler.step(P, c, level, ta, tb - ta, x, idx, W)
-                if not ok or tb == t1:
-                    break
-                passed += 1
-                ta = tb
-            if not ok:
-                status[c] = FAILED
-                break
+    @njit(cache=True, nogil=True)
+    def drive(P, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap):
+        """Integrate every case ``c`` whose ``status[c]`` is OK over ``n_steps[c]`` steps of ``dt[c]`` s.
+
+        Each step ``[k h, (k + 1) h]`` is split at the breakpoints inside it, so every sub-step sees one
+        polynomial piece of every profile; the outputs are observed at the end of each step.
+        ``status[c]`` becomes UNSTABLE when the base runs away (``engine.kernels.peaks.observe``) and
+        FAILED on a singular mass matrix; the case stops there. ``full``, ``ev``, ``sub_b``, ``sub_a``,
+        ``deg``, ``osc`` are the exact method's prepared maps (empty for the others). ``outmap`` is the
+        linear output map ``(G, KF, target, rest_target, still)`` (``engine.kernels.output_map``; empty at
+        the nonlinear level), through which the linear levels observe every case whose floor stands still
+        and that is not recorded.
+        """
+        C = dt.shape[0]
+        nx = 13 if level == NONLINEAR else 12
+        z = np.zeros(nx + 6 * (deg + 1))  # the state, then exact's forcing derivatives carried between steps
+        x = z[:nx]
+        Fv = z[nx:]
+        S = np.zeros((rk4.SCRATCH_ROWS, nx))  # RK4's stage state and slopes
+        xn = np.zeros(nx)  # exact: the new state
+        idx = np.zeros(P.sm.shape[1], dtype=np.int64)
+        G, KF, tgt, rtgt, still = outmap
+        m = G.shape[2]
+        # exact: a whole step inside one piece with no actuator, oscillator or recorded floor input takes the
+        # lean path (exact.full_step)
+        lean = not P.ffon and not osc and P.ft.shape[0] == 0
+        Smap = np.zeros((10, max(m, 1)))  # the output map's running state and scratch (output_map.observe)
+        Vmap = np.zeros((9, max(m, 1)))
+        Qmap = np.zeros(13)
+        F0, rest, ptol = P.f0, O.rest, O.point_tol
+        first = np.int64(0)  # the first output step, typed as the later ``k + 1``: one compiled observe
+        for c in range(C):
+            if status[c] != OK:
+                continue
+            linear = level != NONLINEAR and m > 0 and still[c] and O.slot[c] < 0
             if linear:
-                seen = output_map.observe(c, t1, x, k + 1, G, KF, F0, tgt, rtgt, rest, ptol, Smap, Vmap, Qmap)
+                output_map.start(O, c, Smap, Qmap)
+            x[:] = 0.0
+            if level == NONLINEAR:
+                x[3] = 1.0
+            Fv[:] = 0.0
+            idx[:] = -1
+            h = dt[c]
+            tol = 1e-6 * h
+            passed = 0
+            piece_end = -np.inf  # the earliest start of a stage's next piece, s
+            if linear:
+                output_map.observe(c, 0.0, x, 0, G, KF, F0, tgt, rtgt, rest, ptol, Smap, Vmap, Qmap)
             else:
-                seen = observe(P, c, level, t1, x, W, O, k + 1)
-            if not seen:
-                status[c] = UNSTABLE
-                break
-        if linear:
-            output_map.finish(O, c, Smap, Qmap)
+                observe(P, c, level, 0.0, x, W, O, first)
+            ET = full[c if method == EXACT else 0]
+            for k in range(n_steps[c]):
+                t0 = k * h
+                t1 = (k + 1) * h
+                ta = t0
+                while True:
+                    fresh = piece_end <= ta + tol  # a stage enters a new piece (always at the case's start)
+                    if fresh:
+                        advance_pieces(P, c, ta, idx, tol)
+                        piece_end = next_breakpoint(P, c, idx, np.inf, tol)
+                    if method == EXACT:
+                        tb = exact.next_split(ev, c, passed, t1, tol)
+                        if lean and tb == t1 and ta == t0 and not fresh:
+                            exact.full_step(ET, z, Fv, deg, t1 - t0)  # as exact.step shifts: bit for bit
+                            ok = True
+                        else:
+                            ok = exact.step(
+                                P,
+                                c,
+                                ta,
+                                tb,
+                                t0,
+                                t1,
+                                fresh,
+                                passed,
+                                z,
+                                Fv,
+                                xn,
+                                idx,
+                                W,
+                                full,
+                                sub_b,
+                                sub_a,
+                                deg,
+                                osc,
+                            )
+                    else:
+                        tb = piece_end if piece_end < t1 - tol else t1
+                        if method == RK4 and level == LTI:
+                            ok = rk4.step_lti(P, c, ta, tb - ta, x, S, idx, W)
+                        elif method == RK4:
+                            ok = rk4.step(P, c, level, ta, tb - ta, x, S, idx, W)
+                        else:
+                            ok = euler.step(P, c, level, ta, tb - ta, x, idx, W)
+                    if not ok or tb == t1:
+                        break
+                    passed += 1
+                    ta = tb
+                if not ok:
+                    status[c] = FAILED
+                    break
+                if linear:
+                    seen = output_map.observe(
+                        c, t1, x, k + 1, G, KF, F0, tgt, rtgt, rest, ptol, Smap, Vmap, Qmap
+                    )
+                else:
+                    seen = observe(P, c, level, t1, x, W, O, k + 1)
+                if not seen:
+                    status[c] = UNSTABLE
+                    break
+            if linear:
+                output_map.finish(O, c, Smap, Qmap)
+
+    return drive
 
 
-# Entry points: a call from Python with plain ints would send numba through its literal dispatch on every
-# call (milliseconds each); called from these cached kernels, the codes are compile-time constants.
-@njit(cache=True, nogil=True)
-def _run_euler(P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap):
-    if level == LTI:
-        drive(EULER, P, LTI, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap)
-    elif level == LTV:
-        drive(EULER, P, LTV, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap)
-    else:
-        drive(EULER, P, NONLINEAR, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap)
+ENTRIES = {
+    (name, fidelity): pair_driver(method, FIDELITIES[fidelity])
+    for name, method, fidelities in (
+        ("euler", EULER, ("lti", "ltv", "nonlinear")),
+        ("rk4", RK4, ("lti", "ltv", "nonlinear")),
+        ("exact", EXACT, ("lti",)),
+    )
+    for fidelity in fidelities
+}
+"""The cached driver of each stepped method and fidelity level, by ``(method, level)`` names: what a run
+calls from Python (and compiles, on an empty cache, alone), and what a check of the kernel cache on disk
+reads."""
 
-
-@njit(cache=True, nogil=True)
-def _run_rk4(P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap):
-    if level == LTI:
-        drive(RK4, P, LTI, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap)
-    elif level == LTV:
-        drive(RK4, P, LTV, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap)
-    else:
-        drive(RK4, P, NONLINEAR, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap)
-
-
-@njit(cache=True, nogil=True)
-def _run_exact(P, level, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap):
-    drive(EXACT, P, LTI, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap)
-
-
-ENTRIES = {"euler": _run_euler, "rk4": _run_rk4, "exact": _run_exact}
-"""The cached entry kernel of each stepped method: what a run calls from Python, and what a check of the
-kernel cache on disk reads."""
+_LEVEL_NAMES = {level: name for name, level in FIDELITIES.items()}
 
 _NO_MAPS = (
     np.zeros((1, 0, 12)),
@@ -213,9 +215,8 @@ def run(
         outmap = (*output_map.build(P, O.target, O.rest_target), output_map.still_floor(P))
     else:
         outmap = _NO_OUTPUT_MAP
-    ENTRIES[name](
+    ENTRIES[name, _LEVEL_NAMES[level]](
         kernel_struct(P),
-        level,
         dt,
         n_steps,
         kernel_struct(O),

@@ -29,9 +29,11 @@ from isolab.engine.kernels.rotations import cross
 #   different key recomputes;
 # - the state.
 # ``W.cc``: case, m_tot (kg), 1/m_tot, inertia (9, kg m^2), floor amplitude (3, m), angular frequency
-# (3, rad/s), phase (3, rad), number of recorded floor samples.
-CC_MT, CC_IMT, CC_IN, CC_FA, CC_FW, CC_FP, CC_NF = 1, 2, 3, 12, 15, 18, 21
-CC_SIZE = 22
+# (3, rad/s), phase (3, rad), number of recorded floor samples, and ``V = sum f0_j d_j - g sum m rho_h``
+# (3, N m): the preloads' and the home weights' first moment, whose moment ``V x R^T e_z`` the balanced
+# preload convention (``Params.pbase`` 2) takes out.
+CC_MT, CC_IMT, CC_IN, CC_FA, CC_FW, CC_FP, CC_NF, CC_V = 1, 2, 3, 12, 15, 18, 21, 22
+CC_SIZE = 25
 # ``W.cs`` (m, 8 + 5 K): per stage mass (kg), parent, axis (3), home (3, m), then its pieces' start times
 # (K, s), positions (m), velocities (m/s), accelerations (m/s^2) and jerks (m/s^3).
 CS_E, CS_H, CS_P = 2, 5, 8
@@ -85,6 +87,13 @@ def _pack_case(P, c, W):
             cm[j, CM_C + a] = P.cd[c, j, a]
         cm[j, CM_SKY] = P.sky[c, j]
         cm[j, CM_F0] = P.f0[c, j]
+    for a in range(3):
+        v = 0.0
+        for j in range(P.d.shape[1]):
+            v += P.f0[c, j] * P.d[c, j, a]
+        for i in range(P.sm.shape[1]):
+            v -= P.g * P.sm[c, i] * P.rho_h[c, i, a]
+        cc[CC_V + a] = v
     x = np.zeros(12)
     z = np.zeros(3)
     out = np.zeros(6)

@@ -23,6 +23,7 @@ from numba import njit
 
 from isolab.engine.kernels.cached_terms import (
     CC_IMT,
+    CC_V,
     CM_C,
     CM_D,
     CM_F0,
@@ -184,7 +185,7 @@ def nonlinear_acc(x, tc, cc, cm, R, F, acc, g, pbase):
         f1 += F1
         f2 += F2
         p = cm[j, CM_F0]
-        if pbase:
+        if pbase == 1:
             # the preload turns with the base: (0, 0, p) in the body, R (0, 0, p) in the floor frame
             f0 += p * R[0, 2]
             f1 += p * R[1, 2]
@@ -201,6 +202,13 @@ def nonlinear_acc(x, tc, cc, cm, R, F, acc, g, pbase):
         r0 += m0
         r1 += m1
         r2 += m2
+    if pbase == 2:
+        # balanced: the preloads and the home weights cancel in every attitude; take out their moment
+        # V x R^T e_z (what is left of the weights is the stages' travel, in the weight moment below)
+        m0, m1, m2 = cross(cc[CC_V], cc[CC_V + 1], cc[CC_V + 2], R[2, 0], R[2, 1], R[2, 2])
+        r0 -= m0
+        r1 -= m1
+        r2 -= m2
     s0, s1, s2 = tc[TC_SR, 0], tc[TC_SR, 1], tc[TC_SR, 2]
     # body-frame forces: feedforward actuators (fixed in the machine) and the stages'
     # -sum m (w x (w x rho) + 2 w x v_rel + a_rel), turned to the floor frame

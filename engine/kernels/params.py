@@ -95,8 +95,10 @@ class Params(NamedTuple):
     (``engine.kernels.feedforward.feedforward_transients``)."""
     ffwt: np.ndarray
     """(C, n) 1 where a mount also feeds the change of the stages' weight moment forward, else 0."""
-    pbase: bool
-    """The nonlinear level's preloads turn with the base (else they stay vertical)."""
+    pbase: int
+    """The nonlinear level's preload convention: 0 vertical in the floor frame, 1 turning with the base,
+    2 balancing the weights with the stages at home in every attitude (``engine.kernels.cached_terms``
+    ``CC_V``)."""
 
 
 class Work(NamedTuple):

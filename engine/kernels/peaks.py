@@ -69,6 +69,8 @@ Peaks = namedtuple(
         "last_defl",
         "last_floor",
         "last_force",
+        "point_offset",
+        "rest_point_offset",
     ],
 )
 
@@ -94,6 +96,8 @@ def allocate(
     rest_target: np.ndarray | None = None,
     point_tol: np.ndarray | None = None,
     h_interp: np.ndarray | None = None,
+    point_offset: np.ndarray | None = None,
+    rest_point_offset: np.ndarray | None = None,
 ) -> Peaks:
     """Accumulators for ``n_cases`` cases; histories of ``n_steps + 1`` samples for the ``record`` cases.
 
@@ -104,6 +108,9 @@ def allocate(
     as ``engine.model.rest_offsets`` gives them (default: none); ``point_tol`` (C, p) the settling
     tolerance of each point of interest, m (default: ``tol``); ``h_interp`` (C,) the longest interval
     between output times over which a peak is interpolated, s (default: every interval).
+    ``point_offset`` (C, p, 3) and ``rest_point_offset`` (C, K, p, 3), m, are what a point's static
+    displacement adds to the linearised ``u + theta x d`` of ``target`` and ``rest_target`` (the nonlinear
+    level's ``(R - I) d - theta x d``; default zero).
     """
     slot = np.full(n_cases, -1, dtype=np.int64)
     record = list(record or [])
@@ -157,6 +164,15 @@ def allocate(
         last_defl=np.zeros((n_cases, n_isolators, 3, 2)),
         last_floor=np.zeros((n_cases, 3, 2)),
         last_force=np.zeros((n_cases, n_isolators, 3)),
+        point_offset=np.ascontiguousarray(
+            np.zeros((n_cases, n_points, 3)) if point_offset is None else point_offset, dtype=float
+        ),
+        rest_point_offset=np.ascontiguousarray(
+            np.zeros((n_cases, 1 if rest_target is None else np.shape(rest_target)[1], n_points, 3))
+            if rest_point_offset is None
+            else rest_point_offset,
+            dtype=float,
+        ),
     )
 
 
@@ -277,10 +293,10 @@ def observe(P, c, level, t, x, W, O, step):
         _peak_point(O.poi, O.last_poi, c, p, 1, pv1, v1 + q1, h, between)
         _peak_point(O.poi, O.last_poi, c, p, 2, pv2, v2 + q2, h, between)
         if settle:
-            # target point displacement from the linearised static offset
-            e0 = O.target[c, 4] * d2 - O.target[c, 5] * d1 + O.target[c, 0]
-            e1 = O.target[c, 5] * d0 - O.target[c, 3] * d2 + O.target[c, 1]
-            e2 = O.target[c, 3] * d1 - O.target[c, 4] * d0 + O.target[c, 2]
+            # target point displacement from the static offset (linearised, plus the nonlinear rest)
+            e0 = O.target[c, 4] * d2 - O.target[c, 5] * d1 + O.target[c, 0] + O.point_offset[c, p, 0]
+            e1 = O.target[c, 5] * d0 - O.target[c, 3] * d2 + O.target[c, 1] + O.point_offset[c, p, 1]
+            e2 = O.target[c, 3] * d1 - O.target[c, 4] * d0 + O.target[c, 2] + O.point_offset[c, p, 2]
             e = max(abs(pv0 - e0), abs(pv1 - e1), abs(pv2 - e2))
             if e > err:
                 err = e
@@ -289,6 +305,9 @@ def observe(P, c, level, t, x, W, O, step):
             e0 = O.rest_target[c, k, 4] * d2 - O.rest_target[c, k, 5] * d1 + O.rest_target[c, k, 0]
             e1 = O.rest_target[c, k, 5] * d0 - O.rest_target[c, k, 3] * d2 + O.rest_target[c, k, 1]
             e2 = O.rest_target[c, k, 3] * d1 - O.rest_target[c, k, 4] * d0 + O.rest_target[c, k, 2]
+            e0 += O.rest_point_offset[c, k, p, 0]
+            e1 += O.rest_point_offset[c, k, p, 1]
+            e2 += O.rest_point_offset[c, k, p, 2]
             if max(abs(pv0 - e0), abs(pv1 - e1), abs(pv2 - e2)) > O.point_tol[c, p]:
                 O.p_viol[c, p] = t
         if slot >= 0:

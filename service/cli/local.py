@@ -115,12 +115,13 @@ COMPILING = "compiling kernels, first run only"
 """What ``simulate`` and ``run`` print (stderr) before a run that compiles the engine's kernels."""
 
 
-def say_if_compiling(integrators: list[str | None]) -> None:
-    """Print :data:`COMPILING` to stderr when the kernels of ``integrators`` (None: still to be chosen) are
-    not cached on disk yet (:func:`isolab.studies.run.kernel_cache.kernels_cached`)."""
+def say_if_compiling(integrators: list[str | None], fidelity: str | None = None) -> None:
+    """Print :data:`COMPILING` to stderr when the kernels of ``integrators`` (None: still to be chosen) at
+    ``fidelity`` (None: every level) are not cached on disk yet
+    (:func:`isolab.studies.run.kernel_cache.kernels_cached`)."""
     from isolab.studies.run.kernel_cache import kernels_cached
 
-    if not kernels_cached(integrators):
+    if not kernels_cached(integrators, fidelity=fidelity):
         typer.echo(COMPILING, err=True)
 
 
@@ -167,7 +168,7 @@ def simulate(
             step, reason = dt or choice.dt, choice.reason
         if fid is None or integ is None or step is None:  # resolved above; a scene always has defaults
             raise ValueError("simulation: no fidelity, integrator and step to run with")
-        say_if_compiling([integ])
+        say_if_compiling([integ], fid)
         t0 = time.perf_counter()
         result = run(batch, fid, integ, step, auto_step=sim.auto_step, record=[0] if plot else None)
         elapsed = time.perf_counter() - t0
@@ -296,7 +297,8 @@ def run_study_command(
     sim = definition.simulation
     # the chosen model (or every one, when the study asks for an accuracy) and the reference that measures
     # each dataset's error
-    say_if_compiling([None if sim.request is not None else sim.integrator, "reference"])
+    chosen = sim.request is None
+    say_if_compiling([sim.integrator if chosen else None, "reference"], sim.fidelity if chosen else None)
     t0 = time.perf_counter()
     try:
         with Progress(

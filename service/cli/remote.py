@@ -10,7 +10,7 @@ from typing import Annotated, Any, NoReturn, Self
 
 import typer
 
-from isolab.service.client import DEFAULT_URL, URL_ENV, Client, ClientError
+from isolab.service.settings import DEFAULT_URL, URL_ENV
 
 UrlOption = Annotated[str, typer.Option("--url", envvar=URL_ENV, help="Address of the isolab service.")]
 """``--url`` of a command that asks the service (``ISOLAB_URL`` when not given)."""
@@ -81,6 +81,8 @@ def submit_command(
     token: TokenOption = None,
 ) -> None:
     """Submit a study file to the service (its scene_file is read here and sent inline); print its id."""
+    from isolab.service.client import Client, ClientError
+
     try:
         with Client(url, token=token) as api:
             accepted = api.submit(study)
@@ -105,6 +107,8 @@ def status_command(
     limit: Annotated[int, typer.Option(min=1, max=500, help="Studies to list.")] = 20,
 ) -> None:
     """Show one study's status and progress, or list the latest studies."""
+    from isolab.service.client import Client, ClientError
+
     try:
         with Client(url, token=token) as api:
             if study_id is not None:
@@ -140,6 +144,8 @@ def fetch_command(
     token: TokenOption = None,
 ) -> None:
     """Download a done study's netCDF dataset."""
+    from isolab.service.client import Client, ClientError
+
     try:
         with Client(url, token=token) as api:
             path = api.download(study_id, output)

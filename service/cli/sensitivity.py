@@ -11,7 +11,7 @@ from typing import Annotated, Any
 import typer
 
 from isolab.service.cli.remote import TokenOption, UrlOption
-from isolab.service.client import DEFAULT_URL, Client, ClientError
+from isolab.service.settings import DEFAULT_URL
 
 
 def _local_answer(path: Path, output: str) -> dict[str, Any]:
@@ -45,6 +45,8 @@ def sensitivity_command(
 ) -> None:
     """Sensitivity indices of one output: Sobol' S1 and ST for a saltelli design, Borgonovo's delta and S1
     for other samples and grids, each with its 95 % confidence interval, parameters ranked."""
+    from isolab.service.client import Client, ClientError
+
     local = Path(study)
     try:
         if local.suffix == ".nc" or local.is_file():

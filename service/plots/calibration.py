@@ -13,8 +13,6 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 DPI = 100
 
@@ -28,6 +26,9 @@ def calibration_png(traces: Mapping[str, Any], title: str = "", notes: Sequence[
         title: figure title.
         notes: lines printed under the title (fitted values, misfits).
     """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
     t = np.asarray(traces["time"], dtype=float)
     channels = list(traces["channels"])
     n = max(len(channels), 1)

@@ -5,9 +5,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from matplotlib.figure import Figure
 
-from isolab.service.plots.studies import DPI, figure_png
+from isolab.service.plots.studies import figure_png, new_figure
 
 _COLOURS = {"S1": "#1f77b4", "ST": "#d62728", "delta": "#2ca02c"}
 _LABELS = {"S1": "S1 (first order)", "ST": "ST (total order)", "delta": "delta (Borgonovo)"}
@@ -26,7 +25,7 @@ def sensitivity_png(result: dict[str, Any], title: str = "") -> bytes:
     names = list(result["parameters"])
     kinds = list(result["indices"])
     n, k = len(names), len(kinds)
-    fig = Figure(figsize=(8, 1.2 + 0.45 * n * k + 0.6), dpi=DPI, layout="constrained")
+    fig = new_figure(8, 1.2 + 0.45 * n * k + 0.6)
     ax = fig.add_subplot()
     height = 0.8 / max(k, 1)
     pos = np.arange(n)[::-1].astype(float)

@@ -17,17 +17,18 @@ from __future__ import annotations
 import io
 import warnings
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
-from matplotlib.ticker import NullFormatter
 
 from isolab.studies import AXES, ROTATIONS
 from isolab.studies.questions.designs import Design
-from isolab.studies.results.cases import CaseColumns
 from isolab.studies.units import readable_unit, shown_in
+
+if TYPE_CHECKING:  # matplotlib and the case table load when a figure is drawn
+    from matplotlib.figure import Figure
+
+    from isolab.studies.results.cases import CaseColumns
 
 DPI = 100
 
@@ -110,8 +111,17 @@ def format_value(value: Any) -> str:
     return str(value)
 
 
+def new_figure(width: float, height: float) -> Figure:
+    """An empty matplotlib figure of ``width`` x ``height`` inches at :data:`DPI`, constrained layout."""
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=(width, height), dpi=DPI, layout="constrained")
+
+
 def figure_png(fig: Figure) -> bytes:
     """A matplotlib figure as PNG bytes (drawn by Agg, without pyplot)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
     canvas = FigureCanvasAgg(fig)
     buf = io.BytesIO()
     canvas.print_png(buf)
@@ -138,7 +148,7 @@ def case_figure(
         title: figure title.
     """
     t = np.asarray(time, dtype=float)
-    fig = Figure(figsize=(9, 12), dpi=DPI, layout="constrained")
+    fig = new_figure(9, 12)
     panels = fig.subplots(5, 1, sharex=True)
     ax = panels[0]
     shift = np.asarray(displacement, dtype=float)
@@ -248,6 +258,8 @@ def _ticks(ax: Any, which: str, levels: np.ndarray, series: Shown) -> np.ndarray
     if len(pos) <= 12:
         getattr(ax, f"set_{which}ticks")(pos, [format_value(v) for v in pos])
         if series.log:  # no decade labels over the levels' own
+            from matplotlib.ticker import NullFormatter
+
             getattr(ax, f"{which}axis").set_minor_formatter(NullFormatter())
     return pos
 
@@ -292,7 +304,7 @@ def study_figure(
         return np.flatnonzero(np.asarray(group.values).astype(str) == g)
 
     if x2 is None:
-        fig = Figure(figsize=(8, 5), dpi=DPI, layout="constrained")
+        fig = new_figure(8, 5)
         ax = fig.subplots()
         combined = False
         xt = np.asarray(xs.values)
@@ -324,7 +336,7 @@ def study_figure(
 
     x2s = x2.shown()
     n = len(groups)
-    fig = Figure(figsize=(min(max(5.5 * n, 6.5), 16), 5.2), dpi=DPI, layout="constrained")
+    fig = new_figure(min(max(5.5 * n, 6.5), 16), 5.2)
     axes = np.atleast_1d(fig.subplots(1, n, squeeze=False)[0])
     xt, x2t = np.asarray(xs.values), np.asarray(x2s.values)
     for ax, g in zip(axes, groups, strict=True):
@@ -433,7 +445,7 @@ def floor_velocity_png(spectra: dict[str, Any], title: str = "") -> bytes:
     edges = np.asarray(spectra["band_edges"], dtype=float)  # (21,) Hz
     BAND_LOWER, BAND_UPPER = edges[:-1], edges[1:]
     um = 1e6
-    fig = Figure(figsize=(15, 5.2), dpi=DPI, layout="constrained")
+    fig = new_figure(15, 5.2)
     panels = fig.subplots(1, 3, sharey=True)
     floor = np.asarray(spectra["floor"], dtype=float)
     everything = [floor[floor > 0] * um]

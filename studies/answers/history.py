@@ -16,10 +16,9 @@ import math
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import xarray as xr
 
 from isolab.engine import STATUS_NAMES, simulate
 from isolab.engine.profiles import Pieces, evaluate
@@ -31,6 +30,9 @@ from isolab.studies.inputs.study import Study, study_from_json, study_labels
 from isolab.studies.results.cases import CaseQueryError
 from isolab.studies.results.store import NETCDF_LOCK, Store, StudyRecord
 from isolab.studies.run.accuracy import recorded_choice, resolved_definition, resolved_study
+
+if TYPE_CHECKING:  # xarray loads with the first history dataset (a mode name needs none)
+    import xarray as xr
 
 MAX_RECORDED_SAMPLES = 2_000_000
 """Longest time history (samples) a case is recomputed with: about 200 bytes a sample in memory."""
@@ -317,6 +319,8 @@ def history_dataset(study_id: str, case: int, h: CaseHistory, every: int) -> xr.
     """The histories as a CF-described dataset: ``displacement`` (time, axis), ``base_rotation``
     (time, rotation), ``isolator_force`` (time, isolator, axis), ``point_displacement``
     (time, point, axis)."""
+    import xarray as xr
+
     s = slice(None, None, every)
     ds = xr.Dataset(
         {

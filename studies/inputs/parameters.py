@@ -29,6 +29,7 @@ from typing import Any, cast
 
 import numpy as np
 
+from isolab.engine.profiles import SHAPERS
 from isolab.engine.results import AXES
 from isolab.studies.inputs.isolators import PRESETS
 from isolab.studies.inputs.schema import (
@@ -54,6 +55,7 @@ from isolab.studies.inputs.schema.scene_paths import (
     MACHINE_INERTIA_DIAGONAL,
     MACHINE_MASS,
     MOUNT_FIGURES,
+    SHAPER_KEYS,
     SIMULATION_DURATION,
     SIMULATION_SETTLE_TOLERANCE,
     components,
@@ -63,6 +65,7 @@ from isolab.studies.inputs.schema.scene_paths import (
     mount,
     point,
     profile_segment,
+    profile_shaper,
     stage,
     stage_profile,
 )
@@ -101,6 +104,7 @@ _LEAVES: dict[str, tuple[str, str | None]] = {
     "amplitude": ("length", None),
     "frequency": ("frequency", "ge0"),
     "phase": ("angle", None),
+    "damping": ("dimensionless", "ge0"),
     "duration": ("time", "gt0"),
     "settle_tolerance": ("length", "gt0"),
 }
@@ -205,6 +209,8 @@ def available_paths(scene: Scene) -> list[str]:
         p = stage(s.name)
         out += [f"{p}.mass"] + components(f"{p}.home")
         prof = s.profile
+        if prof.shaper is not None:
+            out += [f"{profile_shaper(s.name)}.{key}" for key in ("type", *SHAPER_KEYS)]
         if isinstance(prof, SequenceProfile):
             for k, seg in enumerate(prof.segments):
                 segment_keys = (
@@ -309,6 +315,8 @@ def resolve(path: str, scene: Scene) -> Target:
     name = _default_name(canon)
     if parts[-1] == "preset":
         return Target(canon, name, CATEGORICAL, "", tuple(PRESETS), (canon,), None)
+    if parts[-2:] == ["shaper", "type"]:
+        return Target(canon, name, CATEGORICAL, "", SHAPERS, (canon,), None)
     writes: tuple[str, ...] = (canon,)
     if parts[0] == ISOLATORS and parts[1] in EXPLICIT_VALUES and parts[2] in AXIS_ALIASES:
         writes = tuple(group_axis(parts[1], axis) for axis in AXIS_ALIASES[parts[2]])

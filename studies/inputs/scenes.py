@@ -64,6 +64,7 @@ from isolab.studies.inputs.schema.scene_paths import (
     MACHINE_INERTIA_DIAGONAL,
     MACHINE_MASS,
     MOUNT_FIGURES,
+    SHAPER_KEYS,
     SIMULATION_DURATION,
     SIMULATION_SETTLE_TOLERANCE,
     floor_sine,
@@ -72,10 +73,12 @@ from isolab.studies.inputs.schema.scene_paths import (
     mount,
     point,
     profile_segment,
+    profile_shaper,
     stage,
     stage_entry,
     stage_profile,
 )
+from isolab.studies.inputs.schema.stages import ShaperSpec
 from isolab.studies.questions.floor import scene_band_velocity
 
 _LAYOUT_SX = np.array([-1.0, 1.0, 1.0, -1.0])
@@ -108,6 +111,8 @@ def shape_signature(scene: Scene) -> tuple:
             kind = ("scan", p.jerk is not None, p.repeats)
         else:
             kind = (p.type,)
+        if p.shaper is not None:  # a shaped profile has SHAPER_IMPULSES times the pieces
+            kind = (*kind, "shaped")
         stages.append((s.name, s.parent, kind))
     floor: tuple[object, ...] | None = None  # the time-domain floor motion (a spectrum shapes nothing)
     if scene.floor is not None and scene.floor.sine is not None:
@@ -284,6 +289,23 @@ def _mount_feedforward(cases: _Cases, n: int) -> tuple[np.ndarray, np.ndarray, n
     return out["gain"], out["bandwidth"], out["force_limit"], weight
 
 
+def _shaped(pc: profiles.Pieces, cases: _Cases, i: int) -> profiles.Pieces:
+    """Stage ``i``'s profile ``pc`` through its input shaper, tuned per case (engine.profiles.shape)."""
+    q = profile_shaper(cases.scenes[0].stages[i].name)
+    kinds = cases.each(lambda s: cast(ShaperSpec, s.stages[i].profile.shaper).type)
+
+    def figure(key: str) -> np.ndarray:
+        return cases.get(f"{q}.{key}", lambda s: getattr(s.stages[i].profile.shaper, key))
+
+    figs = [figure(k) for k in SHAPER_KEYS]
+    f, z = (np.broadcast_to(x, (cases.c,)) for x in figs)
+    t, a = np.zeros((cases.c, profiles.SHAPER_IMPULSES)), np.zeros((cases.c, profiles.SHAPER_IMPULSES))
+    for kind in set(kinds):
+        on = np.array([k == kind for k in kinds]) if len(kinds) == cases.c else np.ones(cases.c, dtype=bool)
+        t[on], a[on] = profiles.shaper_impulses(kind, f[on], z[on])
+    return profiles.shape(profiles.Pieces(*(np.broadcast_to(x, (cases.c, x.shape[1])) for x in pc)), t, a)
+
+
 def _profiles(cases: _Cases) -> profiles.Pieces:
     c = cases.c
     stages = cases.scenes[0].stages
@@ -335,6 +357,8 @@ def _profiles(cases: _Cases) -> profiles.Pieces:
                     else:
                         segs.append({"dwell": sget("dwell")})
                 pc = profiles.sequence(segs, start=get("start"))
+            if prof.shaper is not None:
+                pc = _shaped(pc, cases, i)
         except SceneError as err:
             names = {"v_max": "velocity", "a_max": "acceleration", "j_max": "jerk", "distance": "travel"}
             field = err.field
@@ -615,7 +639,8 @@ def build_batch(
         iso_ff_bandwidth=ff_bandwidth,
         iso_ff_limit=ff_limit,
         iso_ff_weight=ff_weight,
-        preload_with_base=preload.pop() == "base",
+        preload_with_base="base" in preload,
+        preload_balanced="balanced" in preload,
     )
     auto = np.isnan(duration)
     if auto.any():

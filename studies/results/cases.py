@@ -26,15 +26,16 @@ import re
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import netCDF4
 import numpy as np
-import xarray as xr
 
 from isolab.engine.results import ISOLATOR, OUTPUTS, OutputSpec
 from isolab.studies.results.store import NETCDF_LOCK, Store
 from isolab.studies.units import dimension_of, quantity_problem, to_si
+
+if TYPE_CHECKING:  # xarray and netCDF4 load with the first dataset read
+    import xarray as xr
 
 MAX_CASE_ROWS = 100_000
 """Most rows one page of the case table holds."""
@@ -315,6 +316,9 @@ _TABLES_LOCK = threading.Lock()
 
 
 def _cached_case_table(path: str, mtime_ns: int, size: int) -> CaseColumns:
+    import netCDF4
+    import xarray as xr
+
     key = (path, mtime_ns, size)
     with _TABLES_LOCK:
         if key in _TABLES:

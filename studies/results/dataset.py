@@ -31,12 +31,9 @@ import operator
 import threading
 import uuid
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import dask.array as da
 import numpy as np
-import xarray as xr
-from dask.highlevelgraph import HighLevelGraph
 
 from isolab.engine.results import (
     AXES,
@@ -54,6 +51,8 @@ from isolab.engine.results import (
 )
 from isolab.studies.questions.designs import Design
 
+if TYPE_CHECKING:  # xarray and dask load with the first dataset built: a single case needs neither
+    import xarray as xr
 CONVENTIONS = "CF-1.10"
 
 _BOOL_ENCODING = {"dtype": "int8", "_FillValue": np.int8(-1)}
@@ -217,6 +216,8 @@ def to_dataset(
         ValueError: sizes disagree, a grid cell is missing or repeated, or a parameter name clashes with
             a dimension or variable name.
     """
+    import xarray as xr
+
     n = result.n_cases
     if design.n_cases != n:
         raise ValueError(f"result: {n} cases, but the design has {design.n_cases}")
@@ -281,6 +282,8 @@ def chunk_dataset(
     encodings, plus ``criterion_margin`` and ``meets_criteria`` for a ``criteria`` block
     (:func:`studies.questions.criteria.add_criteria`). ``arrays`` and ``indices`` are as :func:`chunk_result`
     takes them."""
+    import xarray as xr
+
     from isolab.studies.questions.criteria import add_criteria
 
     result = chunk_result(
@@ -321,6 +324,10 @@ def streamed_dataset(
         ValueError: the chunks do not partition the design's cases, or a parameter name clashes with a
             dimension or variable name. A chunk whose arrays do not fit raises when it is read.
     """
+    import dask.array as da
+    import xarray as xr
+    from dask.highlevelgraph import HighLevelGraph
+
     n = int(sum(len(c) for c in chunks))
     if design.n_cases != n:
         raise ValueError(f"chunks: {n} cases, but the design has {design.n_cases}")
@@ -458,6 +465,8 @@ def _case_variables(
     """Every per-case variable of ``result`` (outputs, ``status``, ``message``) along ``case_dims``, each
     array put there by ``lay_out`` (case order in, the case dimensions' layout out). Outputs of a case
     whose status is not OK are NaN."""
+    import xarray as xr
+
     bad = ~np.asarray(result.status == OK)
     data_vars: dict[str, xr.Variable] = {}
     for name, spec in OUTPUTS.items():  # the catalogue's outputs, in its order
@@ -493,6 +502,8 @@ def _case_variables(
 
 def _fixed_coords(isolator_names: Sequence[str], point_names: Sequence[str]) -> dict[str, xr.Variable]:
     """The coordinates of the per-case dimensions: axis, rotation, isolator, point, mode, dof."""
+    import xarray as xr
+
     coords: dict[str, xr.Variable] = {}
     coords["axis"] = xr.Variable("axis", np.array(AXES), {"units": "1", "long_name": "floor axis (Z up)"})
     coords["rotation"] = xr.Variable(
@@ -663,10 +674,10 @@ def add_error_estimate(
     out = ds.copy()
     for name, value in values.items():
         case = worst_case.get(name)
-        out[ERROR_ESTIMATE_PREFIX + name] = xr.Variable(
+        out[ERROR_ESTIMATE_PREFIX + name] = (  # (dimensions, value, attributes): a variable
             (),
             np.float64(value),
-            attrs={
+            {
                 "units": units.get(name, "1"),
                 "long_name": f"{meaning.get(name, name)}, over the sampled cases against the reference level",
                 "case": np.int64(-1 if case is None else case),

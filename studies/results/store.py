@@ -43,11 +43,9 @@ import threading
 import time
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import netCDF4
 import numpy as np
-import xarray as xr
 
 from isolab.engine.results import OK, STATUS_NAMES
 from isolab.studies.inputs.definitions import stored_definition
@@ -64,6 +62,9 @@ from isolab.studies.results.catalog import (
 )
 from isolab.studies.results.records import StudyFilter, StudyRecord, isolator_types
 from isolab.studies.results.timings import record_timing
+
+if TYPE_CHECKING:  # xarray and netCDF4 load with the first dataset written or read
+    import xarray as xr
 
 log = logging.getLogger(__name__)
 
@@ -267,6 +268,8 @@ def write_netcdf(ds: xr.Dataset, path: str | Path) -> Path:
     here,
     in this thread, one block at a time as they are written (never on a Dask cluster this process may be
     part of)."""
+    import netCDF4
+
     path = Path(path)
     encoding = netcdf_encoding(ds)
     streamed = [str(k) for k, v in ds.variables.items() if v.chunks is not None]
@@ -537,6 +540,8 @@ class Store:
 
     def open_dataset(self, study_id: str) -> xr.Dataset:
         """A study's dataset, loaded into memory (the file is closed again). Raises StudyNotFound."""
+        import xarray as xr
+
         path = self.path(study_id)
         if not path.exists():
             raise StudyNotFound(study_id)
@@ -649,6 +654,8 @@ def failures(path: str | Path) -> str:
     """What went wrong in a study's dataset file: how many cases have each status other than ok, and the
     message of the first of them (``"12 tipping; case 0: statically unstable: ..."``). Empty when every
     case is ok."""
+    import xarray as xr
+
     with NETCDF_LOCK, xr.open_dataset(path) as ds:
         status = np.asarray(ds["status"].values, dtype=np.int8).reshape(-1)
         bad = np.flatnonzero(status != OK)

@@ -21,26 +21,32 @@ STEPPED = ("euler", "rk4", "exact")
 """Integrators whose cases run through one cached driver loop each (``engine.integrators.stepping``)."""
 
 
-def entry_kernels(integrator: str | None) -> list[Any]:
-    """The numba dispatchers a run with ``integrator`` calls from Python; every integrator's for None (a
-    model still to be chosen)."""
+def entry_kernels(integrator: str | None, fidelity: str | None = None) -> list[Any]:
+    """The numba dispatchers a run with ``integrator`` at ``fidelity`` calls from Python: a stepped method's
+    one entry per level (every level it integrates for a None ``fidelity``); every integrator's for a None
+    ``integrator`` (a model still to be chosen)."""
     from isolab.engine.integrators.stepping import ENTRIES as _ENTRIES
     from isolab.engine.kernels.dynamics import derivative
     from isolab.engine.kernels.peaks import observe
 
     if integrator in STEPPED:
-        return [_ENTRIES[integrator]]
+        return [k for (name, at), k in _ENTRIES.items() if name == integrator and fidelity in (None, at)]
     if integrator == "reference":  # scipy's solve_ivp calls the right-hand side and the observer
         return [derivative, observe]
-    return [_ENTRIES[name] for name in STEPPED] + [derivative, observe]
+    return list(_ENTRIES.values()) + [derivative, observe]
 
 
-def kernels_cached(integrators: Sequence[str | None] = (None,), kernels: Sequence[Any] | None = None) -> bool:
-    """True when every entry kernel of ``integrators`` (or the given numba ``kernels``) has a compiled
-    version on disk for this machine and its current code, so nothing is compiled on first use. Reads one
-    small index file per kernel. When numba's cache cannot be inspected, answers True (nothing is said)."""
+def kernels_cached(
+    integrators: Sequence[str | None] = (None,),
+    kernels: Sequence[Any] | None = None,
+    fidelity: str | None = None,
+) -> bool:
+    """True when every entry kernel of ``integrators`` at ``fidelity`` (every level for None; or the given
+    numba ``kernels``) has a compiled version on disk for this machine and its current code, so nothing is
+    compiled on first use. Reads one small index file per kernel. When numba's cache cannot be inspected,
+    answers True (nothing is said)."""
     if kernels is None:
-        kernels = [k for name in integrators for k in entry_kernels(name)]
+        kernels = [k for name in integrators for k in entry_kernels(name, fidelity)]
     for kernel in kernels:
         try:
             cache = kernel._cache
@@ -114,4 +120,4 @@ def warmup_plan() -> tuple[list[tuple[str, str]], bool]:
     """The pairs a service warms at start (:func:`example_pairs`) and whether the kernels they call are all
     in the cache already (the worker task that plans the warm-up)."""
     pairs = example_pairs()
-    return pairs, kernels_cached(sorted({integrator for _, integrator in pairs}))
+    return pairs, all(kernels_cached([integrator], fidelity=fidelity) for fidelity, integrator in pairs)

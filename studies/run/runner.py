@@ -34,10 +34,9 @@ import time
 import uuid
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import xarray as xr
 
 from isolab.studies.inputs.study import Study, study_from_json, study_labels
 from isolab.studies.questions.criteria import add_criteria
@@ -66,6 +65,9 @@ from isolab.studies.run.error_estimate import (
 )
 from isolab.studies.run.fanout import TASK_RETRIES, choose_chunk_size, plan_chunks, run_chunks, worker_threads
 from isolab.studies.run.optimisation import run_optimisation
+
+if TYPE_CHECKING:  # xarray loads with the first dataset built
+    import xarray as xr
 
 log = logging.getLogger(__name__)
 
@@ -387,7 +389,9 @@ def _error_estimate(
         k: np.concatenate([np.asarray(p["reference"][k]) for p in parts]) for k in parts[0]["reference"]
     }
     method = "nonlinear level, reference integrator (DOP853, rtol 1e-10), sampled at the step each case used"
-    return estimate_errors(ours, reference, cases, outputs, method=method)
+    return estimate_errors(
+        ours, reference, cases, outputs, method=method, integrator=study.simulation.integrator
+    )
 
 
 def _counts(arrays: dict[str, np.ndarray]) -> tuple[int, int]:

@@ -287,8 +287,14 @@ def test_parked_stage_tilts_the_base_to_the_static_solution() -> None:
     for fidelity, integrator in (("lti", "exact"), ("ltv", "rk4"), ("nonlinear", "rk4")):
         r = simulate(b, fidelity, integrator, dt=1e-3, record=[0])
         assert r.status[0] == 0, r.message[0]
-        np.testing.assert_allclose(r.final_displacement[0], expected, rtol=1e-9, atol=1e-15)
         end = np.concatenate([r.history["displacement"][0, -1], r.history["rotation"][0, -1]])
+        if fidelity == "nonlinear":
+            # its own static equilibrium: the hand solution plus a part second order in the rotation
+            # (3e-4 rad: Z sinks by 1.3e-8 m), where the run ends (to the transient's 1e-9)
+            np.testing.assert_allclose(r.final_displacement[0], expected, rtol=1e-6, atol=2e-8)
+            np.testing.assert_allclose(end, r.final_displacement[0], atol=5e-9)
+        else:
+            np.testing.assert_allclose(r.final_displacement[0], expected, rtol=1e-9, atol=1e-15)
         # the transient has decayed to ~1e-9 by t = 2 s (measured: lti, ltv 1e-9; nonlinear 4e-8, its
         # finite rotation of 3e-4 rad adding a second-order part); 1e-6 is well inside the brief's 1e-3
         np.testing.assert_allclose(end[[1, 3]], expected[[1, 3]], rtol=1e-6)

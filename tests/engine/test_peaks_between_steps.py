@@ -42,3 +42,21 @@ def test_step_response_peak_at_a_coarse_step_matches_the_closed_form(zeta: float
     assert r.max_isolator_load[0].max() - r.static_isolator_load[0].max() == pytest.approx(
         r.peak_isolator_force[0, :, 2].max(), rel=1e-9
     )
+
+
+def test_a_step_longer_than_one_over_omega_says_its_peaks_are_sampled() -> None:
+    """At 1 ms (w h = 1 rad) the peaks are refined between steps and the case says nothing; at 2.5 ms
+    (w h = 2.5 rad) they are the output samples', as low as the samples fall, and the message says so."""
+    b = one_mode(0.02)
+    k = (ONE_MODE_BASE + ONE_MODE_PUSH) * ONE_MODE_W**2
+    peak = ONE_MODE_PUSH * 1.0 / k * (1 + np.exp(-0.02 * np.pi / np.sqrt(1 - 0.02**2)))
+    fine = simulate(b, "lti", "exact", dt=1e-3)
+    assert "peaks sampled" not in fine.message[0]
+    coarse = simulate(b, "lti", "exact", dt=2.5e-3, record=[0])
+    assert coarse.status[0] == 0
+    assert coarse.message[0].startswith("peaks sampled at the output steps only")
+    assert "1 ms" in coarse.message[0] and "159.2 Hz" in coarse.message[0]
+    n = int(coarse.history["n_samples"][0])
+    # the reported peak is the largest output sample, below the true peak
+    assert coarse.peak_displacement[0, 2] == np.abs(coarse.history["displacement"][0, :n, 2]).max()
+    assert coarse.peak_displacement[0, 2] < peak * (1 - 1e-3)

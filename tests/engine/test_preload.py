@@ -14,6 +14,7 @@ from isolab.engine import GRAVITY, model, simulate
 from isolab.engine.kernels.dynamics import accel
 from isolab.engine.kernels.params import NONLINEAR
 from isolab.engine.kernels.structs import kernel_struct
+from isolab.engine.scene import SceneError
 
 M = 10_000.0
 SIZE = (2.6, 4.2, 0.34)
@@ -127,3 +128,53 @@ def test_floor_preload_is_the_default_and_unchanged() -> None:
     explicit.preload_with_base = True
     c = simulate(explicit, "nonlinear", "rk4", dt=1e-3)
     assert not np.array_equal(a.peak_rotation, c.peak_rotation)
+
+
+def _balanced(stages=None):
+    b = _soft(False, stages)
+    b.preload_balanced = True
+    return b
+
+
+def test_balanced_preload_has_no_rocking_stiffness_from_preload_and_weight() -> None:
+    """``preload_balanced``: preload and weights cancel in every attitude, so the Y-pitch pair is
+    [[4 ky, 4 ky h], [4 ky h, 4 ky h^2 + 4 kz b^2]] (no -W h, symmetric): the linear stiffness without the
+    gravity term."""
+    kz, _ = mount(M / 4, 1.0, 0.0)
+    kx, ky = 0.8 * kz, 1.2 * kz
+    a, b = SPAN[0] / 2, SPAN[1] / 2
+    ixx, iyy, izz = np.diag(box_inertia(M, *SIZE))
+    y_rx = _pair(4 * ky, 4 * ky * H, 4 * ky * H, 4 * ky * H**2 + 4 * kz * b**2, M, ixx)
+    x_ry = _pair(4 * kx, -4 * kx * H, -4 * kx * H, 4 * kx * H**2 + 4 * kz * a**2, M, iyy)
+    closed = np.sort(np.concatenate([y_rx, x_ry, [4 * kz / M, 4 * (kx * b**2 + ky * a**2) / izz]]))
+    w2 = np.sort(np.linalg.eigvals(_small_amplitude_stiffness(_balanced())).real)
+    np.testing.assert_allclose(w2, closed, rtol=1e-6)
+    # and the rocking mode is stiffer than with the vertical preload (-W h gone)
+    assert w2[-1] > np.sort(_closed_form(False))[-1] * 1.01
+
+
+def test_balanced_and_base_preload_together_are_refused() -> None:
+    b = _balanced()
+    b.preload_with_base = True
+    with pytest.raises(SceneError, match="preload_balanced"):
+        simulate(b, "nonlinear", "rk4", dt=1e-3)
+
+
+def test_balanced_preload_follows_the_linear_model_without_gravity_stiffness() -> None:
+    """A 1 t stage moving 3 m on 1 Hz mounts: with the balanced preload the nonlinear level's peaks are
+    those of the ltv level without the gravity rocking term (to the second-order terms), and not those of
+    the default vertical preload."""
+    stage = [y_stage(home=(0.2, -1.5, 0.3))]
+    bal = simulate(_balanced(stage), "nonlinear", "rk4", dt=1e-3)
+    floor = simulate(_soft(False, stage), "nonlinear", "rk4", dt=1e-3)
+    lin = _soft(False, stage)
+    lin.gravity_stiffness = False
+    ltv = simulate(lin, "ltv", "rk4", dt=1e-3)
+    assert bal.status[0] == 0
+    pitch_bal, pitch_floor, pitch_ltv = (
+        bal.peak_rotation[0, 0],
+        floor.peak_rotation[0, 0],
+        ltv.peak_rotation[0, 0],
+    )
+    assert pitch_bal == pytest.approx(pitch_ltv, rel=0.02)
+    assert abs(pitch_floor / pitch_bal - 1) > 0.03

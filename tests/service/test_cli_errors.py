@@ -26,7 +26,7 @@ from isolab.service.client import Client, read_study_file
 from isolab.studies.inputs.definitions import DefinitionError, check_definition
 from isolab.studies.inputs.file_checks import in_user_words
 from isolab.studies.results.store import copy_atomic, new_file_mode
-from isolab.studies.run.kernel_cache import kernels_cached
+from isolab.studies.run.kernel_cache import entry_kernels, kernels_cached
 
 BAR = "━"  # what rich draws a progress bar with
 
@@ -176,13 +176,30 @@ def test_messages_name_stages_and_keys_as_the_file_writes_them() -> None:
 # ----------------------------------------------------------------------------------- the compile notice
 def test_simulate_says_when_it_compiles(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     path = write(tmp_path / "scene.yaml", scene())
-    monkeypatch.setattr("isolab.studies.run.kernel_cache.kernels_cached", lambda integrators: False)
+    monkeypatch.setattr("isolab.studies.run.kernel_cache.kernels_cached", lambda integrators, **_: False)
     r = invoke("simulate", str(path))
     assert r.exit_code == 0, r.output
     assert r.stderr.splitlines() == [local_commands.COMPILING] and "ok" in r.stdout
-    monkeypatch.setattr("isolab.studies.run.kernel_cache.kernels_cached", lambda integrators: True)
+    monkeypatch.setattr("isolab.studies.run.kernel_cache.kernels_cached", lambda integrators, **_: True)
     r = invoke("simulate", str(path))
     assert r.exit_code == 0 and r.stderr == ""
+
+
+def test_simulate_asks_for_its_own_pair(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # one cached driver per method and level: the notice asks about the pair the scene runs at, so a cache
+    # that holds ltv/rk4 alone does not make a warm ltv/rk4 run say it compiles
+    path = write(tmp_path / "scene.yaml", scene())
+    asked = []
+    monkeypatch.setattr(
+        "isolab.studies.run.kernel_cache.kernels_cached",
+        lambda integrators, fidelity=None: asked.append((list(integrators), fidelity)) or True,
+    )
+    r = invoke("simulate", str(path), "--fidelity", "lti", "--integrator", "exact")
+    assert r.exit_code == 0, r.output
+    assert asked == [(["exact"], "lti")]
+    assert len(entry_kernels("rk4", "ltv")) == 1 and len(entry_kernels("exact", "lti")) == 1
+    assert len(entry_kernels("rk4")) == 3 and len(entry_kernels("euler")) == 3
+    assert entry_kernels("rk4", "ltv")[0] is not entry_kernels("rk4", "lti")[0]
 
 
 def test_kernels_cached_reads_the_numba_index(tmp_path: Path) -> None:
@@ -266,7 +283,7 @@ def test_run_writes_the_dataset_with_the_umask_mode(
     asked = []
     monkeypatch.setattr(
         "isolab.studies.run.kernel_cache.kernels_cached",
-        lambda integrators: asked.append(integrators) or False,
+        lambda integrators, **_: asked.append(integrators) or False,
     )
     path = study(tmp_path)
     out = tmp_path / "out.nc"

@@ -72,6 +72,15 @@ def stage_profile(name: str) -> str:
     return f"{stage(name)}.profile"
 
 
+SHAPER_KEYS = ("frequency", "damping")
+"""The numbers of a profile's input shaper a study may vary (its ``type`` is categorical)."""
+
+
+def profile_shaper(name: str) -> str:
+    """The input shaper of the stage called ``name``: ``stages.<name>.profile.shaper``."""
+    return f"{stage_profile(name)}.shaper"
+
+
 def profile_segment(name: str, k: int) -> str:
     """Segment ``k`` of a sequence profile: ``stages.<name>.profile.segments.<k>``."""
     return f"{stage_profile(name)}.segments.{k}"

@@ -179,10 +179,12 @@ class Simulation(InputModel):
     gravity_stiffness: bool = Field(
         True, description="include the rocking stiffness of preload and weights that tilt with the base"
     )
-    preload: Literal["floor", "base"] = Field(
+    preload: Literal["floor", "base", "balanced"] = Field(
         "floor",
         description="nonlinear level: the mounts' preload stays vertical (floor) or turns with the base "
-        "(base: mounts that tilt with it, no rocking stiffness -W h from the preload)",
+        "(base: mounts that tilt with it, no rocking stiffness -W h from the preload), or balances the "
+        "weights with the stages at home in every attitude (balanced: no rocking stiffness from preload "
+        "and weights, only the stages' travel tilts the base)",
     )
 
     @field_validator("tolerance", mode="before")
@@ -228,8 +230,8 @@ class Simulation(InputModel):
                 )
             if self.preload != "floor":
                 raise ValueError(
-                    "simulation.preload: 'base' is a choice of the nonlinear level; an accuracy request "
-                    "picks the level itself (name fidelity: nonlinear)"
+                    f"simulation.preload: {self.preload!r} is a choice of the nonlinear level; an accuracy "
+                    "request picks the level itself (name fidelity: nonlinear)"
                 )
             # a request overrides a scene's choice as a whole when this block is merged over it
             fields_set.update(_CHOICE_FIELDS)
@@ -254,8 +256,8 @@ class Simulation(InputModel):
             )
         if self.preload != "floor" and self.fidelity != "nonlinear":
             raise ValueError(
-                f"simulation.preload: 'base' (the preload turning with the base) is a choice of the "
-                f"nonlinear level, got fidelity {self.fidelity!r}"
+                f"simulation.preload: {self.preload!r} (a convention of the preload at finite rotations) is "
+                f"a choice of the nonlinear level, got fidelity {self.fidelity!r}"
             )
         if self.integrator == "exact" and self.fidelity != "lti":
             raise ValueError(

@@ -18,8 +18,26 @@ from isolab.studies.inputs.schema.fields import (
     StageJerk,
     StageMass,
     StageVelocity,
+    within,
 )
-from isolab.studies.units import Dimensionless, Length
+from isolab.studies.units import Dimensionless, Frequency, Length
+
+
+class ShaperSpec(InputModel):
+    """An input shaper on the profile (docs/physics.md, "Input shaping"): the profile's acceleration
+    convolved with the shaper's impulses, tuned to a mode of ``frequency`` and ``damping``. The move gets
+    longer by the shaper's duration: half the mode's damped period (ZV) or a whole one (ZVD, EI)."""
+
+    type: Literal["zv", "zvd", "ei"] = Field(
+        description="zv (zero vibration), zvd (zero vibration and derivative: less sensitive to a frequency "
+        "error) or ei (extra insensitive, 5 % vibration tolerated at the frequency)"
+    )
+    frequency: Annotated[Frequency, within(0.1, 1000.0, "frequency", "a mode of a machine on isolators")] = (
+        Field(description="the mode's natural frequency, Hz")
+    )
+    damping: Annotated[Dimensionless, within(0.0, 0.9, "dimensionless", "an underdamped mode")] = Field(
+        0.0, description="the mode's damping ratio, 1"
+    )
 
 
 class TrapezoidProfile(InputModel):
@@ -30,6 +48,7 @@ class TrapezoidProfile(InputModel):
     velocity: StageVelocity
     acceleration: StageAcceleration
     start: NonNegativeTime = 0.0
+    shaper: ShaperSpec | None = None
 
 
 class SCurveProfile(InputModel):
@@ -41,6 +60,7 @@ class SCurveProfile(InputModel):
     acceleration: StageAcceleration
     jerk: StageJerk
     start: NonNegativeTime = 0.0
+    shaper: ShaperSpec | None = None
 
 
 class ScanProfile(InputModel):
@@ -54,6 +74,7 @@ class ScanProfile(InputModel):
     dwell: NonNegativeTime = 0.0
     repeats: int = Field(1, ge=1, le=1000)
     start: NonNegativeTime = 0.0
+    shaper: ShaperSpec | None = None
 
 
 class MoveSegment(InputModel):
@@ -84,6 +105,7 @@ class SequenceProfile(InputModel):
     type: Literal["sequence"]
     segments: list[Segment] = Field(min_length=1, max_length=MAX_SEGMENTS)
     start: NonNegativeTime = 0.0
+    shaper: ShaperSpec | None = None
 
 
 Profile = Annotated[
