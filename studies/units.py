@@ -50,10 +50,14 @@ DIMENSIONS: dict[str, tuple[str, str, str]] = {
     "density": ("kg/m^3", "[mass]/[length]**3", "2700 kg/m^3"),
     "inertia": ("kg m^2", "[mass]*[length]**2", "1e4 kg m^2"),
     "force": ("N", "[mass]*[length]/[time]**2", "2 kN"),
+    "area": ("m^2", "[length]**2", "300 cm^2"),
+    "pressure": ("Pa", "[mass]/[length]/[time]**2", "6 bar"),
     "displacement_psd": ("m^2/Hz", "[length]**2*[time]", "1e-12 m^2/Hz"),
     "velocity_psd": ("m^2/s^2/Hz", "[length]**2/[time]", "1e-10 m^2/s^2/Hz"),
     "angle": ("rad", "", "3 mrad"),
     "dimensionless": ("", "", "5 %"),
+    "volume": ("m^3", "[length]**3", "20 l"),
+    "viscosity": ("Pa s", "[mass]/[length]/[time]", "18 uPa s"),
 }
 
 MAX_QUANTITY_CHARS = 256
@@ -424,8 +428,12 @@ Inertia = _quantity("inertia")
 Angle = _quantity("angle")
 Dimensionless = _quantity("dimensionless")
 Force = _quantity("force")
+Area = _quantity("area")
+Pressure = _quantity("pressure")
 DisplacementPSD = _quantity("displacement_psd")
 VelocityPSD = _quantity("velocity_psd")
+Volume = _quantity("volume")
+Viscosity = _quantity("viscosity")
 
 
 # ------------------------------------------------------------------------------ units for people to read

@@ -97,6 +97,10 @@ class Params(NamedTuple):
     """(C, n) 1 where a mount also feeds the change of the stages' weight moment forward, else 0."""
     pbase: bool
     """The nonlinear level's preloads turn with the base (else they stay vertical)."""
+    orient: bool
+    """Some mount acts along its own axes (``qm``), not the floor's."""
+    qm: np.ndarray
+    """(C, n, 3, 3) each mount's own axes in the floor frame (columns); ``k``, ``cd`` act along them."""
 
 
 class Work(NamedTuple):
@@ -143,7 +147,7 @@ class Work(NamedTuple):
     cs: np.ndarray
     """(m, 8 + 5 K) the packed stages."""
     cm: np.ndarray
-    """(n, 11) the packed mounts."""
+    """(n, 11) the packed mounts; (n, 20) when some mount has its own axes (``Params.qm``, row-major)."""
     cK: np.ndarray
     """(12, 6) the LTV level's mount operator: the mounts' generalised force per unit state."""
     sw: np.ndarray
