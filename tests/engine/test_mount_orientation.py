@@ -93,11 +93,13 @@ def test_identity_frame_is_bit_identical_and_a_quarter_turn_swaps_axes() -> None
     for fidelity, integrator in (("lti", "exact"), ("ltv", "rk4"), ("nonlinear", "rk4"), ("ltv", "euler")):
         r0 = simulate(b, fidelity=fidelity, integrator=integrator)
         r1 = simulate(turned, fidelity=fidelity, integrator=integrator)
-        for name in ("peak_displacement", "peak_rotation", "final_displacement", "min_isolator_load"):
+        for name in ("peak_displacement", "peak_rotation", "final_displacement"):
             x0, x1 = getattr(r0, name), getattr(r1, name)
             assert np.allclose(x0, x1, rtol=1e-9, atol=1e-15), (fidelity, integrator, name)
-        # force peaks: at the output times for the turned mounts, between them too for the upright ones
-        assert np.allclose(r0.peak_isolator_force, r1.peak_isolator_force, rtol=2e-3)
+        # force and load peaks: at the output times for the turned mounts, between them too for the
+        # upright ones
+        for name in ("peak_isolator_force", "min_isolator_load", "max_isolator_load"):
+            assert np.allclose(getattr(r0, name), getattr(r1, name), rtol=2e-3), (fidelity, integrator, name)
 
 
 def test_inclined_mounts_static_offset_and_levels_agree() -> None:
@@ -120,8 +122,9 @@ def test_inclined_mounts_static_offset_and_levels_agree() -> None:
     f[3:] = np.cross([0.8, 0.0, 0.0], [0.0, 0.0, -400.0 * b.g])
     q = np.linalg.solve(K, f)
     assert np.allclose(exact.final_displacement[0], q, rtol=1e-9, atol=1e-14)
-    nl = simulate(b, fidelity="nonlinear", integrator="rk4")
-    assert np.allclose(nl.peak_displacement, simulate(b, fidelity="ltv", integrator="rk4").peak_displacement, rtol=2e-2)
+    nl = simulate(b, fidelity="nonlinear", integrator="rk4").peak_displacement
+    ltv = simulate(b, fidelity="ltv", integrator="rk4").peak_displacement
+    assert np.allclose(nl, ltv, rtol=1e-3, atol=1e-3 * ltv.max())  # small motions: the levels agree
 
 
 def test_frames_that_are_not_rotations_or_meet_floor_motion_are_refused() -> None:
