@@ -45,7 +45,6 @@ def validate(b: SceneBatch) -> None:
         "iso_k": (C, n, 3),
         "iso_c": (C, n, 3),
         "iso_skyhook": (C, n),
-        "iso_frame": (C, n, 3, 3),
         "stage_mass": (C, m),
         "stage_home": (C, m, 3),
         "stage_axis": (C, m, 3),
@@ -82,6 +81,8 @@ def validate(b: SceneBatch) -> None:
     if (b.iso_c < 0).any():
         raise SceneError("iso_c", "damping must not be negative" + _case((b.iso_c < 0).any(axis=(1, 2))))
     Q = np.asarray(b.iso_frame, dtype=float)
+    if Q.shape != (C, n, 3, 3):
+        raise SceneError("iso_frame", f"shape {Q.shape}, expected {(C, n, 3, 3)}")
     skewed = np.abs(np.einsum("cnki,cnkj->cnij", Q, Q) - np.eye(3)).max(axis=(2, 3)) > 1e-9
     if skewed.any() or (np.linalg.det(Q) <= 0).any():
         raise SceneError(
