@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from isolab.engine.kernels.cached_terms import CM_WIDTH
 from isolab.engine.kernels.feedforward import feedforward_transients
 from isolab.engine.kernels.params import Params, Work
 from isolab.engine.kernels.structs import kernel_struct
@@ -39,7 +40,7 @@ def preload(b: SceneBatch) -> np.ndarray:
     at home). Mounts without vertical stiffness share the load as if they were equal.
     """
     d, rho_h, _ = relative_geometry(b)
-    w = b.iso_k[..., 2].copy()
+    w = isolator_tensor(b, b.iso_k)[..., 2, 2] if b.has_orientation else b.iso_k[..., 2].copy()
     none = ~(w > 0).all(axis=1)
     w[none] = 1.0
     basis = np.stack([np.ones_like(d[..., 0]), d[..., 0], d[..., 1]], axis=-1)  # (C, n, 3)
@@ -69,12 +70,22 @@ def mass_matrix(b: SceneBatch, rho: np.ndarray | None = None) -> np.ndarray:
     return M
 
 
+def isolator_tensor(b: SceneBatch, k: np.ndarray) -> np.ndarray:
+    """Each mount's stiffness or damping as a floor-frame tensor (C, n, 3, 3): ``Q diag(k) Q^T`` with
+    ``Q = b.iso_frame`` the mount's own axes and ``k`` (C, n, 3) its values along them (N/m or N s/m)."""
+    Q = np.asarray(b.iso_frame, dtype=float)
+    return np.einsum("cnik,cnk,cnjk->cnij", Q, np.asarray(k, dtype=float), Q)
+
+
 def _isolator_matrix(d: np.ndarray, k: np.ndarray) -> np.ndarray:
-    """``sum_j T_j^T diag(k_j) T_j`` with ``T_j = [I, -[d_j]x]`` (C, 6, 6)."""
+    """``sum_j T_j^T K_j T_j`` with ``T_j = [I, -[d_j]x]`` (C, 6, 6); ``k`` is (C, n, 3), the diagonal
+    ``K_j = diag(k_j)`` of mounts along the floor's axes, or (C, n, 3, 3), full tensors."""
     C, n, _ = d.shape
     T = np.zeros((C, n, 3, 6))
     T[..., :, :3] = np.eye(3)
     T[..., :, 3:] = -skew(d)
+    if k.ndim == 4:
+        return np.einsum("cnki,cnkl,cnlj->cij", T, k, T)
     return np.einsum("cnki,cnk,cnkj->cij", T, k, T)
 
 
@@ -87,7 +98,7 @@ def stiffness_matrix(b: SceneBatch, rho: np.ndarray | None = None) -> np.ndarray
     """
     d, rho_h, _ = relative_geometry(b)
     rho = rho_h if rho is None else rho
-    K = _isolator_matrix(d, b.iso_k)
+    K = _isolator_matrix(d, isolator_tensor(b, b.iso_k) if b.has_orientation else b.iso_k)
     if b.gravity_stiffness:
         f0 = preload(b)
         F0 = np.zeros(d.shape)
@@ -102,7 +113,7 @@ def stiffness_matrix(b: SceneBatch, rho: np.ndarray | None = None) -> np.ndarray
 def damping_matrix(b: SceneBatch) -> np.ndarray:
     """Isolator damping matrix (C, 6, 6), N s/m, N s, N m s/rad."""
     d, _, _ = relative_geometry(b)
-    return _isolator_matrix(d, b.iso_c)
+    return _isolator_matrix(d, isolator_tensor(b, b.iso_c) if b.has_orientation else b.iso_c)
 
 
 def placed_positions(b: SceneBatch, s: np.ndarray) -> np.ndarray:
@@ -412,6 +423,8 @@ def _params(b: SceneBatch) -> Params:
         ffA=np.zeros((b.n_cases, n, fftb.shape[1], 6)),
         ffwt=f64(b.iso_ff_weight, dtype=float),
         pbase=2 if b.preload_balanced else int(bool(b.preload_with_base)),
+        orient=b.has_orientation,
+        qm=f64(b.iso_frame, dtype=float),
     )
 
 
@@ -441,7 +454,7 @@ def work(b: SceneBatch) -> Work:
         tc=np.zeros((21, 3)),
         cc=np.concatenate([[-1.0], np.zeros(24)]),
         cs=np.zeros((m, 8 + 5 * b.prof_t.shape[-1])),
-        cm=np.zeros((n, 11)),
+        cm=np.zeros((n, CM_WIDTH + (9 if b.has_orientation else 0))),
         cK=np.zeros((12, 6)),
         sw=np.zeros((m, 9)),
     )

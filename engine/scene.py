@@ -78,6 +78,9 @@ class SceneBatch:
         preload_balanced: the nonlinear level's preloads balance the weights (with the stages at home) in
             every attitude: no rocking stiffness from them, only the stages' travel tilts the base (default
             False; not together with ``preload_with_base``).
+        iso_frame: (C, n, 3, 3) each mount's own axes in the floor frame (columns: the mount's x, y, z; a
+            rotation). ``iso_k`` and ``iso_c`` act along these axes, so the mount's stiffness in the floor
+            frame is ``Q diag(k) Q^T``. Default: the identity (the floor's axes).
     """
 
     mass: np.ndarray
@@ -114,6 +117,7 @@ class SceneBatch:
     iso_ff_weight: np.ndarray | None = None
     preload_with_base: bool = False
     preload_balanced: bool = False
+    iso_frame: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         c = np.shape(self.mass)[0] if np.ndim(self.mass) else 1
@@ -134,6 +138,8 @@ class SceneBatch:
             self.duration = np.full(c, 5.0)
         if self.settle_tol is None:
             self.settle_tol = np.full(c, 10e-6)
+        if self.iso_frame is None:
+            self.iso_frame = np.broadcast_to(np.eye(3), (c, n, 3, 3)).copy()
         if self.point_settle_tol is None:
             tol = np.asarray(self.settle_tol, dtype=float)
             p = np.shape(self.points)[1] if np.ndim(self.points) == 3 else 0
@@ -163,6 +169,11 @@ class SceneBatch:
     def has_feedforward(self) -> bool:
         """True when some mount feeds the stages' inertial wrench forward (a gain other than 0)."""
         return bool(np.any(np.asarray(self.iso_ff_gain) != 0.0))
+
+    @property
+    def has_orientation(self) -> bool:
+        """True when some mount's own axes are not the floor's (``iso_frame`` other than the identity)."""
+        return bool(np.any(np.asarray(self.iso_frame) != np.eye(3)))
 
     @property
     def has_floor_motion(self) -> bool:

@@ -82,6 +82,19 @@ def validate(b: SceneBatch) -> None:
         raise SceneError("iso_k", "stiffness must not be negative" + _case((b.iso_k < 0).any(axis=(1, 2))))
     if (b.iso_c < 0).any():
         raise SceneError("iso_c", "damping must not be negative" + _case((b.iso_c < 0).any(axis=(1, 2))))
+    Q = np.asarray(b.iso_frame, dtype=float)
+    if Q.shape != (C, n, 3, 3):
+        raise SceneError("iso_frame", f"shape {Q.shape}, expected {(C, n, 3, 3)}")
+    skewed = np.abs(np.einsum("cnki,cnkj->cnij", Q, Q) - np.eye(3)).max(axis=(2, 3)) > 1e-9
+    if skewed.any() or (np.linalg.det(Q) <= 0).any():
+        raise SceneError(
+            "iso_frame",
+            "each mount's axes must be a rotation (orthonormal, right-handed)" + _case(skewed.any(axis=1)),
+        )
+    if b.has_orientation and (b.has_floor_motion or b.has_floor_spectrum):
+        raise SceneError(
+            "iso_frame", "mounts with their own axes do not take floor motion or a floor spectrum yet"
+        )
     for name in ("iso_ff_gain", "iso_ff_bandwidth", "iso_ff_limit", "iso_ff_weight"):
         if np.shape(getattr(b, name)) != (C, n):
             raise SceneError(name, f"shape {np.shape(getattr(b, name))}, expected {(C, n)}")

@@ -56,6 +56,8 @@ DIMENSIONS: dict[str, tuple[str, str, str]] = {
     "velocity_psd": ("m^2/s^2/Hz", "[length]**2/[time]", "1e-10 m^2/s^2/Hz"),
     "angle": ("rad", "", "3 mrad"),
     "dimensionless": ("", "", "5 %"),
+    "volume": ("m^3", "[length]**3", "20 l"),
+    "viscosity": ("Pa s", "[mass]/[length]/[time]", "18 uPa s"),
 }
 
 MAX_QUANTITY_CHARS = 256
@@ -433,6 +435,8 @@ Area = _quantity("area")
 Pressure = _quantity("pressure")
 DisplacementPSD = _quantity("displacement_psd")
 VelocityPSD = _quantity("velocity_psd")
+Volume = _quantity("volume")
+Viscosity = _quantity("viscosity")
 
 
 # ------------------------------------------------------------------------------ units for people to read

@@ -39,6 +39,11 @@ CC_SIZE = 25
 CS_E, CS_H, CS_P = 2, 5, 8
 # ``W.cm`` (n, 11): per mount lever arm (3, m), stiffness (3, N/m), damping (3, N s/m), sky-hook, preload (N).
 CM_D, CM_K, CM_C, CM_SKY, CM_F0 = 0, 3, 6, 9, 10
+CM_WIDTH = 11
+"""Columns of ``W.cm`` for mounts along the floor's axes."""
+CM_Q = 11
+"""Where a mount's own axes (``Params.qm``, 9 values, row-major) start in ``W.cm``, when some mount has
+them."""
 # Rows of ``W.tc`` (21, 3): the stages' sums at the time of ``W.key``.
 TC_SR, TC_SV, TC_SA, TC_TA, TC_WM, TC_SFA, TC_DFA, TC_XF, TC_VF, TC_LD, TC_BT, TC_BR = range(12)
 """``sum m rho`` (kg m), ``sum m v_rel`` (kg m/s), ``sum m a_rel`` (N), ``sum m rho x a_rel`` (N m), the
@@ -87,6 +92,10 @@ def _pack_case(P, c, W):
             cm[j, CM_C + a] = P.cd[c, j, a]
         cm[j, CM_SKY] = P.sky[c, j]
         cm[j, CM_F0] = P.f0[c, j]
+        if cm.shape[1] > CM_Q:
+            for a in range(3):
+                for b in range(3):
+                    cm[j, CM_Q + 3 * a + b] = P.qm[c, j, a, b]
     for a in range(3):
         v = 0.0
         for j in range(P.d.shape[1]):

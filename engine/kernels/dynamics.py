@@ -28,6 +28,7 @@ from isolab.engine.kernels.cached_terms import (
     CM_D,
     CM_F0,
     CM_K,
+    CM_Q,
     CM_SKY,
     TC_BR,
     TC_BT,
@@ -178,9 +179,26 @@ def nonlinear_acc(x, tc, cc, cm, R, F, acc, g, pbase):
         q1 = R[1, 0] * b0 + R[1, 1] * b1 + R[1, 2] * b2
         q2 = R[2, 0] * b0 + R[2, 1] * b1 + R[2, 2] * b2
         rel = 1.0 - cm[j, CM_SKY]
-        F0 = -cm[j, CM_K] * (u0 + o0 - x0) - cm[j, CM_C] * (v0 + q0 - rel * y0)
-        F1 = -cm[j, CM_K + 1] * (u1 + o1 - x1) - cm[j, CM_C + 1] * (v1 + q1 - rel * y1)
-        F2 = -cm[j, CM_K + 2] * (u2 + o2 - x2) - cm[j, CM_C + 2] * (v2 + q2 - rel * y2)
+        if cm.shape[1] > CM_Q:  # the mount's own axes (``engine.kernels.mounts.oriented_force``)
+            e0, e1, e2 = u0 + o0 - x0, u1 + o1 - x1, u2 + o2 - x2
+            s0, s1, s2 = v0 + q0 - rel * y0, v1 + q1 - rel * y1, v2 + q2 - rel * y2
+            Q = cm[j, CM_Q : CM_Q + 9]
+            n0 = Q[0] * e0 + Q[3] * e1 + Q[6] * e2
+            n1 = Q[1] * e0 + Q[4] * e1 + Q[7] * e2
+            n2 = Q[2] * e0 + Q[5] * e1 + Q[8] * e2
+            p0 = Q[0] * s0 + Q[3] * s1 + Q[6] * s2
+            p1 = Q[1] * s0 + Q[4] * s1 + Q[7] * s2
+            p2 = Q[2] * s0 + Q[5] * s1 + Q[8] * s2
+            g0 = -cm[j, CM_K] * n0 - cm[j, CM_C] * p0
+            g1 = -cm[j, CM_K + 1] * n1 - cm[j, CM_C + 1] * p1
+            g2 = -cm[j, CM_K + 2] * n2 - cm[j, CM_C + 2] * p2
+            F0 = Q[0] * g0 + Q[1] * g1 + Q[2] * g2
+            F1 = Q[3] * g0 + Q[4] * g1 + Q[5] * g2
+            F2 = Q[6] * g0 + Q[7] * g1 + Q[8] * g2
+        else:
+            F0 = -cm[j, CM_K] * (u0 + o0 - x0) - cm[j, CM_C] * (v0 + q0 - rel * y0)
+            F1 = -cm[j, CM_K + 1] * (u1 + o1 - x1) - cm[j, CM_C + 1] * (v1 + q1 - rel * y1)
+            F2 = -cm[j, CM_K + 2] * (u2 + o2 - x2) - cm[j, CM_C + 2] * (v2 + q2 - rel * y2)
         f0 += F0
         f1 += F1
         f2 += F2

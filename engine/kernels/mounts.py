@@ -4,7 +4,8 @@ sky-hook mount's damper acts on the absolute velocity of its point instead).
 
 Numba functions on case ``c`` of the kernel parameters ``P`` (``engine.kernels.params.Params``): lever arms
 ``P.d`` (m, from the c.g.), stiffness ``P.k`` (N/m), damping ``P.cd`` (N s/m), sky-hook share ``P.sky``,
-preload ``P.f0`` (N).
+preload ``P.f0`` (N). A mount with its own axes (``P.orient``, ``P.qm``: columns its x, y, z in the floor
+frame) has ``P.k``, ``P.cd`` along those axes (:func:`oriented_force`).
 """
 
 from __future__ import annotations
@@ -28,6 +29,24 @@ def mount_offset(level, x, R, d0, d1, d2):
     return cross(x[3], x[4], x[5], d0, d1, d2)
 
 
+@njit(cache=True, inline="always")
+def oriented_force(Q, k0, k1, k2, c0, c1, c2, e0, e1, e2, s0, s1, s2):
+    """Force (N, floor frame) of a mount whose own axes are the columns of ``Q`` (3, 3): stiffness ``k``
+    (N/m) and damping ``c`` (N s/m) along those axes, deflection ``e`` (m) and its rate ``s`` (m/s) in
+    the floor frame: ``F = -Q (diag(k) Q^T e + diag(c) Q^T s)``."""
+    g0 = -k0 * (Q[0, 0] * e0 + Q[1, 0] * e1 + Q[2, 0] * e2)
+    g0 -= c0 * (Q[0, 0] * s0 + Q[1, 0] * s1 + Q[2, 0] * s2)
+    g1 = -k1 * (Q[0, 1] * e0 + Q[1, 1] * e1 + Q[2, 1] * e2)
+    g1 -= c1 * (Q[0, 1] * s0 + Q[1, 1] * s1 + Q[2, 1] * s2)
+    g2 = -k2 * (Q[0, 2] * e0 + Q[1, 2] * e1 + Q[2, 2] * e2)
+    g2 -= c2 * (Q[0, 2] * s0 + Q[1, 2] * s1 + Q[2, 2] * s2)
+    return (
+        Q[0, 0] * g0 + Q[0, 1] * g1 + Q[0, 2] * g2,
+        Q[1, 0] * g0 + Q[1, 1] * g1 + Q[1, 2] * g2,
+        Q[2, 0] * g0 + Q[2, 1] * g1 + Q[2, 2] * g2,
+    )
+
+
 @njit(cache=True)
 def isolator_forces(P, c, level, x, R, xf, vf, F):
     """Dynamic isolator forces on the machine ``F`` (n, 3) N, floor frame, at state ``x``.
@@ -37,6 +56,7 @@ def isolator_forces(P, c, level, x, R, xf, vf, F):
     ``(R - I) d``.
     """
     D, k, cd, sky = P.d, P.k, P.cd, P.sky  # bound once: an attribute read counts a reference each time
+    orient, qm = P.orient, P.qm
     n = D.shape[1]
     if level == NONLINEAR:
         off = 7
@@ -56,6 +76,23 @@ def isolator_forces(P, c, level, x, R, xf, vf, F):
         else:
             q0, q1, q2 = cross(w0, w1, w2, d0, d1, d2)
         rel = 1.0 - sky[c, j]
+        if orient:
+            F[j, 0], F[j, 1], F[j, 2] = oriented_force(
+                qm[c, j],
+                k[c, j, 0],
+                k[c, j, 1],
+                k[c, j, 2],
+                cd[c, j, 0],
+                cd[c, j, 1],
+                cd[c, j, 2],
+                u0 + r0 - xf[0],
+                u1 + r1 - xf[1],
+                u2 + r2 - xf[2],
+                v0 + q0 - rel * vf[0],
+                v1 + q1 - rel * vf[1],
+                v2 + q2 - rel * vf[2],
+            )
+            continue
         F[j, 0] = -k[c, j, 0] * (u0 + r0 - xf[0]) - cd[c, j, 0] * (v0 + q0 - rel * vf[0])
         F[j, 1] = -k[c, j, 1] * (u1 + r1 - xf[1]) - cd[c, j, 1] * (v1 + q1 - rel * vf[1])
         F[j, 2] = -k[c, j, 2] * (u2 + r2 - xf[2]) - cd[c, j, 2] * (v2 + q2 - rel * vf[2])

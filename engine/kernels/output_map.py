@@ -39,9 +39,12 @@ damping (N s/m) per axis; ``target`` (C, m) the outputs at the final static stat
 def still_floor(P: Params) -> np.ndarray:
     """Per case (C,), True where the floor does not move in time under it (no sine, no recorded floor
     motion): where the output map observes it. Decided per case, so a case's results do not depend on
-    the batch it runs in."""
+    the batch it runs in. A batch with mounts on their own axes (``P.orient``) is observed by the full
+    observer (``engine.kernels.peaks.observe``), whose forces follow the mounts' tensors."""
     famp = np.asarray(P.famp)
     still = ~np.any(famp != 0.0, axis=1)
+    if P.orient:
+        still[:] = False
     if np.asarray(P.ft).shape[0]:
         still &= ~np.any(np.asarray(P.fd) != 0.0, axis=(1, 2))
     return np.ascontiguousarray(still)

@@ -99,6 +99,10 @@ class Params(NamedTuple):
     """The nonlinear level's preload convention: 0 vertical in the floor frame, 1 turning with the base,
     2 balancing the weights with the stages at home in every attitude (``engine.kernels.cached_terms``
     ``CC_V``)."""
+    orient: bool
+    """Some mount acts along its own axes (``qm``), not the floor's."""
+    qm: np.ndarray
+    """(C, n, 3, 3) each mount's own axes in the floor frame (columns); ``k``, ``cd`` act along them."""
 
 
 class Work(NamedTuple):
@@ -145,7 +149,7 @@ class Work(NamedTuple):
     cs: np.ndarray
     """(m, 8 + 5 K) the packed stages."""
     cm: np.ndarray
-    """(n, 11) the packed mounts."""
+    """(n, 11) the packed mounts; (n, 20) when some mount has its own axes (``Params.qm``, row-major)."""
     cK: np.ndarray
     """(12, 6) the LTV level's mount operator: the mounts' generalised force per unit state."""
     sw: np.ndarray

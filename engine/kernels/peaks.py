@@ -245,6 +245,7 @@ def observe(P, c, level, t, x, W, O, step):
     # longer ones it would overshoot, and the output samples alone are the honest peak)
     between = step > 0 and h > 0.0 and h <= O.h_interp[c]
     inv_h = 1.0 / h if between else 0.0
+    orient = P.orient  # a mount with its own axes: its force peaks at the output times (no per-axis cubic)
     off = 7 if level == NONLINEAR else 6
     if level == NONLINEAR:
         # angular velocity in the floor frame: the rate of the rotation vector, linearised
@@ -339,7 +340,7 @@ def observe(P, c, level, t, x, W, O, step):
             F1 = W.F[j, i]
             a = max(abs(F1), O.force[c, j, i])
             b = max(abs(dl), O.defl[c, j, i])
-            if between:
+            if between and not orient:
                 # the deflection's and the floor's cubics; the force law -k delta - c (delta' + sky x_f')
                 # on them, shifted linearly to meet the computed forces at both ends
                 p0, m0 = O.last_defl[c, j, i, 0], O.last_defl[c, j, i, 1]

@@ -34,6 +34,7 @@ from isolab.studies.inputs.isolators import (
     load_share,
     stiffness_from_frequency,
 )
+from isolab.studies.inputs.mount_physics import apply_mount_physics
 from isolab.studies.inputs.parameters import check_leaf_values
 from isolab.studies.inputs.schema import (
     AUTO_DURATION_CAP,
@@ -520,6 +521,9 @@ def build_batch(
     safe_load = np.where(load > 0.0, load, 0.0)[..., None]
     iso_k = _first_set(k_explicit, stiffness_from_frequency(safe_load, freq, g))
     iso_c = _first_set(c_explicit, damping_from_ratio(iso_k, safe_load, zeta[..., None], g))
+    iso_k, iso_c, iso_frame = apply_mount_physics(
+        cases.each(lambda s: s.isolators), load, iso_k, iso_c, k_explicit, c_explicit, g
+    )
     _fail(
         ISOLATORS,
         "stiffness and damping must be finite and non-negative",
@@ -614,6 +618,7 @@ def build_batch(
         iso_k=iso_k,
         iso_c=iso_c,
         iso_skyhook=skyhook,
+        iso_frame=iso_frame,
         stage_mass=stage_mass,
         stage_home=stage_home,
         stage_axis=stage_axis,

@@ -4,7 +4,7 @@ an explicit list, per-axis stiffness and damping, and the feedforward of an acti
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import Field, model_validator
@@ -39,7 +39,17 @@ from isolab.studies.inputs.schema.fields import (
     within,
 )
 from isolab.studies.inputs.schema.scene_paths import AXIS_ALIASES, ISOLATORS
-from isolab.studies.units import Dimensionless, Force, Frequency, Length
+from isolab.studies.units import (
+    Angle,
+    Area,
+    Dimensionless,
+    Force,
+    Frequency,
+    Length,
+    Pressure,
+    Viscosity,
+    Volume,
+)
 
 
 def _axis_aliases(value: Any) -> Any:
@@ -136,6 +146,77 @@ class FeedforwardSpec(InputModel):
         )
 
 
+class Orientation(InputModel):
+    """A mount's own axes in the floor frame: a rotation ``angle`` ``about`` a floor axis, or a 3x3
+    rotation ``matrix`` whose columns are the mount's x, y, z. The mount's stiffness and damping act
+    along its own axes (x, y from ``f_horizontal`` or ``k``/``c`` x, y; z from ``f_vertical`` or z)."""
+
+    about: Literal["x", "y", "z"] | None = Field(None, description="the floor axis the mount is turned about")
+    angle: Angle | None = Field(None, description="how far it is turned, rad (e.g. '30 deg')")
+    matrix: (
+        tuple[tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]] | None
+    ) = Field(None, description="rotation matrix, rows in the floor frame; columns: the mount's own axes")
+
+    @model_validator(mode="after")
+    def _one_way(self) -> Orientation:
+        if (self.matrix is None) == (self.about is None or self.angle is None):
+            raise ValueError("orientation: give about and angle, or matrix")
+        if self.matrix is not None:
+            Q = np.array(self.matrix, dtype=float)
+            if np.abs(Q.T @ Q - np.eye(3)).max() > 1e-6 or np.linalg.det(Q) <= 0:
+                raise ValueError(
+                    "orientation.matrix: must be a rotation (orthonormal columns, determinant +1)"
+                )
+        return self
+
+    def rotation(self) -> np.ndarray:
+        """(3, 3) the mount's own axes (columns) in the floor frame."""
+        if self.matrix is not None:
+            Q = np.array(self.matrix, dtype=float)
+            u, _, vt = np.linalg.svd(Q)  # the nearest exact rotation
+            return u @ vt
+        c, s = np.cos(float(self.angle or 0.0)), np.sin(float(self.angle or 0.0))
+        i = "xyz".index(self.about or "z")
+        j, k = (i + 1) % 3, (i + 2) % 3
+        Q = np.eye(3)
+        Q[j, j] = Q[k, k] = c
+        Q[k, j], Q[j, k] = s, -s
+        return Q
+
+
+class Orifice(InputModel):
+    """The laminar capillary between an air spring and its reservoir (Hagen-Poiseuille)."""
+
+    area: Annotated[Area, Field(gt=0)] = Field(description="bore cross-section, m^2")
+    length: Annotated[Length, Field(gt=0)] = Field(description="bore length, m")
+    viscosity: Annotated[Viscosity, Field(gt=0)] = Field(1.81e-5, description="the gas's viscosity, Pa s")
+
+
+class AirSpring(InputModel):
+    """An air spring from its physics: the static load sets the gauge pressure ``p = F / A``, the gas
+    gives the vertical stiffness ``n p_abs A^2 / V``. With an ``orifice`` to the reservoir the spring is
+    a standard linear solid (slow: spring and reservoir, fast: the spring alone), its loss peaking at the
+    orifice's relaxation frequency; the time integration takes its stiffness and damping at the mount's
+    own vertical frequency. Without one the reservoir is open to the spring."""
+
+    effective_area: Annotated[Area, Field(gt=0)] = Field(description="effective piston area, m^2")
+    volume: Annotated[Volume, Field(gt=0)] = Field(description="gas volume of the spring, m^3")
+    reservoir_volume: Annotated[Volume, Field(ge=0)] = Field(0.0, description="reservoir volume, m^3")
+    polytropic_exponent: Annotated[Dimensionless, Field(ge=1.0, le=1.67)] = Field(
+        1.4, description="1 isothermal, 1.4 adiabatic air"
+    )
+    max_pressure: Annotated[Pressure, Field(gt=0)] | None = Field(
+        None, description="largest gauge pressure the spring is rated for, Pa (none: unchecked)"
+    )
+    orifice: Orifice | None = None
+
+    @model_validator(mode="after")
+    def _orifice_needs_reservoir(self) -> AirSpring:
+        if self.orifice is not None and not self.reservoir_volume > 0:
+            raise ValueError("air.orifice: an orifice needs a reservoir_volume above 0")
+        return self
+
+
 class Mount(InputModel):
     """One isolator of an explicit list. Its own values win over the group's: explicit ``k``/``c`` first,
     then its overrides, then its own ``preset``; without a preset of its own it takes the group's
@@ -157,6 +238,8 @@ class Mount(InputModel):
     c: tuple[NonNegativeDamping, NonNegativeDamping, NonNegativeDamping] | None = Field(
         None, description="[cx, cy, cz], N s/m"
     )
+    orientation: Orientation | None = Field(None, description="the mount's own axes (default: the floor's)")
+    air: AirSpring | None = Field(None, description="an air spring from its physics (vertical, own z axis)")
 
 
 class PresetTuning(InputModel):
@@ -205,6 +288,8 @@ class Isolators(InputModel):
     feedforward: FeedforwardSpec | None = None
     k: AxisStiffness | None = None
     c: AxisDamping | None = None
+    orientation: Orientation | None = Field(None, description="every mount's own axes (default: the floor's)")
+    air: AirSpring | None = Field(None, description="every mount an air spring from its physics")
     layout: Layout | None = None
     mounts: list[Mount] | None = Field(None, alias="list", max_length=MAX_MOUNTS)
 

@@ -1,0 +1,110 @@
+"""Mounts from their physics: air springs (stiffness from pressure, area and volume; an orifice's
+relaxation) and mounts on their own axes, applied to a batch's stiffness and damping arrays.
+
+A scene that gives no ``air`` and no ``orientation`` block keeps its arrays untouched.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from isolab.engine import mount_laws
+from isolab.engine.scene import SceneError
+from isolab.studies.inputs.schema.mounts import AirSpring, Isolators, Orientation
+from isolab.studies.inputs.schema.scene_paths import ISOLATORS, mount
+
+
+def _own_or_group(iso: Isolators, j: int, key: str) -> tuple[AirSpring | Orientation | None, str]:
+    """A listed mount's own ``key`` block, else the group's, with the path it was given at."""
+    listed = iso.listed
+    if listed and getattr(listed[j], key) is not None:
+        return getattr(listed[j], key), f"{mount(j)}.{key}"
+    return getattr(iso, key), f"{ISOLATORS}.{key}"
+
+
+def apply_mount_physics(
+    groups: Sequence[Isolators],
+    load: np.ndarray,
+    iso_k: np.ndarray,
+    iso_c: np.ndarray,
+    k_explicit: np.ndarray,
+    c_explicit: np.ndarray,
+    g: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The batch's stiffness and damping (C, n, 3) with the air springs' physics, and the mounts' own
+    axes (C, n, 3, 3), None when no mount has them.
+
+    An air spring sets its mount's z stiffness (N/m) to ``n p_abs A^2 / V`` with the gauge pressure
+    ``p = load / A`` (``load`` (C, n) N the static load); with an orifice, z stiffness and damping are the
+    standard linear solid's at the mount's own vertical natural frequency
+    (``engine.mount_laws.equivalent_viscous``). Explicit ``k``/``c`` of the z axis (``k_explicit``,
+    ``c_explicit``, NaN where not given) still win.
+
+    Raises:
+        SceneError: naming the air block when its static load is not positive or needs more than its
+            ``max_pressure``.
+    """
+    C, n = load.shape
+    air = any(_own_or_group(iso, j, "air")[0] is not None for iso in groups for j in range(n))
+    turned = any(_own_or_group(iso, j, "orientation")[0] is not None for iso in groups for j in range(n))
+    if not air and not turned:
+        return iso_k, iso_c, None
+    iso_k, iso_c = iso_k.copy(), iso_c.copy()
+    frame = np.broadcast_to(np.eye(3), (C, n, 3, 3)).copy()
+    for c, iso in enumerate(groups):
+        for j in range(n):
+            turn, _ = _own_or_group(iso, j, "orientation")
+            if isinstance(turn, Orientation):
+                frame[c, j] = turn.rotation()
+            spring, where = _own_or_group(iso, j, "air")
+            if not isinstance(spring, AirSpring):
+                continue
+            f = float(load[c, j])
+            case = f" (case {c})" if C > 1 else ""
+            if not f > 0.0:
+                raise SceneError(
+                    where,
+                    f"mount {j} carries a static load of {f:.6g} N: an air spring needs one above 0{case}",
+                )
+            p = float(mount_laws.air_pressure(f, spring.effective_area))
+            if spring.max_pressure is not None and p > spring.max_pressure:
+                raise SceneError(
+                    where,
+                    f"mount {j} needs {p / 1e5:.3g} bar to carry {f:.6g} N on "
+                    f"{spring.effective_area:.4g} m^2, "
+                    f"above its max_pressure of {spring.max_pressure / 1e5:.3g} bar{case}",
+                )
+            n_exp = spring.polytropic_exponent
+            if spring.orifice is None:
+                k = float(
+                    mount_laws.air_stiffness(
+                        p, spring.effective_area, spring.volume + spring.reservoir_volume, n_exp
+                    )
+                )
+                cz = None
+            else:
+                o = spring.orifice
+                k0, k1, tau = mount_laws.air_zener(
+                    p,
+                    spring.effective_area,
+                    spring.volume,
+                    spring.reservoir_volume,
+                    mount_laws.orifice_resistance(o.area, o.length, o.viscosity),
+                    n_exp,
+                )
+                ke, ce, _ = mount_laws.equivalent_viscous(k0, np.array([k1]), np.array([tau]), f / g)
+                k, cz = float(ke), float(ce)
+            if np.isnan(k_explicit[c, j, 2]):
+                old_k = iso_k[c, j, 2]
+                iso_k[c, j, 2] = k
+                if cz is not None:
+                    cz_set = cz
+                elif old_k > 0:  # the preset's damping ratio on the new stiffness: c scales with sqrt(k)
+                    cz_set = iso_c[c, j, 2] * np.sqrt(k / old_k)
+                else:
+                    cz_set = iso_c[c, j, 2]
+                if np.isnan(c_explicit[c, j, 2]):
+                    iso_c[c, j, 2] = cz_set
+    return iso_k, iso_c, frame if turned else None
