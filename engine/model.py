@@ -240,7 +240,11 @@ def static_residual(b: SceneBatch, rho: np.ndarray, q: np.ndarray, share: np.nda
     d, _, _ = relative_geometry(b)
     R = rotation_matrices(q[:, 3:])
     off = np.einsum("cij,cnj->cni", R, d) - d
-    F = -b.iso_k * (q[:, None, :3] + off)  # (C, n, 3) floor frame
+    u = q[:, None, :3] + off  # (C, n, 3) each mount's deflection, floor frame
+    if b.has_orientation:  # a mount turned on its own axes: its full stiffness tensor Q diag(k) Q^T
+        F = -np.einsum("cnij,cnj->cni", isolator_tensor(b, b.iso_k), u)
+    else:
+        F = -b.iso_k * u
     p = preload(b)  # (C, n)
     force = F.sum(axis=1)
     if b.preload_with_base:
