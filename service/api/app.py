@@ -22,10 +22,9 @@ import socket
 import sys
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from typing import TYPE_CHECKING
 
-import dask
 from anyio import to_thread
-from distributed import Client, LocalCluster
 from fastapi import Depends, FastAPI, HTTPException, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
@@ -50,11 +49,13 @@ from isolab.service.api.routes import (
     ui,
 )
 from isolab.service.api.unavailable import add_store_handlers
-from isolab.service.api.worker_priority import LowerPriority
 from isolab.service.settings import Settings, load_settings
 from isolab.studies.answers.calibration.jobs import CalibrationJobs
 from isolab.studies.results.calibrations import CalibrationStore
 from isolab.studies.results.store import StoreLock
+
+if TYPE_CHECKING:  # Dask is imported when the service starts: `isolab serve` answers sooner
+    from distributed import Client, LocalCluster
 
 #: The interface the in-process LocalCluster's dashboard listens on, whatever host the API binds to.
 DASHBOARD_HOST = "127.0.0.1"
@@ -97,6 +98,11 @@ def start_dask(settings: Settings) -> tuple[Client, LocalCluster | None]:
 
     Returns the client and the LocalCluster it owns (``None`` when joining an external scheduler).
     """
+    import dask
+    from distributed import Client, LocalCluster
+
+    from isolab.service.api.worker_priority import LowerPriority
+
     if settings.scheduler_address is not None:
         log.info("joining Dask scheduler at %s", settings.scheduler_address)
         return Client(settings.scheduler_address), None

@@ -118,11 +118,13 @@ COMPILING = "compiling kernels, first run only"
 def say_if_compiling(integrators: list[str | None], fidelity: str | None = None) -> None:
     """Print :data:`COMPILING` to stderr when the kernels of ``integrators`` (None: still to be chosen) at
     ``fidelity`` (None: every level) are not cached on disk yet
-    (:func:`isolab.studies.run.kernel_cache.kernels_cached`)."""
-    from isolab.studies.run.kernel_cache import kernels_cached
+    (:func:`isolab.studies.run.kernel_cache.kernels_cached`), and then removes the kernel cache folders
+    of other engine versions long unused (:func:`isolab.studies.run.kernel_cache.tidy_kernel_caches`)."""
+    from isolab.studies.run.kernel_cache import kernels_cached, tidy_kernel_caches
 
     if not kernels_cached(integrators, fidelity=fidelity):
         typer.echo(COMPILING, err=True)
+        tidy_kernel_caches()
 
 
 def fail(lines: list[str]) -> NoReturn:

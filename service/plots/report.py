@@ -18,7 +18,6 @@ from html import escape
 from typing import Any
 
 import numpy as np
-from matplotlib.figure import Figure
 
 from isolab.service.plots.studies import Series, case_png, figure_png, series, study_png
 from isolab.studies.results.cases import CaseColumns
@@ -37,7 +36,7 @@ h1 { font-size: 1.6em; margin-bottom: 0.1em; } h2 { font-size: 1.2em; border-bot
   padding-bottom: 0.2em; margin-top: 1.6em; }
 table { border-collapse: collapse; margin: 0.5em 0 1em; } th, td { border: 1px solid #ccd; padding: 0.25em
   0.6em; text-align: left; vertical-align: top; } th { background: #eef1f5; } td.num { text-align: right;
-  font-variant-numeric: tabular-nums; }
+  font-variant-numeric: tabular-nums; white-space: nowrap; }
 .pass { color: #1b6e2a; font-weight: 600; } .fail { color: #b3261e; font-weight: 600; }
 .warn { background: #fff4d6; border-left: 4px solid #c77700; padding: 0.5em 0.8em; }
 .ok { background: #e6f4ea; border-left: 4px solid #1b6e2a; padding: 0.5em 0.8em; }
@@ -77,6 +76,8 @@ def progress_png(progress: Sequence[Mapping[str, Any]], label: str, unit: str) -
         [np.nan if p["best_so_far"] is None else p["best_so_far"] for p in progress], dtype=float
     )
     shown, one = readable_unit(unit, best[np.isfinite(best)] if np.isfinite(best).any() else np.array([1.0]))
+    from matplotlib.figure import Figure  # on first use: the service starts sooner without it
+
     fig = Figure(figsize=(7.5, 3.4), dpi=100)
     ax = fig.add_subplot()
     ax.plot(gens, best / one, "o", color="#1f77b4", label="best feasible case of the generation")

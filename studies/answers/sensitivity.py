@@ -39,14 +39,15 @@ import warnings
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import xarray as xr
-from scipy.stats import rankdata
 
 from isolab.engine.results import OK
 from isolab.studies.quantities import case_dims, output_values
+
+if TYPE_CHECKING:  # xarray and scipy load when a sensitivity is computed: the service starts sooner
+    import xarray as xr
 
 CONF_LEVEL = 0.95
 """Confidence level of every interval."""
@@ -470,6 +471,7 @@ def _delta(
     common: dict,
 ) -> SensitivityResult:
     from SALib.analyze import delta as salib_delta
+    from scipy.stats import rankdata
 
     columns = []
     for n in names:
@@ -551,6 +553,8 @@ def stored_sensitivity(store: Any, study_id: str, output: str) -> SensitivityRes
     if cached.is_file():
         with contextlib.suppress(OSError, ValueError, TypeError):
             return SensitivityResult.from_dict(json.loads(cached.read_text(encoding="utf-8")))
+    import xarray as xr
+
     with NETCDF_LOCK, xr.open_dataset(path) as opened:
         ds = opened.load()
     result = sensitivity(ds, output)

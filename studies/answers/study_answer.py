@@ -23,10 +23,9 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import xarray as xr
 from pydantic import BaseModel, ConfigDict, Field
 
 from isolab.studies.inputs.block import block_properties
@@ -35,6 +34,9 @@ from isolab.studies.quantities import output_values
 from isolab.studies.questions.criteria import Criteria, judged_criteria
 from isolab.studies.results.cases import CaseColumns, stored_case_table
 from isolab.studies.results.store import Store
+
+if TYPE_CHECKING:  # the caller opens the dataset: xarray loads with it
+    import xarray as xr
 
 MAX_LISTED_CASES = 50
 """A study of at most this many cases lists every case's margins (a larger one: the best case's only)."""

@@ -22,7 +22,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import xarray as xr
 import yaml
 
 from isolab.studies.inputs.definitions import DefinitionError, Loc, check_definition, detail, study_of
@@ -413,6 +412,8 @@ def stored_error_estimate(path: Path) -> dict[str, Any]:
     """
     if not Path(path).is_file():
         raise FileNotFoundError(f"no dataset file {path}")
+    import xarray as xr  # on first use: the service starts sooner without it
+
     with NETCDF_LOCK, xr.open_dataset(path) as ds:
         outputs = {}
         for name in ds.data_vars:

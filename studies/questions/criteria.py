@@ -44,7 +44,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from isolab.studies.units import Force, Length, Time
+from isolab.studies.units import Force, Length, Time, readable_unit
 
 if TYPE_CHECKING:  # xarray loads where a dataset is judged, not where a scene is read
     import xarray as xr
@@ -184,12 +184,13 @@ def judged_criteria(criteria: Criteria) -> list[Criterion]:
                 Criterion(f"{point}_displacement", pc.displacement, "m", f"peak displacement of {point}")
             )
         if pc.settle is not None:
+            unit, scale = readable_unit("m", pc.settle.within)
             out.append(
                 Criterion(
                     f"{point}_settle",
                     pc.settle.after,
                     "s",
-                    f"{point} back within {pc.settle.within:g} m of rest after each move",
+                    f"{point} back within {pc.settle.within / scale:.3g} {unit} of rest after each move",
                 )
             )
         if pc.velocity is not None:

@@ -6,12 +6,18 @@ Numba keeps each ``cache=True`` kernel under ``NUMBA_CACHE_DIR`` (else beside it
 and a hash of the kernel's bytecode, and counts only while the source file is unchanged. A kernel is cached
 when its index holds an entry for this machine and this bytecode. Only the entry kernels an integrator
 calls from Python are read (what they call is compiled, and cached, with them): one small file each.
+
+Each engine version compiles into a folder of its own (``isolab.engine.kernel_cache_folder()``); when a
+version first compiles, :func:`tidy_kernel_caches` removes the folders of other versions left unused for
+:data:`KEEP_UNUSED_DAYS` days.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
+import shutil
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -118,6 +124,87 @@ def warm_kernels(pairs: Sequence[tuple[str, str]]) -> dict[str, float]:
 
 def warmup_plan() -> tuple[list[tuple[str, str]], bool]:
     """The pairs a service warms at start (:func:`example_pairs`) and whether the kernels they call are all
-    in the cache already (the worker task that plans the warm-up)."""
+    in the cache already (the worker task that plans the warm-up); when they are not, the kernel cache
+    folders of other engine versions long unused are removed (:func:`tidy_kernel_caches`)."""
     pairs = example_pairs()
-    return pairs, all(kernels_cached([integrator], fidelity=fidelity) for fidelity, integrator in pairs)
+    cached = all(kernels_cached([integrator], fidelity=fidelity) for fidelity, integrator in pairs)
+    if not cached:  # this engine version compiles: the folders of versions long unused go
+        tidy_kernel_caches()
+    return pairs, cached
+
+
+KEEP_UNUSED_DAYS = 14.0
+"""Days the kernel cache folder of another engine version is kept after its last use (a few hundred MB each
+for a developer who edits the engine; a reinstall of the same version uses its folder again)."""
+ENGINE_HASH_NAME = re.compile(r"[0-9a-f]{12}")
+"""How ``isolab.engine`` names a kernel cache folder (:func:`isolab.engine.engine_source_hash`)."""
+REMOVING = ".removing-"
+"""A folder renamed for removal: ``.<name>.removing-<pid>``, out of every process's way at once."""
+
+
+def last_used(folder: Path) -> float:
+    """When a process last used the kernel cache ``folder`` (POSIX time, s): the latest change of the folder
+    or anything in it, or read of a file in it (numba reads a kernel's index file when it loads the kernel;
+    a file's access time moves at least daily on a file system mounted ``relatime``, the default). 0 when
+    nothing in it can be read."""
+    newest = 0.0
+    for root, _, files in os.walk(folder):
+        try:
+            newest = max(newest, os.stat(root).st_mtime)  # a folder's access time moves when it is listed
+        except OSError:
+            continue
+        for name in files:
+            try:
+                info = os.stat(os.path.join(root, name))
+            except OSError:  # removed meanwhile
+                continue
+            newest = max(newest, info.st_mtime, info.st_atime)
+    return newest
+
+
+def remove_unused_kernel_caches(
+    parent: Path, current: Path, keep_days: float = KEEP_UNUSED_DAYS, now: float | None = None
+) -> list[Path]:
+    """Remove the folders of ``parent`` named like an engine version's kernel cache, other than ``current``,
+    that no process has used for ``keep_days`` days (:func:`last_used`), and what an interrupted removal
+    left. A folder is first renamed (a process still reading it finds nothing and compiles afresh), then
+    deleted; every error is ignored (another process may remove the same folder at the same time). Returns
+    the folders removed."""
+    now = time.time() if now is None else now
+    removed: list[Path] = []
+    try:
+        entries = sorted(parent.iterdir())
+    except OSError:
+        return removed
+    for folder in entries:
+        if REMOVING in folder.name and folder.is_dir():  # an interrupted removal's leftover
+            shutil.rmtree(folder, ignore_errors=True)
+            continue
+        if not ENGINE_HASH_NAME.fullmatch(folder.name) or folder.name == current.name or not folder.is_dir():
+            continue
+        if now - last_used(folder) < keep_days * 86400.0:
+            continue
+        doomed = parent / f".{folder.name}{REMOVING}{os.getpid()}"
+        try:
+            folder.rename(doomed)
+        except OSError:  # another process got there first, or the folder cannot be moved
+            continue
+        shutil.rmtree(doomed, ignore_errors=True)
+        removed.append(folder)
+    return removed
+
+
+def tidy_kernel_caches(keep_days: float = KEEP_UNUSED_DAYS) -> list[Path]:
+    """Remove the kernel cache folders of other engine versions unused for ``keep_days`` days, beside this
+    version's default folder (``<XDG_CACHE_HOME or ~/.cache>/isolab/numba``). Nothing is removed when the
+    user chose the folder (``NUMBA_CACHE_DIR``). Called when this engine version is about to compile: about
+    once per version and machine. Returns the folders removed."""
+    from isolab.engine import default_kernel_cache_folder, kernel_cache_folder
+
+    current = kernel_cache_folder()
+    try:
+        if current.resolve() != default_kernel_cache_folder().resolve():
+            return []
+    except OSError:
+        return []
+    return remove_unused_kernel_caches(current.parent, current, keep_days)

@@ -76,12 +76,22 @@ def test_the_scriber_comparison_reads_as_an_answer(page, base: str) -> None:
     rec = page.locator("#recommendation")
     # untuned, no type meets all four criteria: said in words, in the warning colour, never green
     assert "No type meets every criterion" in rec.inner_text()
+    # the service's reason with each criterion in words, and the heading not said twice
+    reason = rec.inner_text()
+    assert "tool back within 10 um of rest after each move" in reason and "tool_settle" not in reason, reason
+    assert reason.lower().count("no type meets every criterion") == 1, reason
     assert "warn" in rec.get_attribute("class") and "ok" not in rec.get_attribute("class").split()
     rows = page.locator("#criteria-table tbody tr[data-criterion]")
     assert rows.count() == 4  # the criteria, not every output
     for i in range(4):
         margins = rows.nth(i).locator("td.margin").all_inner_texts()
         assert len(margins) == 3 and all(PERCENT.match(m) for m in margins), margins
+    lines = page.eval_on_selector_all(
+        "#criteria-table td.margin",
+        "cells => cells.map((c) => { const r = document.createRange(); r.selectNodeContents(c);"
+        " return r.getClientRects().length; })",
+    )
+    assert set(lines) == {1}, lines  # "−147.1 %" on one line, never broken before its % sign
     settle = page.locator("#criteria-table tr[data-criterion='tool_settle']").inner_text()
     assert "within 1 s" in settle and "fail" in settle
     tally = page.inner_text("#criteria-tally")
@@ -97,6 +107,15 @@ def test_an_optimisation_shows_its_progress_best_design_and_report(
     page.wait_for_selector("#best-parameters", timeout=60_000)
     wait_until(page, "document.querySelector('#progress svg.main-svg') !== null", timeout_s=30)
     assert plot_rendered(page, "#progress")
+    progress = page.evaluate(
+        "() => { const gd = document.getElementById('progress');"
+        " const best = gd.data.find((t) => t.name === 'best so far');"
+        " return { title: gd.layout.yaxis.title.text, best }; }"
+    )
+    assert (
+        re.search(r"\[m?s\]$", progress["title"]) and "<br>" in progress["title"]
+    )  # its unit within the plot
+    assert "markers" in progress["best"]["mode"]  # a best found in one generation alone still shows
     best = page.inner_text("#best-design")
     assert "Best design: case" in best and "settling time" in best
     params = page.inner_text("#best-parameters")
@@ -144,7 +163,9 @@ def test_the_floor_view_draws_each_points_spectrum_against_the_vc_curves(page, b
         line = next(d for d in fig["data"] if d["name"] == f"{t} isolators")
         per_axis = spectra["velocity"][t]["tool"]
         expected = [1e6 * max(per_axis[a][b] for a in "xyz") for b in range(20)]
-        assert line["y"] == pytest.approx(expected, rel=1e-9)
+        # a band the floor leaves still (the 80 Hz band, above the site's 63 Hz) is a gap on the log axis
+        assert expected[-1] == 0.0 and line["y"][-1] is None
+        assert line["y"][:-1] == pytest.approx(expected[:-1], rel=1e-9)
     # untuned, only the active mounts keep the tool within VC-C: elastomer (about 10 Hz) passes the floor's
     # 16-31.5 Hz resonance on, air amplifies the floor's few um/s at its own 3-4 Hz
     tool = page.inner_text("#floor .floor-summary[data-point='tool']")
@@ -161,7 +182,8 @@ def test_the_floor_view_draws_each_points_spectrum_against_the_vc_curves(page, b
     line = next(
         d for d in page.evaluate(FLOOR_FIGURE, "floor-plot-tool")["data"] if d["name"] == "air isolators"
     )
-    assert line["y"] == pytest.approx([1e6 * v for v in spectra["velocity"]["air"]["tool"]["z"]], rel=1e-9)
+    z = [1e6 * v for v in spectra["velocity"]["air"]["tool"]["z"]]
+    assert line["y"] == [None if v == 0 else pytest.approx(v, rel=1e-9) for v in z]
     assert page.locator("#floor-png").is_visible()  # the service's figure of the point stays a click away
     assert page.errors == []
 

@@ -12,7 +12,7 @@ from collections.abc import Iterator
 
 import pytest
 import yaml
-from ui_driver import CHROMIUM, ConsoleErrors, browser, service, settle, wait_until
+from ui_driver import CHROMIUM, ConsoleErrors, browser, overlapping, service, settle, wait_until
 
 pytestmark = [
     pytest.mark.slow,
@@ -102,6 +102,7 @@ def test_the_scriber_is_built_run_changed_and_animated(page, base_url: str) -> N
     traces = page.evaluate("document.querySelector('#traces').data.map(t => t.name)")
     assert any("(run 1, before)" in n for n in traces) and any("(run 2)" in n for n in traces)
     assert len(traces) == 2 * (6 + 4)
+    assert overlapping(page, "#traces g.infolayer text[class$='title']") == []  # the panels' axis titles
 
     # a mode moves the base
     rest = base_z(page)

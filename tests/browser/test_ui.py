@@ -17,6 +17,7 @@ from ui_driver import (
     CHROMIUM,
     ConsoleErrors,
     browser,
+    overlapping,
     plot_rendered,
     service,
     settle,
@@ -132,6 +133,7 @@ def test_submit_watch_sweep_and_case(page, open_service: str) -> None:
     legends = page.locator(LEGENDS).all_text_contents()
     assert max(page.locator(LEGENDS).nth(k).locator("g.traces").count() for k in range(7)) == 12
     assert any("front-left z" in t and "back-right x" in t for t in legends), legends
+    assert overlapping(page, LEGENDS) == []  # the mounts' 12 entries stay beside their own panel
     assert "front-left (x 0.20 m, y 0.30 m)" in page.inner_text("#isolators")
     with page.expect_download() as traces_csv:  # every sample, in the units shown
         page.click("#traces-csv")

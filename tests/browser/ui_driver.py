@@ -105,6 +105,27 @@ def plot_rendered(page, selector: str) -> bool:
     )
 
 
+def overlapping(page, selector: str) -> list[tuple[str, str]]:
+    """The pairs of the elements matching ``selector`` whose boxes on the page overlap (by more than a
+    pixel each way), each element named by its text: labels drawn over one another."""
+    return [
+        tuple(pair)
+        for pair in page.eval_on_selector_all(
+            selector,
+            """nodes => {
+                const boxes = nodes.map((n) => [n.textContent.trim(), n.getBoundingClientRect()]);
+                const out = [];
+                boxes.forEach(([a, p], i) => boxes.slice(i + 1).forEach(([b, q]) => {
+                    const w = Math.min(p.right, q.right) - Math.max(p.left, q.left);
+                    const h = Math.min(p.bottom, q.bottom) - Math.max(p.top, q.top);
+                    if (w > 1 && h > 1) out.push([a, b]);
+                }));
+                return out;
+            }""",
+        )
+    ]
+
+
 def submit_example(page, base: str, example: str = EXAMPLE) -> str:
     """From /ui/new: load the example, wait for the service's check, submit; the new study's id."""
     page.goto(f"{base}/ui/new")

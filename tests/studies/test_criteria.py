@@ -14,7 +14,13 @@ from isolab.service.api.schemas import EXAMPLE_SCENE
 from isolab.studies.answers.comparisons import COST_ORDER, compare, comparison_frame, recommend
 from isolab.studies.inputs.schema import error_messages
 from isolab.studies.inputs.study import load_scene, scene_batch, study_labels, validate_study
-from isolab.studies.questions.criteria import Criteria, add_criteria, criterion_margin, margins
+from isolab.studies.questions.criteria import (
+    Criteria,
+    add_criteria,
+    criterion_margin,
+    judged_criteria,
+    margins,
+)
 from isolab.studies.results.cases import case_table, filter_mask, parse_filter
 from isolab.studies.results.dataset import to_dataset
 
@@ -54,6 +60,11 @@ def test_criteria_read_units_and_name_each_limit() -> None:
         "isolators_max_deflection",
     ]
     assert c.settle_tolerances() == {"tool": pytest.approx(5e-6)}
+    # each described in words, the settling band in a unit that reads at its size
+    assert [j.description for j in judged_criteria(c)][:2] == [
+        "peak displacement of tool",
+        "tool back within 5 um of rest after each move",
+    ]
 
 
 @pytest.mark.parametrize(

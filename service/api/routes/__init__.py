@@ -11,10 +11,9 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from typing import Annotated, Any, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
 from anyio import CapacityLimiter, to_thread
-from distributed import Client
 from fastapi import Depends, HTTPException, Request
 
 from isolab.service.api.jobs import JobQueue
@@ -22,6 +21,9 @@ from isolab.service.api.kernel_warmup import KernelWarmup
 from isolab.service.api.schemas import MessageBody, ValidationErrorBody
 from isolab.service.settings import Settings
 from isolab.studies.results.store import Store, StudyNotFound, StudyRecord
+
+if TYPE_CHECKING:  # Dask is imported when the service starts: `isolab serve` answers sooner
+    from distributed import Client
 
 T = TypeVar("T")
 
@@ -95,10 +97,14 @@ StoreDep = Annotated[Store, Depends(study_store)]
 """A handler's parameter: the app's study store."""
 JobsDep = Annotated[JobQueue, Depends(job_queue)]
 """A handler's parameter: the app's study queue."""
-DaskDep = Annotated[Client, Depends(dask_client)]
-"""A handler's parameter: the app's Dask client (500 when the app runs without its lifespan)."""
-DaskIfRunningDep = Annotated[Client | None, Depends(dask_client_if_running)]
-"""A handler's parameter: the app's Dask client, or None (what ``/health`` reports on)."""
+if TYPE_CHECKING:
+    DaskDep = Annotated[Client, Depends(dask_client)]
+    DaskIfRunningDep = Annotated[Client | None, Depends(dask_client_if_running)]
+else:  # FastAPI reads only the dependency; the type stays a name until Dask is imported
+    DaskDep = Annotated[Any, Depends(dask_client)]
+    DaskIfRunningDep = Annotated[Any, Depends(dask_client_if_running)]
+"""``DaskDep``, a handler's parameter: the app's Dask client (500 when the app runs without its lifespan);
+``DaskIfRunningDep``: the app's Dask client, or None (what ``/health`` reports on)."""
 KernelsDep = Annotated[KernelWarmup | None, Depends(kernel_warmup)]
 """A handler's parameter: the warm-up of the engine's kernels (None without the app's lifespan)."""
 

@@ -5,15 +5,17 @@ from __future__ import annotations
 import hmac
 import shutil
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
-from distributed import Client
 from fastapi import APIRouter, Request, Response
 from fastapi.security.utils import get_authorization_scheme_param
 from pydantic import BaseModel, Field
 
 from isolab.service.api.routes import DaskIfRunningDep, KernelsDep, SettingsDep
 from isolab.studies.results.store import check_writable
+
+if TYPE_CHECKING:  # Dask is imported when the service starts
+    from distributed import Client
 
 #: Longest wait for the Dask scheduler to answer the health probe, in seconds.
 SCHEDULER_TIMEOUT_S = 5.0

@@ -54,10 +54,21 @@ function criterionLimit(req) {
 function recommendationNode(answer) {
   const rec = answer.recommendation || {};
   if (rec.isolator_type) {
-    return el("div", { class: "answer ok", id: "recommendation" }, el("strong", {}, `Recommended: ${rec.isolator_type} isolators. `), rec.reason || "");
+    return el("div", { class: "answer ok", id: "recommendation" }, el("strong", {}, `Recommended: ${rec.isolator_type} isolators. `), reasonInWords(rec.reason || "", answer.requirements || []));
   }
   const none = (answer.requirements || []).length ? "No type meets every criterion. " : "No recommendation. ";
-  return el("div", { class: "answer warn", id: "recommendation" }, el("strong", {}, none), rec.reason || "");
+  return el("div", { class: "answer warn", id: "recommendation" }, el("strong", {}, none), reasonInWords(rec.reason || "", answer.requirements || []));
+}
+
+// The service's reason with each criterion named by its description (``tool_settle`` -> ``tool back
+// within 10 um of rest after each move``) and without the opening the heading already says.
+function reasonInWords(reason, requirements) {
+  let text = reason.replace(/^no type meets every criterion: /, "");
+  const names = [...requirements].sort((a, b) => b.name.length - a.name.length);
+  for (const r of names) {
+    if (r.description) text = text.replace(new RegExp(`\\b${r.name}\\b`, "g"), r.description);
+  }
+  return text.charAt(0).toUpperCase() + text.slice(1);
 }
 
 // Each type against each criterion: how many it meets, counting the criteria only.
@@ -179,6 +190,18 @@ function marginsTable(criteria, best, id) {
   );
 }
 
+// ``text`` broken into lines of at most about ``width`` characters (Plotly's <br>), so that a long axis
+// title stays within its plot instead of running off its end.
+function wrapWords(text, width) {
+  const lines = [];
+  for (const word of text.split(" ")) {
+    const last = lines.length - 1;
+    if (last >= 0 && lines[last].length + 1 + word.length <= width) lines[last] += ` ${word}`;
+    else lines.push(word);
+  }
+  return lines.join("<br>");
+}
+
 function drawProgress(plotNode, opt) {
   const obj = opt.objective;
   const finite = opt.progress.map((p) => p.best).filter((v) => v !== null);
@@ -203,13 +226,14 @@ function drawProgress(plotNode, opt) {
     cloud("infeasible cases", idx((i) => !c.feasible[i]), "#bbb", 5),
     cloud("feasible cases", idx((i) => c.feasible[i] && !c.pareto[i]), "#1f77b4", 6),
     cloud("front (non-dominated)", idx((i) => c.pareto[i]), "#2ca02c", 9),
-    { type: "scatter", mode: "lines", line: { shape: "hv", color: "#d62728", width: 2 }, name: "best so far", x: gens, y: opt.progress.map((p) => scale(p.best_so_far)) },
+    // markers too: a run whose first feasible case comes in its last generation has one point to show
+    { type: "scatter", mode: "lines+markers", line: { shape: "hv", color: "#d62728", width: 2 }, marker: { size: 5 }, name: "best so far", x: gens, y: opt.progress.map((p) => scale(p.best_so_far)) },
   ];
   const layout = {
     height: 380,
-    margin: { t: 20, r: 20, b: 50, l: 80 },
-    xaxis: { title: { text: "generation" }, dtick: gens.length < 15 ? 1 : undefined },
-    yaxis: { title: { text: `${obj.long_name}${unit ? ` [${unit}]` : ""}`, font: { size: 11 } } },
+    margin: { t: 20, r: 20, b: 50, l: 90 },
+    xaxis: { title: { text: "generation" }, dtick: gens.length < 15 ? 1 : undefined, zeroline: false },
+    yaxis: { title: { text: wrapWords(`${obj.long_name}${unit ? ` [${unit}]` : ""}`, 45), font: { size: 11 } } },
     legend: { orientation: "h", y: -0.2 },
   };
   fill(plotNode);
@@ -325,12 +349,16 @@ function drawSensitivity(node, result) {
 const UM_PER_S = 1e6;
 const AXIS_CHOICES = [["largest", "largest of x, y, z"], ["x", "x"], ["y", "y"], ["z", "z"]];
 
-// Each band's value on the chosen axis, or the largest of the three (null where a value is missing).
+// Each band's value on the chosen axis, or the largest of the three (null where a value is missing, and
+// where it is zero: a band the floor leaves still has no place on the log axis, and a zero drawn there
+// would drop the line straight down).
 function bandValues(perAxis, axis) {
   const pick = axis === "largest" ? ["x", "y", "z"] : [axis];
   return perAxis[pick[0]].map((_, b) => {
     const vs = pick.map((a) => perAxis[a][b]);
-    return vs.some((v) => v === null || v === undefined) ? null : Math.max(...vs) * UM_PER_S;
+    if (vs.some((v) => v === null || v === undefined)) return null;
+    const top = Math.max(...vs);
+    return top > 0 ? top * UM_PER_S : null;
   });
 }
 

@@ -140,8 +140,12 @@ function drawTraces(ts, panels) {
   const n = panels.length;
   const gap = 0.035;
   const traces = [];
+  // each panel 210 px high, or as high as its legend's entries (about 19 px each) need
+  const heights = panels.map((p) => Math.max(210, 19 * p.series.length + 20));
+  const plotHeight = heights.reduce((a, b) => a + b, 0);
+  const tops = heights.map((_, i) => 1 - heights.slice(0, i).reduce((a, b) => a + b, 0) / plotHeight);
   const layout = {
-    height: 210 * n + 80,
+    height: plotHeight + 80,
     margin: { t: 30, r: 20, b: 50, l: 90 },
     shapes: [],
     annotations: [],
@@ -151,8 +155,8 @@ function drawTraces(ts, panels) {
   panels.forEach((p, i) => {
     const axis = i === 0 ? "y" : `y${i + 1}`;
     const legend = i === 0 ? "legend" : `legend${i + 1}`;
-    const top = 1 - i / n;
-    const bottom = 1 - (i + 1) / n;
+    const top = tops[i];
+    const bottom = top - heights[i] / plotHeight;
     for (const sr of p.series) {
       traces.push({
         type: "scatter",

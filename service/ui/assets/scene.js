@@ -531,7 +531,8 @@ function drawTraces() {
     xaxis: { title: { text: "time (s)" }, anchor: "y3" },
     yaxis: { title: { text: TRACE_ROWS[0][2] }, domain: [0.7, 1] },
     yaxis2: { title: { text: TRACE_ROWS[1][2] }, domain: [0.37, 0.65] },
-    yaxis3: { title: { text: "dynamic vertical isolator force (kN)" }, domain: [0, 0.32] },
+    // two lines: on one the title is longer than its panel and runs into the rotation's
+    yaxis3: { title: { text: "dynamic vertical<br>isolator force (kN)" }, domain: [0, 0.32] },
     shapes: [{ type: "line", xref: "x", yref: "paper", x0: 0, x1: 0, y0: 0, y1: 1, line: { color: "#444", width: 1 } }],
     legend: { orientation: "h", y: -0.08 },
   };

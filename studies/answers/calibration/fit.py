@@ -36,7 +36,6 @@ from typing import Any
 import numpy as np
 import yaml
 from pydantic import ValidationError
-from scipy.optimize import least_squares
 
 from isolab.studies.answers.calibration.measurements import LOCATION_CG, Measurement, stated_noise
 from isolab.studies.answers.calibration.model import ChannelModel, check_step, simulation_choice
@@ -408,6 +407,8 @@ def _fit(prep: PreparedFit) -> Calibration:
         return r, J
 
     def run(weights: np.ndarray, x0: np.ndarray) -> Any:
+        from scipy.optimize import least_squares  # on first use: importing scipy costs a command 0.4 s
+
         lo = lower[free] / scale[free]
         hi = upper[free] / scale[free]
         try:

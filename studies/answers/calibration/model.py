@@ -16,7 +16,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.signal import butter, detrend, sosfiltfilt
 
 from isolab.engine import STATUS_NAMES, SceneError, simulate
 from isolab.studies.answers.calibration.measurements import (
@@ -112,6 +111,8 @@ class ChannelModel:
                         )
                     ]
                 )
+            from scipy.signal import butter  # on first use: importing scipy costs a command 0.4 s
+
             if highpass > 0 and lp > 0:
                 self.sos = butter(2, [highpass, lp], btype="bandpass", fs=fs, output="sos")
             elif highpass > 0:
@@ -158,6 +159,8 @@ class ChannelModel:
         sensor's bias and linear drift) and band-passed (zero phase)."""
         if self.sos is None:
             return y
+        from scipy.signal import detrend, sosfiltfilt
+
         y = np.array(y, dtype=np.float64, copy=True)
         y[:, self.accel] = sosfiltfilt(self.sos, detrend(y[:, self.accel], axis=0), axis=0)
         return y
@@ -243,6 +246,8 @@ def noise_profile(sos: np.ndarray, n: int) -> np.ndarray:
     """(n,) variance of each sample of white noise of unit variance after the acceleration channels'
     processing (a straight line removed, then the zero-phase filter ``sos``), estimated from random
     +-1 probes (fixed seed) and smoothed: about the noise gain in mid-record, larger at the ends."""
+    from scipy.signal import detrend, sosfiltfilt
+
     rng = np.random.default_rng(0)
     acc = np.zeros(n)
     for _ in range(PROFILE_PROBES // 8):
@@ -257,6 +262,8 @@ def noise_profile(sos: np.ndarray, n: int) -> np.ndarray:
 def _noise_gain(sos: np.ndarray, n: int) -> float:
     """Variance of white noise of unit variance after the zero-phase filter ``sos`` (sum of the squared
     impulse response): the fraction of a filtered channel's samples that count as independent."""
+    from scipy.signal import sosfiltfilt
+
     m = min(n, 20_000)
     x = np.zeros(m)
     x[m // 2] = 1.0

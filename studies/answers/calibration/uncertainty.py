@@ -27,9 +27,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.signal import sosfiltfilt
-from scipy.stats import chi2
-from scipy.stats import f as f_distribution
 
 UNDETERMINED_WIDTH_FRACTION = 0.25
 """A parameter whose 1-sigma uncertainty exceeds this fraction of its bounds' width is not determined."""
@@ -88,6 +85,8 @@ def filter_correlation_length(sos: np.ndarray | None, n: int) -> float:
     what a channel's residuals show when they are its filtered noise and nothing else."""
     if sos is None:
         return 1.0
+    from scipy.signal import sosfiltfilt  # on first use: importing scipy costs a command 0.4 s
+
     m = min(n, 4_096)
     x = np.zeros(m)
     x[m // 2] = 1.0
@@ -134,6 +133,9 @@ def expected_range(
     """The range ``chi2 / dof`` lies in with probability ``level`` when the residuals are the noise: a
     chi-square's against a stated noise, an F distribution's against a noise estimated with ``noise_dof``
     degrees of freedom of its own."""
+    from scipy.stats import chi2
+    from scipy.stats import f as f_distribution
+
     q = [(1 - level) / 2, (1 + level) / 2]
     d = max(dof, 1.0)
     if math.isinf(noise_dof):
