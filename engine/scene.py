@@ -269,10 +269,27 @@ def concat(batches: list[SceneBatch]) -> SceneBatch:
     """Join batches of the same scene shape along the case dimension."""
     first = batches[0]
     shared = {"stage_parent", "floor_t", "gravity_stiffness", "g", "preload_with_base", "preload_balanced"}
+    shared.add("floor_coherence")
     kw = {}
     for f in fields(first):
         if f.name in shared:
             kw[f.name] = getattr(first, f.name)
+        elif f.name == "floor_mount_band_velocity":
+            kw[f.name] = _mount_floor(batches)
         else:
             kw[f.name] = np.concatenate([np.asarray(getattr(b, f.name)) for b in batches], axis=0)
     return replace(first, **kw)
+
+
+def _mount_floor(batches: list[SceneBatch]) -> np.ndarray | None:
+    """The joined ``floor_mount_band_velocity`` (None when no batch has one; a batch without one has its
+    ``floor_band_velocity`` under every mount)."""
+    if all(b.floor_mount_band_velocity is None for b in batches):
+        return None
+    parts = []
+    for b in batches:
+        v = b.floor_mount_band_velocity
+        if v is None:
+            v = np.repeat(np.asarray(b.floor_band_velocity)[:, None], b.n_isolators, axis=1)
+        parts.append(np.asarray(v))
+    return np.concatenate(parts, axis=0)

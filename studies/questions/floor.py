@@ -84,6 +84,13 @@ def canonical_vc(name: str) -> str:
     return key
 
 
+def vc_class(velocity: float) -> str | None:
+    """The strictest VC criterion a one-third-octave RMS velocity (m/s) meets (``velocity <= level``);
+    None above VC-A or for NaN."""
+    met = [name for name, level in VC_LEVELS.items() if velocity <= level]
+    return met[-1] if met else None
+
+
 def band_number(frequency: float) -> int:
     """The number ``n`` of the one-third-octave band whose centre is ``frequency`` (Hz): exact
     ``10^(n/10)`` or nominal (``31.5``); ValueError for a frequency that is no band's centre."""

@@ -7,7 +7,7 @@ import pytest
 from scenes import scene
 
 from isolab.engine import frequency, model
-from isolab.engine.scene import SceneError
+from isolab.engine.scene import SceneError, concat
 from isolab.engine.validation import validate
 
 VCD = 6.25e-6
@@ -111,3 +111,15 @@ def test_take_keeps_the_mount_floor():
     assert t.floor_coherence == "uncorrelated"
     assert np.array_equal(t.floor_mount_band_velocity, b.floor_mount_band_velocity[[2]])
     assert scene(n_cases=2).take([1]).floor_mount_band_velocity is None
+
+
+def test_concat_joins_mount_floors():
+    a, b = scene(n_cases=2, height=0.5), scene(n_cases=1, height=0.5)
+    assert concat([a, b]).floor_mount_band_velocity is None
+    b.floor_band_velocity[:] = VCD
+    a.floor_mount_band_velocity = np.ones((2, 4, 3, 20))
+    a.floor_coherence = b.floor_coherence = "worst_phase"
+    j = concat([a, b])
+    assert j.floor_coherence == "worst_phase"
+    assert np.array_equal(j.floor_mount_band_velocity[:2], a.floor_mount_band_velocity)
+    assert np.array_equal(j.floor_mount_band_velocity[2], np.full((4, 3, 20), VCD))

@@ -109,3 +109,20 @@ def test_study_floor_with_wrong_length_is_refused():
     with pytest.raises(ValidationError) as exc:
         Study.model_validate(copy.deepcopy(study))
     assert any("floor.per_mount: 5 spectra for 4 mounts" in m for m in error_messages(exc.value))
+
+
+def test_floor_cli_compares_coherences(tmp_path: Path):
+    from typer.testing import CliRunner
+
+    from isolab.service.cli import app
+
+    scene = tmp_path / "scene.yaml"
+    scene.write_text(yaml.safe_dump(scriber(spectrum=VCD)))
+    out = tmp_path / "floor.png"
+    args = ["floor", str(scene), "--point", "tool", "--types", "air", "-o", str(out)]
+    r = CliRunner().invoke(app, [*args, "--coherence", "correlated,uncorrelated,worst_phase"])
+    assert r.exit_code == 0, r.output
+    for c in ("correlated", "uncorrelated", "worst_phase"):
+        assert f"air, {c}: worst band" in r.output
+    r = CliRunner().invoke(app, [*args, "--coherence", "partly"])
+    assert r.exit_code == 2 and "--coherence: unknown ['partly']" in r.output

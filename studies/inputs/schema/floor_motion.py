@@ -4,7 +4,7 @@ bands or a PSD)."""
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, get_args
 
 import numpy as np
 from pydantic import BeforeValidator, Field, ValidationError, field_validator, model_validator
@@ -181,6 +181,8 @@ class FloorWave(InputModel):
 
 FloorCoherence = Literal["correlated", "uncorrelated", "worst_phase"]
 """How the floor motions under different mounts combine (:mod:`isolab.engine.frequency`)."""
+FLOOR_COHERENCE: tuple[str, ...] = get_args(FloorCoherence)
+"""The coherences a floor may state."""
 
 
 class Floor(InputModel):
