@@ -66,11 +66,15 @@ def floor_command(
             sc = load_study(scene).scene
         else:
             sc = load_scene(scene)
-        if coherences and sc.floor is None:
-            raise ValueError("floor: the scene has no floor spectrum")
-        runs = {}
-        for c in coherences or [None]:
-            floor = sc.floor if c is None else sc.floor.model_copy(update={"coherence": c, "wave": None})
+        if sc is None:  # a validated study always has its scene
+            raise ValueError("scene: missing")
+        runs: dict[str | None, dict] = {}
+        if not coherences:
+            runs[None] = velocity_spectra(sc, chosen, point)
+        for c in coherences:
+            if sc.floor is None:
+                raise ValueError("floor: the scene has no floor spectrum")
+            floor = sc.floor.model_copy(update={"coherence": c, "wave": None})
             runs[c] = velocity_spectra(sc.model_copy(update={"floor": floor}), chosen, point)
         spectra = next(iter(runs.values()))
     except ValidationError as err:
@@ -86,9 +90,9 @@ def floor_command(
         typer.echo(f"error: {err}", err=True)
         raise typer.Exit(code=2) from None
     out.write_bytes(floor_velocity_png(spectra, f"{scene.name}: {spectra['point']} under the floor spectrum"))
-    for c, run in runs.items():
+    for coh, run in runs.items():
         for t, (v, f, axis) in run["worst"].items():
-            label = t if c is None else f"{t}, {c}"
+            label = t if coh is None else f"{t}, {coh}"
             if v == v:
                 per_axis = ", ".join(
                     f"{a} {run['velocity'][t][k].max() * 1e6:.3g}" for k, a in enumerate(("x", "y", "z"))
