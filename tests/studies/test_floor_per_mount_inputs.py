@@ -126,3 +126,26 @@ def test_floor_cli_compares_coherences(tmp_path: Path):
         assert f"air, {c}: worst band" in r.output
     r = CliRunner().invoke(app, [*args, "--coherence", "partly"])
     assert r.exit_code == 2 and "--coherence: unknown ['partly']" in r.output
+
+
+@pytest.mark.parametrize(
+    ("floor_block", "where", "words"),
+    [
+        ({"per_mount": [VCD] * 3}, "floor.per_mount", "3 spectra for 4 mounts"),
+        ({"spectrum": VCD, "wave": {"speed": "0 m/s"}}, "floor.wave.speed", "greater than 0"),
+    ],
+)
+def test_the_service_answers_422_naming_the_field(tmp_path: Path, floor_block, where, words):
+    from fastapi.testclient import TestClient
+
+    from isolab.service.api.app import create_app
+    from isolab.service.settings import Settings
+
+    http = TestClient(create_app(Settings(data_dir=tmp_path)))
+    body = {"scene": scriber(**floor_block), "isolator_types": ["air"], "point": "tool"}
+    r = http.post("/comparisons/floor.png", json=body)
+    assert r.status_code == 422, r.text
+    text = r.text
+    assert words in text and all(part in text for part in where.split(".")), text
+    ok = http.post("/comparisons/floor.png", json={**body, "scene": scriber(per_mount=[VCD] * 4)})
+    assert ok.status_code == 200, ok.text
