@@ -187,6 +187,90 @@ def point_band_velocity(
     return np.sqrt(out)
 
 
+def floor_to_point_velocity_per_mount(
+    M: np.ndarray,
+    K: np.ndarray,
+    C: np.ndarray,
+    d: np.ndarray,
+    k: np.ndarray,
+    c_rel: np.ndarray,
+    r: np.ndarray,
+    freq: np.ndarray,
+) -> np.ndarray:
+    """Velocity of each point per unit floor velocity under *one* mount (complex ``G_j``, (Cn, F, p,
+    3 out, n mounts, 3 in), 1): the floor moves under mount ``j`` alone.
+
+    ``(K - w^2 M + i w C) q_ja = T_j^T (k_j + i w c'_j) e_a``; by superposition the sum over the mounts is
+    :func:`floor_to_point_velocity` (the uniform floor). Arguments as that function.
+    """
+    Cn, n = M.shape[0], d.shape[1]
+    f = np.broadcast_to(np.asarray(freq, dtype=float), (Cn, np.shape(freq)[-1]))
+    w = 2.0 * np.pi * f
+    T = _lever(d)  # (Cn, n, 3, 6)
+    P = _lever(r)
+    Fk = np.einsum("cnki,cnk->cink", T, k).reshape(Cn, 6, n * 3)  # column (j, a): T_j^T k_j e_a
+    Fc = np.einsum("cnki,cnk->cink", T, c_rel).reshape(Cn, 6, n * 3)
+    out = np.empty((Cn, f.shape[1], r.shape[1], 3, n, 3), dtype=complex)
+    step = max(1, _SOLVES_PER_CHUNK // max(1, Cn * n))
+    for lo in range(0, f.shape[1], step):
+        ww = w[:, lo : lo + step, None, None]
+        D = K[:, None] - ww**2 * M[:, None] + 1j * ww * C[:, None]
+        q = np.linalg.solve(D, Fk[:, None] + 1j * ww * Fc[:, None])  # (Cn, Fc, 6, 3n)
+        pq = np.einsum("cpoi,cfim->cfpom", P, q)
+        out[:, lo : lo + step] = pq.reshape(pq.shape[:4] + (n, 3))
+    return out
+
+
+def mount_band_velocity(
+    M: np.ndarray,
+    K: np.ndarray,
+    C: np.ndarray,
+    d: np.ndarray,
+    k: np.ndarray,
+    c_rel: np.ndarray,
+    r: np.ndarray,
+    band_velocity: np.ndarray,
+    delay: np.ndarray,
+    coherence: str,
+    n_sub: int = MIN_SUBDIVISIONS,
+) -> np.ndarray:
+    """Band RMS velocity of each point per axis (Cn, p, 3, 20), m/s, when the floor under each mount has
+    its own band RMS velocity ``band_velocity`` (Cn, n, 3 floor axes, 20) m/s and delay ``delay`` (Cn, n)
+    s. The floor axes stay uncorrelated; between mounts, per floor axis ``a``, band ``b``:
+
+    - ``correlated``: ``v^2 = mean_b |sum_j G_j V_jab exp(-i w tau_j)|^2`` (a travelling wave when the
+      delays differ; the uniform floor when they are zero and ``V_j`` equal);
+    - ``uncorrelated``: ``v^2 = sum_j V_jab^2 mean_b |G_j|^2``;
+    - ``worst_phase``: ``v^2 = mean_b (sum_j |G_j| V_jab)^2``, the largest response any phases between
+      the mounts give at each frequency (an upper bound of both others).
+
+    Summed over the floor axes. Other arguments as :func:`point_band_velocity`.
+    """
+    fq, wq = band_quadrature(n_sub)
+    Cn, n, p = M.shape[0], d.shape[1], r.shape[1]
+    out = np.zeros((Cn, p, 3, N_BANDS))
+    V = np.asarray(band_velocity, dtype=float)  # (Cn, n, 3, 20)
+    omega = 2.0 * np.pi * fq  # (20, Q)
+    chunk = max(1, _SOLVES_PER_CHUNK // (fq.size * max(1, n * p)))
+    for lo in range(0, Cn, chunk):
+        s = slice(lo, lo + chunk)
+        G = floor_to_point_velocity_per_mount(M[s], K[s], C[s], d[s], k[s], c_rel[s], r[s], fq.reshape(-1))
+        G = G.reshape(G.shape[0], N_BANDS, -1, p, 3, n, 3)  # (c, b, q, p, o, j, a)
+        if coherence == "uncorrelated":
+            mean = np.einsum("cbqpoja,bq->cpojab", G.real**2 + G.imag**2, wq)
+            out[s] = np.einsum("cpojab,cjab->cpob", mean, V[s] ** 2)
+            continue
+        if coherence == "worst_phase":
+            S = np.einsum("cbqpoja,cjab->cbqpoa", np.abs(G), V[s])
+        else:
+            phase = np.exp(
+                -1j * omega[None, :, :, None] * np.asarray(delay[s], dtype=float)[:, None, None, :]
+            )
+            S = np.einsum("cbqpoja,cjab,cbqj->cbqpoa", G, V[s], phase)
+        out[s] = np.einsum("cbqpoa,bq->cpob", S.real**2 + S.imag**2, wq)
+    return np.sqrt(out)
+
+
 def batch_point_band_velocity(
     batch: SceneBatch,
     band_velocity: np.ndarray | None = None,
@@ -214,6 +298,15 @@ def batch_point_band_velocity(
     d, _, r = model.relative_geometry(batch)
     c_rel = batch.iso_c * (1.0 - np.asarray(batch.iso_skyhook, dtype=float)[..., None])
     n_sub = subdivisions(modes.damping_ratio[good], modes.frequency[good])
+    if band_velocity is None and batch.has_mount_floor:
+        Vm = batch.floor_mount_band_velocity
+        if Vm is None:
+            Vm = np.broadcast_to(V[:, None], (batch.n_cases, batch.n_isolators, 3, N_BANDS))
+        out[good] = mount_band_velocity(
+            M[good], K[good], Cm[good], d[good], batch.iso_k[good], c_rel[good], r[good],
+            np.asarray(Vm)[good], np.asarray(batch.floor_delay)[good], batch.floor_coherence, n_sub,
+        )  # fmt: skip
+        return out
     out[good] = point_band_velocity(
         M[good], K[good], Cm[good], d[good], batch.iso_k[good], c_rel[good], r[good], V[good], n_sub
     )

@@ -60,6 +60,14 @@ class SceneBatch:
         floor_band_velocity: (C, 3, 20) the floor's RMS velocity per axis in the one-third-octave bands
             of 1 to 80 Hz (``engine.frequency.BAND_CENTRES``), m/s; all zero (the default) when the
             scene gives no floor spectrum. Steady state only: the time integration does not see it.
+        floor_mount_band_velocity: (C, n, 3, 20) the floor's band RMS velocity under each mount, m/s, when
+            the mounts stand on different floor spectra; None (the default): ``floor_band_velocity`` under
+            every mount.
+        floor_delay: (C, n) delay of the floor motion under each mount (a travelling wave), s; zeros
+            (the default): the floor moves at once under every mount.
+        floor_coherence: how the floor motions under different mounts combine in the frequency response:
+            ``correlated`` (the default; in phase up to ``floor_delay``), ``uncorrelated`` (their powers add)
+            or ``worst_phase`` (per frequency, the phases that maximise each point's response).
         duration: (C,) simulated time, s.
         settle_tol: (C,) settling tolerance on c.g. and point displacement, m.
         point_settle_tol: (C, p) settling tolerance of each point of interest after each stage move
@@ -106,6 +114,9 @@ class SceneBatch:
     floor_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     floor_disp: np.ndarray | None = None
     floor_band_velocity: np.ndarray | None = None
+    floor_mount_band_velocity: np.ndarray | None = None
+    floor_delay: np.ndarray | None = None
+    floor_coherence: str = "correlated"
     duration: np.ndarray | None = None
     settle_tol: np.ndarray | None = None
     point_settle_tol: np.ndarray | None = None
@@ -134,6 +145,8 @@ class SceneBatch:
             self.floor_disp = np.zeros((c, 3, len(self.floor_t)))
         if self.floor_band_velocity is None:
             self.floor_band_velocity = np.zeros((c, 3, 20))
+        if self.floor_delay is None:
+            self.floor_delay = np.zeros((c, n))
         if self.duration is None:
             self.duration = np.full(c, 5.0)
         if self.settle_tol is None:
@@ -148,6 +161,15 @@ class SceneBatch:
     @property
     def has_floor_spectrum(self) -> bool:
         return bool(np.any(np.asarray(self.floor_band_velocity) != 0.0))
+
+    @property
+    def has_mount_floor(self) -> bool:
+        """True when the floor differs between mounts or its coherence is not the uniform floor's."""
+        return (
+            self.floor_mount_band_velocity is not None
+            or bool(np.any(np.asarray(self.floor_delay) != 0.0))
+            or self.floor_coherence != "correlated"
+        )
 
     @property
     def n_cases(self) -> int:
@@ -188,11 +210,12 @@ class SceneBatch:
             "g",
             "preload_with_base",
             "preload_balanced",
+            "floor_coherence",
         }
         kw: dict[str, Any] = {}
         for f in fields(self):
             v = getattr(self, f.name)
-            kw[f.name] = v if f.name in shared else np.asarray(v)[index]
+            kw[f.name] = v if f.name in shared or v is None else np.asarray(v)[index]
         return replace(self, **kw)
 
     def last_move_end(self) -> np.ndarray:
@@ -246,10 +269,27 @@ def concat(batches: list[SceneBatch]) -> SceneBatch:
     """Join batches of the same scene shape along the case dimension."""
     first = batches[0]
     shared = {"stage_parent", "floor_t", "gravity_stiffness", "g", "preload_with_base", "preload_balanced"}
+    shared.add("floor_coherence")
     kw = {}
     for f in fields(first):
         if f.name in shared:
             kw[f.name] = getattr(first, f.name)
+        elif f.name == "floor_mount_band_velocity":
+            kw[f.name] = _mount_floor(batches)
         else:
             kw[f.name] = np.concatenate([np.asarray(getattr(b, f.name)) for b in batches], axis=0)
     return replace(first, **kw)
+
+
+def _mount_floor(batches: list[SceneBatch]) -> np.ndarray | None:
+    """The joined ``floor_mount_band_velocity`` (None when no batch has one; a batch without one has its
+    ``floor_band_velocity`` under every mount)."""
+    if all(b.floor_mount_band_velocity is None for b in batches):
+        return None
+    parts = []
+    for b in batches:
+        v = b.floor_mount_band_velocity
+        if v is None:
+            v = np.repeat(np.asarray(b.floor_band_velocity)[:, None], b.n_isolators, axis=1)
+        parts.append(np.asarray(v))
+    return np.concatenate(parts, axis=0)

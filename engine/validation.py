@@ -20,6 +20,10 @@ def _case(bad: ArrayLike) -> str:
     return f" (case {int(where[0][0])})" if where.size and flags.ndim else ""
 
 
+FLOOR_COHERENCE = ("correlated", "uncorrelated", "worst_phase")
+"""How the floor motions under different mounts combine (``SceneBatch.floor_coherence``)."""
+
+
 def validate(b: SceneBatch) -> None:
     """Raise ``SceneError`` for the first field of ``b`` that is not finite, has the wrong shape or is
     physically impossible."""
@@ -60,6 +64,13 @@ def validate(b: SceneBatch) -> None:
         "settle_tol": (C,),
         "point_settle_tol": (C, b.n_points),
     }
+    shapes["floor_delay"] = (C, n)
+    if b.floor_mount_band_velocity is not None:
+        shapes["floor_mount_band_velocity"] = (C, n, 3, 20)
+    if b.floor_coherence not in FLOOR_COHERENCE:
+        raise SceneError(
+            "floor_coherence", f"{b.floor_coherence!r} is not one of {', '.join(FLOOR_COHERENCE)}"
+        )
     for name, shape in shapes.items():
         if np.shape(getattr(b, name)) != shape:
             raise SceneError(name, f"shape {np.shape(getattr(b, name))}, expected {shape}")
@@ -146,6 +157,8 @@ def validate(b: SceneBatch) -> None:
     band = np.asarray(b.floor_band_velocity)
     if not (np.isfinite(band) & (band >= 0)).all():
         raise SceneError("floor_band_velocity", "must be finite and not negative")
+    if b.floor_mount_band_velocity is not None and (np.asarray(b.floor_mount_band_velocity) < 0).any():
+        raise SceneError("floor_mount_band_velocity", "must not be negative")
     if len(b.floor_t):
         disp = np.asarray(b.floor_disp)
         if disp.shape != (C, 3, len(b.floor_t)):

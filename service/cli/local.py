@@ -81,6 +81,16 @@ def case_outputs(result, case: int, isolators: list[str], points: list[str]) -> 
         "static_isolator_load": _labelled(r.static_isolator_load[case], isolators),
         "units": {name: OUTPUTS[name].unit for name in UNITS_STATED},
     }
+    fpv = getattr(r, "floor_point_velocity", None)
+    if fpv is not None and np.any(np.asarray(fpv[case]) > 0):
+        from isolab.studies.questions.floor import vc_class
+
+        band = r.floor_point_velocity_band[case]
+        out["floor_point_velocity"] = {p: _labelled(v, AXES) for p, v in zip(points, fpv[case], strict=True)}
+        out["floor_point_velocity_band"] = {p: _labelled(v, AXES) for p, v in zip(points, band, strict=True)}
+        out["floor_vc_class"] = {
+            p: vc_class(float(np.max(v))) for p, v in zip(points, fpv[case], strict=True)
+        }
     if not ok:
         return out
     out.update(
@@ -189,6 +199,12 @@ def simulate(
         "wall_time": elapsed,
         **case_outputs(result, 0, names["isolators"], names["points"]),
     }
+    if sc.criteria is not None:
+        from isolab.studies.questions.criteria import result_margins
+
+        margin = result_margins(result, sc.criteria, names["points"], names["isolators"])
+        out["criterion_margin"] = margin
+        out["meets_criteria"] = bool(margin) and all(m >= 0 for m in margin.values())
     if plot:
         from isolab.service.plots.studies import case_png
 
@@ -215,9 +231,30 @@ def simulate(
     if out["message"]:
         typer.echo(f"  {out['message']}")
     if out["status"] != "ok":
+        for line in floor_text(out):
+            typer.echo(line)
         return
-    for line in simulate_text(out):
+    for line in simulate_text(out) + floor_text(out):
         typer.echo(line)
+
+
+def floor_text(out: dict) -> list[str]:
+    """The lines on the floor-induced velocity (worst one-third-octave band per point and axis, the VC
+    criterion it meets) and the criteria margins, where ``out`` (:func:`case_outputs`) has them."""
+    lines = []
+    if "floor_point_velocity" in out:
+        lines.append("  floor-induced velocity (worst one-third-octave band, RMS)")
+        for point, values in out["floor_point_velocity"].items():
+            band = out["floor_point_velocity_band"][point]
+            axes = "  ".join(f"{a} {v * 1e6:.3g} um/s ({band[a]:.3g} Hz)" for a, v in values.items())
+            vc = out["floor_vc_class"][point] or "none (above VC-A)"
+            lines.append(f"    {point:<24}{axes}  meets {vc}")
+    if "criterion_margin" in out:
+        verdict = "all met" if out["meets_criteria"] else "NOT all met"
+        lines.append(f"  criteria margins ({verdict}; fraction of the limit, positive: met)")
+        for name, m in out["criterion_margin"].items():
+            lines.append(f"    {name:<24}{m:+.3f}" + ("" if m >= 0 else "  NOT met"))
+    return lines
 
 
 def simulate_text(out: dict) -> list[str]:

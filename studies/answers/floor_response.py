@@ -220,11 +220,12 @@ def _floor_batch(
         raise DefinitionError(
             [detail(["body", "point"], f"no point of interest named {point!r} (points: {', '.join(names)})")]
         )
-    if built.floor is None or built.floor.spectrum is None:
+    if not built.has_floor_spectrum():
         raise DefinitionError(
             [
                 detail(
-                    ["body", "scene", "floor"], "give the floor's vibration as floor.spectrum to draw spectra"
+                    ["body", "scene", "floor"],
+                    "give the floor's vibration as floor.spectrum (or floor.per_mount) to draw spectra",
                 )
             ]
         )

@@ -80,7 +80,7 @@ from isolab.studies.inputs.schema.scene_paths import (
     stage_profile,
 )
 from isolab.studies.inputs.schema.stages import ShaperSpec
-from isolab.studies.questions.floor import scene_band_velocity
+from isolab.studies.questions.floor import spectrum_fields
 
 _LAYOUT_SX = np.array([-1.0, 1.0, 1.0, -1.0])
 _LAYOUT_SY = np.array([-1.0, -1.0, 1.0, 1.0])
@@ -580,8 +580,8 @@ def build_batch(
         samples = np.array(cases.each(lambda s: recorded(s).displacement.samples()), dtype=np.float64)
         floor_t = np.arange(samples.shape[-1]) * rec.dt
         floor_disp = samples.reshape(c, 3, -1)
-    # the floor spectrum: one-third-octave band velocity per axis (studies.questions.floor)
-    floor_bands = np.array(cases.each(scene_band_velocity), dtype=np.float64).reshape(c, 3, -1)
+    # the floor spectrum: one-third-octave band velocity per axis, and per mount (studies.questions.floor)
+    floor_spectra = spectrum_fields(cases.each, iso_pos, cg)
 
     # simulation
     def sim(s: Scene) -> Simulation:
@@ -634,7 +634,7 @@ def build_batch(
         floor_phase=np.array(floor_phase, dtype=np.float64),
         floor_t=floor_t,
         floor_disp=floor_disp,
-        floor_band_velocity=floor_bands,
+        **floor_spectra,
         duration=np.array(duration, dtype=np.float64),
         settle_tol=np.array(settle, dtype=np.float64),
         point_settle_tol=point_tol,

@@ -109,6 +109,7 @@ class Study(InputModel):
         # the study's own floor and criteria replace the scene's: ``scene`` is then the scene of the study
         if self.floor is not None:
             self.scene = self.scene.model_copy(update={"floor": self.floor})
+            self.floor.check_mounts(self.scene.isolators.count)
         if self.criteria is None:
             self.criteria = self.scene.criteria
         else:

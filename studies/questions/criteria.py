@@ -38,7 +38,7 @@ its own ``within`` (the scene's ``settle_tolerance`` for points without a settle
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
@@ -306,6 +306,40 @@ def add_criteria(ds: xr.Dataset, criteria: Criteria | None) -> xr.Dataset:
     out["meets_criteria"] = var
     out.attrs["criteria"] = json.dumps(criteria.model_dump(mode="json", exclude_none=True))
     return out
+
+
+def result_margins(
+    result: Any, criteria: Criteria, points: Sequence[str], isolators: Sequence[str], case: int = 0
+) -> dict[str, float]:
+    """One case's margin to each criterion (unit 1, positive: met; NaN for a case that did not end ``ok``)
+    straight from an ``engine.results.SimulationResult`` with the points and isolators named in batch
+    order: what ``isolab simulate`` prints."""
+    import xarray as xr
+
+    r = result
+    pa, ia = ("case", "point", "axis"), ("case", "isolator", "axis")
+    pick = slice(case, case + 1)
+
+    def arr(name: str, fill_shape: tuple[int, ...]) -> np.ndarray:
+        v = getattr(r, name, None)
+        return np.full(fill_shape, np.nan) if v is None else np.asarray(v, dtype=float)[pick]
+
+    p, n = len(points), len(isolators)
+    ds = xr.Dataset(
+        {
+            "status": (("case",), np.asarray(r.status)[pick]),
+            "peak_point_displacement": (pa, arr("peak_point_displacement", (1, p, 3))),
+            "point_settling_time": (("case", "point"), arr("point_settling_time", (1, p))),
+            "floor_point_velocity": (pa, arr("floor_point_velocity", (1, p, 3))),
+            "min_isolator_load": (("case", "isolator"), arr("min_isolator_load", (1, n))),
+            "static_isolator_load": (("case", "isolator"), arr("static_isolator_load", (1, n))),
+            "max_isolator_load": (("case", "isolator"), arr("max_isolator_load", (1, n))),
+            "peak_isolator_deflection": (ia, arr("peak_isolator_deflection", (1, n, 3))),
+        },
+        coords={"point": list(points), "isolator": list(isolators)},
+    )
+    m = margins(ds, criteria)
+    return {c.name: float(v) for c, v in zip(judged_criteria(criteria), m.values[0], strict=True)}
 
 
 def criterion_margin(ds: xr.Dataset, case: Any, criterion: str) -> float:

@@ -33,7 +33,7 @@ within each band (:mod:`isolab.engine.frequency`). The spectra it gives at a poi
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -82,6 +82,13 @@ def canonical_vc(name: str) -> str:
     if key not in VC_LEVELS:
         raise ValueError(f"unknown VC level {name!r} (known: {', '.join(VC_LEVELS)})")
     return key
+
+
+def vc_class(velocity: float) -> str | None:
+    """The strictest VC criterion a one-third-octave RMS velocity (m/s) meets (``velocity <= level``);
+    None above VC-A or for NaN."""
+    met = [name for name, level in VC_LEVELS.items() if velocity <= level]
+    return met[-1] if met else None
 
 
 def band_number(frequency: float) -> int:
@@ -188,6 +195,59 @@ def spectrum_levels(spectrum: Any) -> np.ndarray:
 
 
 def scene_band_velocity(scene: Any) -> np.ndarray:
-    """(3, 20) band RMS velocity per floor axis (m/s) of a scene's floor spectrum (zeros without one)."""
+    """(3, 20) band RMS velocity per floor axis (m/s) of a scene's floor spectrum (zeros without one); with
+    a spectrum per mount, their root mean square over the mounts."""
     floor = getattr(scene, "floor", None)
+    per_mount = None if floor is None else getattr(floor, "per_mount", None)
+    if per_mount is not None:
+        return np.sqrt(np.mean([spectrum_levels(s) ** 2 for s in per_mount], axis=0))
     return spectrum_levels(None if floor is None else getattr(floor, "spectrum", None))
+
+
+def scene_mount_band_velocity(scene: Any, n_mounts: int) -> np.ndarray:
+    """(n, 3, 20) band RMS velocity per mount and floor axis (m/s): a scene's ``floor.per_mount`` spectra,
+    or its one spectrum under every mount."""
+    floor = getattr(scene, "floor", None)
+    per_mount = None if floor is None else getattr(floor, "per_mount", None)
+    if per_mount is not None:
+        return np.stack([spectrum_levels(s) for s in per_mount])
+    return np.repeat(scene_band_velocity(scene)[None], n_mounts, axis=0)
+
+
+def spectrum_fields(
+    each: Callable[[Callable[[Any], object]], list], iso_pos: np.ndarray, cg: np.ndarray
+) -> dict:
+    """The floor-spectrum fields of an ``engine.scene.SceneBatch`` (``floor_band_velocity`` and, where a
+    scene asks for them, ``floor_mount_band_velocity``, ``floor_delay`` and ``floor_coherence``).
+
+    ``each(read)`` applies ``read`` to every case's scene; ``iso_pos`` (C, n, 3) and ``cg`` (C, 3), m. A
+    travelling wave delays the floor under mount ``j`` by ``(r_j - c.g.) . e / speed`` (s).
+    """
+    c, n = iso_pos.shape[:2]
+    out: dict[str, Any] = {
+        "floor_band_velocity": np.array(each(scene_band_velocity), dtype=np.float64).reshape(c, 3, -1)
+    }
+    floors = each(lambda s: getattr(s, "floor", None))
+    if all(f is None for f in floors):
+        return out
+    coherence = {getattr(f, "coherence", "correlated") if f is not None else "correlated" for f in floors}
+    if len(coherence) > 1:
+        raise ValueError(
+            f"floor.coherence: the scenes of one batch share one coherence, got {sorted(coherence)}"
+        )
+    if any(getattr(f, "per_mount", None) is not None for f in floors):
+        levels = each(lambda s: scene_mount_band_velocity(s, n))
+        out["floor_mount_band_velocity"] = np.array(levels, dtype=np.float64).reshape(c, n, 3, N_BANDS)
+    if any(getattr(f, "wave", None) is not None for f in floors):
+        waves = np.array(
+            each(
+                lambda s: (
+                    (s.floor.wave.speed, *s.floor.wave.direction) if s.floor.wave else (np.inf, 1.0, 0.0)
+                )
+            ),
+            dtype=np.float64,
+        ).reshape(c, 3)
+        e = np.concatenate([waves[:, 1:], np.zeros((c, 1))], axis=1)
+        out["floor_delay"] = np.einsum("cni,ci->cn", iso_pos - cg[:, None], e) / waves[:, :1]
+    out["floor_coherence"] = coherence.pop()
+    return out

@@ -4,7 +4,7 @@ bands or a PSD)."""
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal, get_args
 
 import numpy as np
 from pydantic import BeforeValidator, Field, ValidationError, field_validator, model_validator
@@ -163,19 +163,75 @@ class FloorSpectrum(InputModel):
         return self
 
 
+class FloorWave(InputModel):
+    """A floor wave crossing the site at ``speed`` along the horizontal ``direction``: the floor under a
+    mount at ``r`` moves as the floor under the base's c.g. did ``(r - c.g.) . e / speed`` earlier."""
+
+    speed: Annotated[Velocity, Field(gt=0)] = Field(description="m/s (very fast: the uniform floor)")
+    direction: tuple[float, float] = Field((1.0, 0.0), description="along the floor's X and Y, any length")
+
+    @field_validator("direction")
+    @classmethod
+    def _direction(cls, value: tuple[float, float]) -> tuple[float, float]:
+        norm = float(np.hypot(*value))
+        if not np.isfinite(norm) or norm == 0.0:
+            raise ValueError("direction: give a non-zero horizontal direction [x, y]")
+        return (value[0] / norm, value[1] / norm)
+
+
+FloorCoherence = Literal["correlated", "uncorrelated", "worst_phase"]
+"""How the floor motions under different mounts combine (:mod:`isolab.engine.frequency`)."""
+FLOOR_COHERENCE: tuple[str, ...] = get_args(FloorCoherence)
+"""The coherences a floor may state."""
+
+
 class Floor(InputModel):
     """Motion of the floor under the isolators: a sine per axis or a recorded displacement (the time
     integration sees them), and/or a ``spectrum`` (steady state, one-third-octave bands: the velocity at
-    the points of interest, :mod:`studies.questions.floor`)."""
+    the points of interest, :mod:`studies.questions.floor`): the same under every mount, or one spectrum
+    per mount (``per_mount``), a travelling ``wave``, and the ``coherence`` between mounts."""
 
     sine: SineFloor | None = None
     recorded: RecordedFloor | None = None
     spectrum: FloorSpectrum | None = None
+    per_mount: list[FloorSpectrum] | None = Field(
+        None,
+        min_length=1,
+        description="one floor spectrum per mount, in the mounts' order (not with spectrum)",
+    )
+    wave: FloorWave | None = Field(None, description="the spectrum travels across the site (correlated)")
+    coherence: FloorCoherence = Field(
+        "correlated",
+        description="between mounts: correlated (in phase, or delayed by the wave), uncorrelated (powers "
+        "add) or worst_phase (per frequency, the phases that maximise the response: an upper bound)",
+    )
 
     @model_validator(mode="after")
     def _one_kind(self) -> Floor:
         if self.sine is not None and self.recorded is not None:
             raise ValueError("floor: give either sine or recorded, not both")
-        if self.sine is None and self.recorded is None and self.spectrum is None:
-            raise ValueError("floor: give sine, recorded or spectrum")
+        if self.sine is None and self.recorded is None and self.spectrum is None and self.per_mount is None:
+            raise ValueError("floor: give sine, recorded, spectrum or per_mount")
+        if self.spectrum is not None and self.per_mount is not None:
+            raise ValueError("floor.per_mount: give either spectrum (every mount) or per_mount, not both")
+        if self.wave is not None and self.coherence != "correlated":
+            raise ValueError(
+                f"floor.coherence: a travelling wave is a correlated floor, got coherence {self.coherence}"
+            )
+        mounts = self.per_mount is not None or self.wave is not None or self.coherence != "correlated"
+        if mounts and self.spectrum is None and self.per_mount is None:
+            raise ValueError("floor: wave and coherence shape a floor spectrum: give spectrum or per_mount")
+        if mounts and (self.sine is not None or self.recorded is not None):
+            raise ValueError(
+                "floor: per_mount, wave and coherence act on the floor spectrum only; the time integration's "
+                "sine or recorded floor moves uniformly: give them in separate scenes"
+            )
         return self
+
+    def check_mounts(self, n_mounts: int) -> None:
+        """Refuse a ``per_mount`` list whose length is not the number of mounts (ValueError naming it)."""
+        if self.per_mount is not None and len(self.per_mount) != n_mounts:
+            raise ValueError(
+                f"floor.per_mount: {len(self.per_mount)} spectra for {n_mounts} mounts (one per mount, in "
+                "the mounts' order)"
+            )

@@ -110,13 +110,17 @@ class Scene(InputModel):
 
     @model_validator(mode="after")
     def _criteria_points(self) -> Scene:
+        if self.floor is not None:
+            self.floor.check_mounts(self.isolators.count)
         if self.criteria is not None:
             self.criteria.check_points(self.points, self.has_floor_spectrum())
         return self
 
     def has_floor_spectrum(self) -> bool:
         """Whether the floor's vibration is given as a spectrum (what a velocity criterion judges)."""
-        return self.floor is not None and getattr(self.floor, "spectrum", None) is not None
+        return self.floor is not None and (
+            self.floor.spectrum is not None or self.floor.per_mount is not None
+        )
 
     def total_mass(self) -> float:
         """Machine plus all stages, kg."""
