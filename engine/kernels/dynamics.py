@@ -88,7 +88,7 @@ def accel_ltv(P, c, x, W):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def ltv_acc(x, tc, K, cc, g, ffon, gstiff, acc):
     """:func:`accel_ltv` on the workspace's arrays: ``acc`` (6,) from the time-only terms ``tc``, the
     mount operator ``K`` (12, 6), the packed case ``cc`` and gravity ``g`` (m/s^2)."""
@@ -148,7 +148,7 @@ def accel_nonlinear(P, c, x, W):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def nonlinear_acc(x, tc, cc, cm, R, F, acc, g, pbase):
     """:func:`accel_nonlinear` on the workspace's arrays (``R`` (3, 3), ``F`` (n, 3) scratch; the packed
     case ``cc``, ``cm``)."""
