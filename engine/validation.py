@@ -64,9 +64,6 @@ def validate(b: SceneBatch) -> None:
         "settle_tol": (C,),
         "point_settle_tol": (C, b.n_points),
     }
-    shapes["floor_delay"] = (C, n)
-    if b.floor_mount_band_velocity is not None:
-        shapes["floor_mount_band_velocity"] = (C, n, 3, 20)
     if b.floor_coherence not in FLOOR_COHERENCE:
         raise SceneError(
             "floor_coherence", f"{b.floor_coherence!r} is not one of {', '.join(FLOOR_COHERENCE)}"
@@ -89,6 +86,14 @@ def validate(b: SceneBatch) -> None:
         raise SceneError("inertia", "must be positive definite")
     if n < 3:
         raise SceneError("iso_pos", f"a base needs at least 3 isolators, got {n}")
+    per_mount: dict[str, tuple[int, ...]] = {
+        "floor_delay": (C, n)
+    }  # checked after the isolator count, which names the cause
+    if b.floor_mount_band_velocity is not None:
+        per_mount["floor_mount_band_velocity"] = (C, n, 3, 20)
+    for name, shape in per_mount.items():
+        if np.shape(getattr(b, name)) != shape:
+            raise SceneError(name, f"shape {np.shape(getattr(b, name))}, expected {shape}")
     if (b.iso_k < 0).any():
         raise SceneError("iso_k", "stiffness must not be negative" + _case((b.iso_k < 0).any(axis=(1, 2))))
     if (b.iso_c < 0).any():
