@@ -10,15 +10,10 @@ from __future__ import annotations
 import math
 from typing import Any
 
-import numpy as np
-
-from isolab.engine import simulate
 from isolab.engine.results import LARGER, OUTPUTS
 from isolab.studies.inputs.definitions import DefinitionError, check_definition, detail
-from isolab.studies.inputs.study import Study, study_labels
-from isolab.studies.questions.criteria import add_criteria
+from isolab.studies.inputs.study import Study
 from isolab.studies.results.cases import CaseColumns, case_table, json_values
-from isolab.studies.results.dataset import to_dataset
 from isolab.studies.run.accuracy import resolved_study
 
 SHOWN_UNJUDGED = ("settled", "status")
@@ -62,18 +57,9 @@ def run_comparison(study: Study) -> CaseColumns:
     Raises:
         ValueError: a scene the engine refuses under one of the types.
     """
-    sim = study.simulation
-    fidelity, integrator, dt = sim.engine_choice()
-    result = simulate(
-        study.batch(np.arange(study.n_cases)),
-        fidelity=fidelity,
-        integrator=integrator,
-        dt=dt,
-        auto_step=sim.auto_step,
-    )
-    iso, pts = study_labels(study)
-    ds = to_dataset(result, study.design(), isolator_names=iso, point_names=pts)
-    return case_table(add_criteria(ds, study.criteria))
+    from isolab.studies.answers.robustness import judged_dataset
+
+    return case_table(judged_dataset(study))
 
 
 def criterion(table: CaseColumns, column: str) -> str | None:

@@ -19,7 +19,7 @@ from __future__ import annotations
 import copy
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -29,6 +29,9 @@ from isolab.studies.inputs.study import Study, study_labels
 from isolab.studies.questions.criteria import add_criteria
 from isolab.studies.questions.tolerances import CONFIDENCE, INTERVAL_METHOD, clopper_pearson, meets_counts
 from isolab.studies.results.dataset import to_dataset
+
+if TYPE_CHECKING:
+    import xarray as xr
 
 DEFAULT_SAMPLES = 200
 """Machines drawn from the tolerances per type and design, unless asked otherwise."""
@@ -110,8 +113,10 @@ def tolerance_study(
     return check_definition(body, prefix=["body"] if prefix is None else list(prefix))
 
 
-def reliability(study: Study, isolator_type: str, design: str) -> Reliability:
-    """Run a :func:`tolerance_study` through the engine and count the machines that meet the criteria.
+def judged_dataset(study: Study) -> xr.Dataset:
+    """Every case of ``study`` run through the engine in one batch, in this process, as its labelled
+    dataset with the criteria's margins: how a comparison, a tuning, a sizing and a tolerance cloud are
+    judged.
 
     Raises:
         ValueError: a scene the engine refuses.
@@ -126,8 +131,17 @@ def reliability(study: Study, isolator_type: str, design: str) -> Reliability:
         auto_step=sim.auto_step,
     )
     iso, pts = study_labels(study)
-    ds = add_criteria(to_dataset(result, study.design(), isolator_names=iso, point_names=pts), study.criteria)
-    k, n, fails, names = meets_counts(ds)
+    ds = to_dataset(result, study.design(), isolator_names=iso, point_names=pts)
+    return add_criteria(ds, study.criteria)
+
+
+def reliability(study: Study, isolator_type: str, design: str) -> Reliability:
+    """Run a :func:`tolerance_study` through the engine and count the machines that meet the criteria.
+
+    Raises:
+        ValueError: a scene the engine refuses.
+    """
+    k, n, fails, names = meets_counts(judged_dataset(study))
     return Reliability(
         isolator_type,
         design,

@@ -18,11 +18,9 @@ from typing import Any
 import numpy as np
 from scipy.optimize import differential_evolution
 
-from isolab.engine import simulate
+from isolab.studies.answers.robustness import judged_dataset
 from isolab.studies.inputs.isolators import PRESETS
-from isolab.studies.inputs.study import study_labels, validate_study
-from isolab.studies.questions.criteria import add_criteria
-from isolab.studies.results.dataset import to_dataset
+from isolab.studies.inputs.study import validate_study
 
 #: What each isolator type can be built or set to: (low, high) of f_vertical (Hz), f_horizontal (Hz),
 #: zeta (1). Active systems: their controller sets 0.5-2 Hz and 20-70 % damping. Air springs: 1.5 Hz
@@ -92,16 +90,7 @@ def worst_margins(
     if simulation is not None:
         body["simulation"] = simulation
     study = validate_study(body)
-    fidelity, integrator, dt = study.simulation.engine_choice()
-    result = simulate(
-        study.batch(np.arange(study.n_cases)),
-        fidelity=fidelity,
-        integrator=integrator,
-        dt=dt,
-        auto_step=study.simulation.auto_step,
-    )
-    iso, pts = study_labels(study)
-    ds = add_criteria(to_dataset(result, study.design(), isolator_names=iso, point_names=pts), study.criteria)
+    ds = judged_dataset(study)
     worst = ds["criterion_margin"].min("criterion", skipna=False).values
     return np.where(np.isfinite(worst), worst, -np.inf)
 
