@@ -6,6 +6,8 @@ displacement (m) and small rotation about X, Y, Z (rad). Matrices are (C, 6, 6) 
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from isolab.engine.kernels.cached_terms import CM_WIDTH
@@ -355,6 +357,157 @@ def feedforward_distribution(b: SceneBatch) -> np.ndarray:
     return D.reshape(C, n, 3, 6)
 
 
+class SlotBlock(NamedTuple):
+    """One model's block of the extra linear states ``z`` (``nz`` of them; ``Params.zA`` ...): ``z' = A z
+    + X x + Q acc + S s''`` with ``x`` the base's state (12), ``acc`` its accelerations (6) and ``s''`` the
+    stages' accelerations along their axes (m); the base's generalised force gains ``G z`` (and, at the LTI
+    level, its accelerations ``Ms s''``); each point's displacement and each mount's deflection ``O[0] z``,
+    their rates ``O[1] z``."""
+
+    A: np.ndarray
+    """(C, nz, nz), 1/s."""
+    X: np.ndarray
+    """(C, nz, 12)."""
+    Q: np.ndarray
+    """(C, nz, 6)."""
+    S: np.ndarray
+    """(C, nz, m)."""
+    G: np.ndarray
+    """(C, 6, nz), N and N m per unit z."""
+    O: np.ndarray
+    """(C, 2, nz, 3 p + 3 n)."""
+
+
+def _arm_map(d: np.ndarray) -> np.ndarray:
+    """``T = [I, -[d]x]`` (C, k, 3, 6): a point's displacement ``u + theta x d`` from ``[u, theta]``."""
+    T = np.zeros(d.shape[:2] + (3, 6))
+    T[..., :, :3] = np.eye(3)
+    T[..., :, 3:] = -skew(d)
+    return T
+
+
+def flexible_base_block(b: SceneBatch) -> SlotBlock | None:
+    """The base's elastic modes as a block of extra linear states, ``z = [eta (k), eta' (k)]`` (modal
+    coordinates, m), or None for a rigid base (docs/physics.md, "A flexible base"). Modal superposition:
+    ``M_k (eta'' + 2 zeta w eta' + w^2 eta) = Phi_mounts^T F_mounts + Phi_stages^T F_stages`` with the
+    mounts' forces from the base's rigid motion plus ``Phi eta`` at their points; the stages' masses load
+    the modes at their homes (``M_k = m_k + sum m_s |phi_s|^2``) and their inertial forces along their
+    axes drive them; the mounts' modal forces push back on the rigid base."""
+    k = b.n_base_modes
+    if k == 0:
+        return None
+    C, n, m, p = b.n_cases, b.n_isolators, b.n_stages, b.n_points
+    d, _, _ = relative_geometry(b)
+    T = _arm_map(d)  # (C, n, 3, 6)
+    phi_j = np.asarray(b.base_mode_iso, dtype=float)  # (C, n, 3, k)
+    phi_s = np.asarray(b.base_mode_stage, dtype=float)
+    mk = np.asarray(b.base_mode_mass, dtype=float) + np.einsum("cs,csak,csak->ck", b.stage_mass, phi_s, phi_s)
+    w = 2.0 * np.pi * np.asarray(b.base_mode_frequency, dtype=float)
+    zeta = np.asarray(b.base_mode_damping, dtype=float)
+    kk = np.asarray(b.iso_k, dtype=float)
+    cc = np.asarray(b.iso_c, dtype=float)
+    K_eq = np.einsum("cnak,cna,cnaj->ckj", phi_j, kk, T)  # (C, k, 6) Phi^T K T
+    C_eq = np.einsum("cnak,cna,cnaj->ckj", phi_j, cc, T)
+    K_ee = np.einsum("cnak,cna,cnal->ckl", phi_j, kk, phi_j)  # (C, k, k)
+    C_ee = np.einsum("cnak,cna,cnal->ckl", phi_j, cc, phi_j)
+    own = np.asarray(b.base_mode_mass, dtype=float)
+    inv = 1.0 / mk[..., None]
+    A = np.zeros((C, 2 * k, 2 * k))
+    A[:, :k, k:] = np.eye(k)
+    A[:, k:, :k] = -inv * (K_ee + np.einsum("ck,kl->ckl", own * w**2, np.eye(k)))
+    A[:, k:, k:] = -inv * (C_ee + np.einsum("ck,kl->ckl", 2.0 * own * zeta * w, np.eye(k)))
+    X = np.zeros((C, 2 * k, 12))
+    X[:, k:, :6] = -inv * K_eq
+    X[:, k:, 6:] = -inv * C_eq
+    # a stage's inertial force -m_i a_rel,i at its home; a_rel,i = sum over its chain of s''_q e_q
+    e = b.stage_axis / np.maximum(np.linalg.norm(b.stage_axis, axis=-1, keepdims=True), 1e-300)
+    S = np.zeros((C, 2 * k, m))
+    for i in range(m):
+        q = i
+        while q >= 0:
+            S[:, k:, q] -= b.stage_mass[:, i, None] * np.einsum("cak,ca->ck", phi_s[:, i], e[:, q]) / mk
+            q = int(b.stage_parent[q])
+    G = np.zeros((C, 6, 2 * k))
+    G[:, :, :k] = -np.swapaxes(K_eq, 1, 2)
+    G[:, :, k:] = -np.swapaxes(C_eq, 1, 2)
+    shapes = np.concatenate(
+        [np.asarray(b.base_mode_point, dtype=float).reshape(C, 3 * p, k), phi_j.reshape(C, 3 * n, k)], axis=1
+    )  # (C, 3 p + 3 n, k)
+    O = np.zeros((C, 2, 2 * k, 3 * p + 3 * n))
+    O[:, 0, :k] = np.swapaxes(shapes, 1, 2)
+    O[:, 1, k:] = np.swapaxes(shapes, 1, 2)
+    return SlotBlock(A, X, np.zeros((C, 2 * k, 6)), S, G, O)
+
+
+SLOT_MODELS = (flexible_base_block,)
+"""The models of the extra linear states, in the order of their blocks in ``z``: each a function of the
+batch that returns its ``SlotBlock`` or None when the scene does not use it."""
+
+
+def linear_slot(b: SceneBatch) -> SlotBlock:
+    """Every model's block of the extra linear states, joined block-diagonally (``nz = 0`` when the scene
+    uses none: the kernels then run exactly as without them)."""
+    blocks = [blk for blk in (model(b) for model in SLOT_MODELS) if blk is not None]
+    C, m, n, p = b.n_cases, b.n_stages, b.n_isolators, b.n_points
+    nz = sum(blk.A.shape[1] for blk in blocks)
+    A = np.zeros((C, nz, nz))
+    X = np.zeros((C, nz, 12))
+    Q = np.zeros((C, nz, 6))
+    S = np.zeros((C, nz, m))
+    G = np.zeros((C, 6, nz))
+    O = np.zeros((C, 2, nz, 3 * p + 3 * n))
+    at = 0
+    for blk in blocks:
+        z = slice(at, at + blk.A.shape[1])
+        A[:, z, z] = blk.A
+        X[:, z] = blk.X
+        Q[:, z] = blk.Q
+        S[:, z] = blk.S
+        G[:, :, z] = blk.G
+        O[:, :, z] = blk.O
+        at = z.stop
+    return SlotBlock(A, X, Q, S, G, O)
+
+
+def slot_static(
+    b: SceneBatch, fidelity: str, q0: np.ndarray, rho: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The static state with the extra linear states (C, 6) and (C, nz): the rigid static offset ``q0``
+    (C, 6) (:func:`static_offset`, stages at ``rho``) corrected for the states' coupling, from ``K q - G z
+    = K q0`` and ``A z + X[:, :, :6] q = 0`` (every rate and acceleration zero)."""
+    slot = linear_slot(b)
+    nz = slot.A.shape[1]
+    if nz == 0:
+        return q0, np.zeros((b.n_cases, 0))
+    rho_f = final_positions(b) if rho is None else rho
+    K = stiffness_matrix(b, None if fidelity == "lti" else rho_f)
+    C = b.n_cases
+    L = np.zeros((C, 6 + nz, 6 + nz))
+    L[:, :6, :6] = K
+    L[:, :6, 6:] = -slot.G
+    L[:, 6:, :6] = slot.X[:, :, :6]
+    L[:, 6:, 6:] = slot.A
+    rhs = np.zeros((C, 6 + nz))
+    rhs[:, :6] = np.einsum("cij,cj->ci", K, q0)
+    sol = np.einsum("cij,cj->ci", np.linalg.pinv(L), rhs)
+    return sol[:, :6], sol[:, 6:]
+
+
+def slot_state_matrix(P: Params) -> np.ndarray:
+    """The LTI level's state matrix with the extra linear states (C, 12 + nz, 12 + nz), 1/s: ``x' = A x``
+    without forcing (for the stability guard and the fastest mode)."""
+    C, nz = P.zA.shape[0], P.zA.shape[1]
+    A = np.zeros((C, 12 + nz, 12 + nz))
+    A[:, :6, 6:12] = np.eye(6)
+    A[:, 6:12, :6] = P.a21
+    A[:, 6:12, 6:12] = P.a22
+    A[:, 6:12, 12:] = P.zM
+    A[:, 12:, :12] = P.zX
+    A[:, 12:, 12:] = P.zA
+    A[:, 12:, :] += P.zQ @ A[:, 6:12, :]
+    return A
+
+
 def params(b: SceneBatch) -> Params:
     """The kernels' parameter arrays for a batch (see ``engine.kernels.params.Params``)."""
     P = _params(b)
@@ -387,6 +540,7 @@ def _params(b: SceneBatch) -> Params:
     ffon = bool(b.has_feedforward and b.n_stages)
     n = b.n_isolators
     fftb = _feedforward_breakpoints(b) if ffon else np.full((b.n_cases, 1), np.inf)
+    slot = linear_slot(b)
     return Params(
         mass=f64(b.mass, dtype=float),
         mtot=f64(b.mass + b.stage_mass.sum(axis=1), dtype=float),
@@ -429,6 +583,14 @@ def _params(b: SceneBatch) -> Params:
         pbase=2 if b.preload_balanced else int(bool(b.preload_with_base)),
         orient=b.has_orientation,
         qm=f64(b.iso_frame, dtype=float),
+        zA=f64(slot.A),
+        zX=f64(slot.X),
+        zQ=f64(slot.Q),
+        zS=f64(slot.S),
+        zG=f64(slot.G),
+        zM=f64(minv @ slot.G),
+        sM=np.zeros((b.n_cases, 6, 0)),
+        zO=f64(slot.O),
     )
 
 
@@ -459,6 +621,6 @@ def work(b: SceneBatch) -> Work:
         cc=np.concatenate([[-1.0], np.zeros(24)]),
         cs=np.zeros((m, 8 + 5 * b.prof_t.shape[-1])),
         cm=np.zeros((n, CM_WIDTH + (9 if b.has_orientation else 0))),
-        cK=np.zeros((12, 6)),
+        cK=np.zeros((12 + linear_slot(b).A.shape[1], 6)),
         sw=np.zeros((m, 9)),
     )

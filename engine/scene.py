@@ -89,6 +89,14 @@ class SceneBatch:
         iso_frame: (C, n, 3, 3) each mount's own axes in the floor frame (columns: the mount's x, y, z; a
             rotation). ``iso_k`` and ``iso_c`` act along these axes, so the mount's stiffness in the floor
             frame is ``Q diag(k) Q^T``. Default: the identity (the floor's axes).
+        base_mode_frequency: (C, k) the base's elastic modes' free-free natural frequencies, Hz (k = 0, the
+            default: a rigid base; docs/physics.md, "A flexible base").
+        base_mode_damping: (C, k) their modal damping ratios.
+        base_mode_mass: (C, k) their modal masses, kg (the shapes' scale: ``m_k = int rho |phi_k|^2 dV``).
+        base_mode_iso: (C, n, 3, k) each mode's shape at the mounts' points of action (displacement per unit
+            modal coordinate, floor axes).
+        base_mode_stage: (C, m, 3, k) at the stages' homes (where their reactions enter the base).
+        base_mode_point: (C, p, 3, k) at the points of interest.
     """
 
     mass: np.ndarray
@@ -129,6 +137,12 @@ class SceneBatch:
     preload_with_base: bool = False
     preload_balanced: bool = False
     iso_frame: np.ndarray | None = None
+    base_mode_frequency: np.ndarray | None = None
+    base_mode_damping: np.ndarray | None = None
+    base_mode_mass: np.ndarray | None = None
+    base_mode_iso: np.ndarray | None = None
+    base_mode_stage: np.ndarray | None = None
+    base_mode_point: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         c = np.shape(self.mass)[0] if np.ndim(self.mass) else 1
@@ -157,6 +171,28 @@ class SceneBatch:
             tol = np.asarray(self.settle_tol, dtype=float)
             p = np.shape(self.points)[1] if np.ndim(self.points) == 3 else 0
             self.point_settle_tol = np.repeat(tol.reshape(-1, 1), p, axis=1)
+        self._base_mode_defaults(c, n)
+
+    def _base_mode_defaults(self, c: int, n: int) -> None:
+        """A rigid base (no elastic mode) unless the scene gives one."""
+        k = np.shape(self.base_mode_frequency)[1] if self.base_mode_frequency is not None else 0
+        m = np.shape(self.stage_mass)[1] if np.ndim(self.stage_mass) == 2 else 0
+        p = np.shape(self.points)[1] if np.ndim(self.points) == 3 else 0
+        for name, shape in (
+            ("base_mode_frequency", (c, k)),
+            ("base_mode_damping", (c, k)),
+            ("base_mode_mass", (c, k)),
+            ("base_mode_iso", (c, n, 3, k)),
+            ("base_mode_stage", (c, m, 3, k)),
+            ("base_mode_point", (c, p, 3, k)),
+        ):
+            if getattr(self, name) is None:
+                setattr(self, name, np.zeros(shape) if name != "base_mode_mass" else np.ones(shape))
+
+    @property
+    def n_base_modes(self) -> int:
+        """The number of the base's elastic modes (0: rigid)."""
+        return int(np.asarray(self.base_mode_frequency).shape[1])
 
     @property
     def has_floor_spectrum(self) -> bool:

@@ -84,6 +84,37 @@ def _divergence_cause(integrator: str, step: float) -> str:
     )
 
 
+SLOT_LEVELS = ("lti", "ltv")
+"""The levels that model the extra linear states (a flexible base)."""
+SLOT_INTEGRATORS = ("rk4", "exact")
+"""The integrators that step them."""
+
+
+def check_slot(batch: SceneBatch, fidelity: str, integrator: str) -> None:
+    """Refuse a flexible base (``base_mode_*``) where it is not modelled, naming the input and the levels
+    and integrators that model it."""
+    if batch.n_base_modes == 0:
+        return
+    field = "base_mode_frequency"
+    if fidelity not in SLOT_LEVELS:
+        raise SceneError(
+            field,
+            f"a flexible base is modelled at the {' and '.join(SLOT_LEVELS)} levels, not {fidelity!r}; "
+            "choose one of them or a rigid base",
+        )
+    if integrator not in SLOT_INTEGRATORS:
+        raise SceneError(
+            field, f"a flexible base is integrated by {' or '.join(SLOT_INTEGRATORS)}, not {integrator!r}"
+        )
+    for name, used in (
+        ("floor", batch.has_floor_motion or batch.has_floor_spectrum),
+        ("iso_ff_gain", batch.has_feedforward),
+        ("iso_frame", batch.has_orientation),
+    ):
+        if used:
+            raise SceneError(field, f"a flexible base is not modelled together with {name} (not yet)")
+
+
 def simulate(
     batch: SceneBatch,
     fidelity: str = "ltv",
@@ -113,6 +144,7 @@ def simulate(
     if not (np.isfinite(dt) and dt > 0):
         raise SceneError("dt", f"must be a positive, finite step in s, got {dt!r}")
     validate(batch)
+    check_slot(batch, fidelity, integrator)
     C = batch.n_cases
     if record:
         bad = [r for r in record if not 0 <= r < C]
@@ -152,8 +184,10 @@ def simulate(
     steps = np.full(C, float(dt))
     n_div = np.ones(C, dtype=np.int64)
     method = INTEGRATORS[integrator]
+    nz = P.zA.shape[1]
+    A0 = model.slot_state_matrix(P) if nz else modal.state_matrix(M0, K0, C0)
     if method.guarded:
-        n_div = stability.subdivisions(modal.state_matrix(M0, K0, C0), dt, method.step_matrix)
+        n_div = stability.subdivisions(A0, dt, method.step_matrix)
         for M, K in placed:
             more = stability.subdivisions(modal.state_matrix(M, K, C0), dt, method.step_matrix)
             n_div = np.where((n_div == 0) | (more == 0), 0, np.maximum(n_div, more))
@@ -185,6 +219,28 @@ def simulate(
 
     target = model.static_offset(batch, fidelity)
     rest, rest_n, rest_target = model.rest_offsets(batch, fidelity)
+    slot_run: dict[str, np.ndarray] = {}
+    point_offset = rest_point_offset = None
+    fastest_hz = np.asarray(md.frequency).max(axis=1)
+    if nz:
+        target, z_end = model.slot_static(batch, fidelity, target)
+        z_rest = np.zeros(rest_target.shape[:2] + (nz,))
+        for k in range(rest_target.shape[1]):
+            has = rest_n > k
+            when = np.where(
+                has, np.where(np.isfinite(rest[:, k, 1]), 0.5 * (rest[:, k, 0] + rest[:, k, 1]), 0.0), 0.0
+            )
+            rho = model.placed_positions(batch, model.positions_at(batch, when))
+            q, z = model.slot_static(batch, fidelity, rest_target[:, k], rho)
+            rest_target[has, k] = q[has]
+            z_rest[has, k] = z[has]
+        slot_run = {"slot_target": z_end, "slot_rest_target": z_rest}
+        p3 = 3 * batch.n_points
+        point_offset = np.einsum("czr,cz->cr", P.zO[:, 0, :, :p3], z_end).reshape(C, -1, 3)
+        rest_point_offset = np.einsum("czr,ckz->ckr", P.zO[:, 0, :, :p3], z_rest).reshape(
+            C, rest_target.shape[1], -1, 3
+        )
+        fastest_hz = np.maximum(fastest_hz, np.abs(np.linalg.eigvals(A0)).max(axis=1) / (2.0 * np.pi))
     O = peaks.allocate(
         C,
         batch.n_points,
@@ -199,13 +255,14 @@ def simulate(
         rest_target=rest_target,
         point_tol=batch.point_settle_tol,
         # a peak between output times is interpolated over intervals of at most 1/omega of the fastest mode
-        h_interp=1.0 / (2.0 * np.pi * np.maximum(np.asarray(md.frequency).max(axis=1), 1e-300)),
-        # the nonlinear level's rest of a point is u + (R - I) p, not the linearised u + theta x p
-        point_offset=model.point_rest_offsets(batch, target) if fidelity == "nonlinear" else None,
+        h_interp=1.0 / (2.0 * np.pi * np.maximum(fastest_hz, 1e-300)),
+        # the nonlinear level's rest of a point is u + (R - I) p, not the linearised u + theta x p (with
+        # extra linear states, what they add at rest)
+        point_offset=model.point_rest_offsets(batch, target) if fidelity == "nonlinear" else point_offset,
         rest_point_offset=(
             np.moveaxis(model.point_rest_offsets(batch, np.moveaxis(rest_target, 1, 0)), 0, 1)
             if fidelity == "nonlinear"
-            else None
+            else rest_point_offset
         ),
     )
     sampled = sampled_peak_message(steps, np.asarray(O.h_interp))
@@ -214,7 +271,7 @@ def simulate(
             message[c] = f"{message[c]}; {sampled[c]}" if message[c] else sampled[c]
     W = model.work(batch)
     run_status = status.copy()
-    method.run(P, level, steps, n_steps, O, W, run_status, messages=message)
+    method.run(P, level, steps, n_steps, O, W, run_status, messages=message, **slot_run)
     for c in range(C):
         if status[c] != OK:
             continue

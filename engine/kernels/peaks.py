@@ -247,6 +247,7 @@ def observe(P, c, level, t, x, W, O, step):
     inv_h = 1.0 / h if between else 0.0
     orient = P.orient  # a mount with its own axes: its force peaks at the output times (no per-axis cubic)
     off = 7 if level == NONLINEAR else 6
+    nz = 0 if level == NONLINEAR else x.shape[0] - 12
     if level == NONLINEAR:
         # angular velocity in the floor frame: the rate of the rotation vector, linearised
         wb0, wb1, wb2 = x[off + 3], x[off + 4], x[off + 5]
@@ -290,6 +291,10 @@ def observe(P, c, level, t, x, W, O, step):
         r0, r1, r2 = mount_offset(level, x, W.R, d0, d1, d2)
         q0, q1, q2 = _arm_rate(level, wf0, wf1, wf2, r0, r1, r2, d0, d1, d2)
         pv0, pv1, pv2 = u0 + r0, u1 + r1, u2 + r2
+        if nz > 0:  # the extra linear states' share (a flexible base's modes)
+            pv0, q0 = _slot_share(P.zO, c, 3 * p, x, pv0, q0)
+            pv1, q1 = _slot_share(P.zO, c, 3 * p + 1, x, pv1, q1)
+            pv2, q2 = _slot_share(P.zO, c, 3 * p + 2, x, pv2, q2)
         _peak_point(O.poi, O.last_poi, c, p, 0, pv0, v0 + q0, h, between)
         _peak_point(O.poi, O.last_poi, c, p, 1, pv1, v1 + q1, h, between)
         _peak_point(O.poi, O.last_poi, c, p, 2, pv2, v2 + q2, h, between)
@@ -338,6 +343,15 @@ def observe(P, c, level, t, x, W, O, step):
             dl -= W.xf[i]
             dd -= W.vf[i]
             F1 = W.F[j, i]
+            if nz > 0:  # the mount point's share of the extra linear states, and its force
+                r = 3 * P.pts.shape[1] + 3 * j + i
+                sl, sd = _slot_share(P.zO, c, r, x, 0.0, 0.0)
+                dl += sl
+                dd += sd
+                F1 -= P.k[c, j, i] * sl + P.cd[c, j, i] * sd
+                W.F[j, i] = F1
+                if i == 2:
+                    lo = hi = P.f0[c, j] + F1
             a = max(abs(F1), O.force[c, j, i])
             b = max(abs(dl), O.defl[c, j, i])
             if between and not orient:
@@ -479,6 +493,17 @@ def _peak_point(peak, last, c, p, i, value, rate, h, between):
         peak[c, p, i] = a
     last[c, p, i, 0] = value
     last[c, p, i, 1] = rate
+
+
+@njit(cache=True, inline="always")
+def _slot_share(zO, c, r, x, value, rate):
+    """``value`` (m) and ``rate`` (m/s) of output ``r`` (a point's or a mount's axis, ``Params.zO``) with
+    the extra linear states ``x[12:]`` added."""
+    for k in range(zO.shape[2]):
+        zk = x[12 + k]
+        value += zO[c, 0, k, r] * zk
+        rate += zO[c, 1, k, r] * zk
+    return value, rate
 
 
 @njit(cache=True, inline="always")

@@ -45,6 +45,8 @@ from isolab.studies.inputs.schema.scene_paths import (
     BLOCK_DENSITY,
     BLOCK_SIZE,
     EXPLICIT_VALUES,
+    FLEXIBLE_DAMPING,
+    FLEXIBLE_YOUNG_MODULUS,
     FLOOR_SINE_KEYS,
     ISOLATOR_PRESET,
     ISOLATORS,
@@ -86,6 +88,7 @@ _LEAVES: dict[str, tuple[str, str | None]] = {
     "f_vertical": ("frequency", "gt0"),
     "f_horizontal": ("frequency", "gt0"),
     "zeta": ("dimensionless", "ge0"),
+    "young_modulus": ("pressure", "gt0"),
     "k": ("stiffness", "ge0"),
     "c": ("damping", "ge0"),
     "span_x": ("length", "gt0"),
@@ -187,6 +190,8 @@ def available_paths(scene: Scene) -> list[str]:
     m = scene.machine
     if m.block is not None:
         out += components(BLOCK_SIZE) + [BLOCK_DENSITY] + components(BLOCK_CORNER)
+        if m.flexible is not None:
+            out += [FLEXIBLE_YOUNG_MODULUS, FLEXIBLE_DAMPING]
     else:
         out += [MACHINE_MASS] + components(MACHINE_CG)
         if m.inertia_diagonal is not None:

@@ -11,9 +11,8 @@ What the builder works out:
   around the machine's c.g., order :data:`studies.inputs.schema.LAYOUT_ORDER`);
 - the static load of each mount under the total weight of machine and stages at home
   (:func:`studies.inputs.isolators.load_share`, about the composite c.g.), and from it preset stiffness per
-  floor
-  axis (X, Y from ``f_horizontal``, Z from ``f_vertical``) and damping from ``zeta``; explicit values win;
-- stage motion profiles (:mod:`engine.profiles`), points, floor motion, duration and settling tolerance.
+  floor axis (X, Y from ``f_horizontal``, Z from ``f_vertical``) and damping from ``zeta``; explicit values
+  win; stage motion profiles (:mod:`engine.profiles`), points, floor motion, duration and settling tolerance.
 """
 
 from __future__ import annotations
@@ -26,6 +25,7 @@ import numpy as np
 from isolab.engine import profiles
 from isolab.engine.results import AXES
 from isolab.engine.scene import GRAVITY, SceneBatch, SceneError
+from isolab.studies.inputs.base_flexibility import flexible_base
 from isolab.studies.inputs.block import MAX_TRAVEL, beyond_travel, block_properties, travel_bound
 from isolab.studies.inputs.isolators import (
     CollinearIsolatorsError,
@@ -90,7 +90,7 @@ def shape_signature(scene: Scene) -> tuple:
     """What all scenes of one batch must share (array shapes and which inputs exist)."""
     iso = scene.isolators
     m = scene.machine
-    machine = ("block",) if m.block is not None else ("direct", m.inertia is not None)
+    machine = ("block", m.flexible and m.flexible.modes) if m.block else ("direct", m.inertia is not None)
     mounts = (
         ("layout",)
         if iso.layout is not None
@@ -416,9 +416,7 @@ def build_batch(
     sizes = {len(scenes)} | {a.size for a in ov.values()}
     c = n_cases if n_cases is not None else max(sizes)
     if not sizes <= {1, c}:
-        raise ValueError(
-            f"build_batch: scenes and overrides disagree on the number of cases: {sorted(sizes)}"
-        )
+        raise ValueError(f"build_batch: scenes and overrides disagree on the case count: {sorted(sizes)}")
     ov = {k: np.broadcast_to(a, (c,)) for k, a in ov.items()}
     cases = _Cases(scenes, ov, c)
     s0 = scenes[0]
@@ -647,6 +645,7 @@ def build_batch(
         preload_with_base="base" in preload,
         preload_balanced="balanced" in preload,
     )
+    batch = flexible_base(batch, cases)  # a block base's elastic modes, when the scene asks for them
     auto = np.isnan(duration)
     if auto.any():
         decay = slowest_decay_time(batch.take(np.flatnonzero(auto)))
