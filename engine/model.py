@@ -6,14 +6,15 @@ displacement (m) and small rotation about X, Y, Z (rad). Matrices are (C, 6, 6) 
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 
 from isolab.engine.kernels.cached_terms import CM_WIDTH
 from isolab.engine.kernels.feedforward import feedforward_transients
 from isolab.engine.kernels.params import Params, Work
 from isolab.engine.kernels.structs import kernel_struct
+from isolab.engine.linear_states.block import SlotBlock
+from isolab.engine.linear_states.flexible_base import flexible_base_block
+from isolab.engine.linear_states.servo import servo_block
 from isolab.engine.scene import SceneBatch
 
 
@@ -331,6 +332,7 @@ def point_rest_offsets(b: SceneBatch, offset: np.ndarray) -> np.ndarray:
     ``u + theta x p`` of the static ``offset`` (..., C, 6) (m, rad; ``theta`` a rotation vector):
     ``(R - I) p - theta x p`` (..., C, p, 3), m, second order in the rotation."""
     _, _, pts = relative_geometry(b)
+    pts = np.where((np.asarray(b.point_relative) == 0)[..., None], pts, 0.0)  # a relative point: no arm
     q = np.asarray(offset, dtype=float)
     flat = q.reshape(-1, q.shape[-2], 6)
     out = np.zeros(flat.shape[:2] + (b.n_points, 3))
@@ -357,89 +359,7 @@ def feedforward_distribution(b: SceneBatch) -> np.ndarray:
     return D.reshape(C, n, 3, 6)
 
 
-class SlotBlock(NamedTuple):
-    """One model's block of the extra linear states ``z`` (``nz`` of them; ``Params.zA`` ...): ``z' = A z
-    + X x + Q acc + S s''`` with ``x`` the base's state (12), ``acc`` its accelerations (6) and ``s''`` the
-    stages' accelerations along their axes (m); the base's generalised force gains ``G z`` (and, at the LTI
-    level, its accelerations ``Ms s''``); each point's displacement and each mount's deflection ``O[0] z``,
-    their rates ``O[1] z``."""
-
-    A: np.ndarray
-    """(C, nz, nz), 1/s."""
-    X: np.ndarray
-    """(C, nz, 12)."""
-    Q: np.ndarray
-    """(C, nz, 6)."""
-    S: np.ndarray
-    """(C, nz, m)."""
-    G: np.ndarray
-    """(C, 6, nz), N and N m per unit z."""
-    O: np.ndarray
-    """(C, 2, nz, 3 p + 3 n)."""
-
-
-def _arm_map(d: np.ndarray) -> np.ndarray:
-    """``T = [I, -[d]x]`` (C, k, 3, 6): a point's displacement ``u + theta x d`` from ``[u, theta]``."""
-    T = np.zeros(d.shape[:2] + (3, 6))
-    T[..., :, :3] = np.eye(3)
-    T[..., :, 3:] = -skew(d)
-    return T
-
-
-def flexible_base_block(b: SceneBatch) -> SlotBlock | None:
-    """The base's elastic modes as a block of extra linear states, ``z = [eta (k), eta' (k)]`` (modal
-    coordinates, m), or None for a rigid base (docs/physics.md, "A flexible base"). Modal superposition:
-    ``M_k (eta'' + 2 zeta w eta' + w^2 eta) = Phi_mounts^T F_mounts + Phi_stages^T F_stages`` with the
-    mounts' forces from the base's rigid motion plus ``Phi eta`` at their points; the stages' masses load
-    the modes at their homes (``M_k = m_k + sum m_s |phi_s|^2``) and their inertial forces along their
-    axes drive them; the mounts' modal forces push back on the rigid base."""
-    k = b.n_base_modes
-    if k == 0:
-        return None
-    C, n, m, p = b.n_cases, b.n_isolators, b.n_stages, b.n_points
-    d, _, _ = relative_geometry(b)
-    T = _arm_map(d)  # (C, n, 3, 6)
-    phi_j = np.asarray(b.base_mode_iso, dtype=float)  # (C, n, 3, k)
-    phi_s = np.asarray(b.base_mode_stage, dtype=float)
-    mk = np.asarray(b.base_mode_mass, dtype=float) + np.einsum("cs,csak,csak->ck", b.stage_mass, phi_s, phi_s)
-    w = 2.0 * np.pi * np.asarray(b.base_mode_frequency, dtype=float)
-    zeta = np.asarray(b.base_mode_damping, dtype=float)
-    kk = np.asarray(b.iso_k, dtype=float)
-    cc = np.asarray(b.iso_c, dtype=float)
-    K_eq = np.einsum("cnak,cna,cnaj->ckj", phi_j, kk, T)  # (C, k, 6) Phi^T K T
-    C_eq = np.einsum("cnak,cna,cnaj->ckj", phi_j, cc, T)
-    K_ee = np.einsum("cnak,cna,cnal->ckl", phi_j, kk, phi_j)  # (C, k, k)
-    C_ee = np.einsum("cnak,cna,cnal->ckl", phi_j, cc, phi_j)
-    own = np.asarray(b.base_mode_mass, dtype=float)
-    inv = 1.0 / mk[..., None]
-    A = np.zeros((C, 2 * k, 2 * k))
-    A[:, :k, k:] = np.eye(k)
-    A[:, k:, :k] = -inv * (K_ee + np.einsum("ck,kl->ckl", own * w**2, np.eye(k)))
-    A[:, k:, k:] = -inv * (C_ee + np.einsum("ck,kl->ckl", 2.0 * own * zeta * w, np.eye(k)))
-    X = np.zeros((C, 2 * k, 12))
-    X[:, k:, :6] = -inv * K_eq
-    X[:, k:, 6:] = -inv * C_eq
-    # a stage's inertial force -m_i a_rel,i at its home; a_rel,i = sum over its chain of s''_q e_q
-    e = b.stage_axis / np.maximum(np.linalg.norm(b.stage_axis, axis=-1, keepdims=True), 1e-300)
-    S = np.zeros((C, 2 * k, m))
-    for i in range(m):
-        q = i
-        while q >= 0:
-            S[:, k:, q] -= b.stage_mass[:, i, None] * np.einsum("cak,ca->ck", phi_s[:, i], e[:, q]) / mk
-            q = int(b.stage_parent[q])
-    G = np.zeros((C, 6, 2 * k))
-    G[:, :, :k] = -np.swapaxes(K_eq, 1, 2)
-    G[:, :, k:] = -np.swapaxes(C_eq, 1, 2)
-    shapes = np.concatenate(
-        [np.asarray(b.base_mode_point, dtype=float).reshape(C, 3 * p, k), phi_j.reshape(C, 3 * n, k)], axis=1
-    )  # (C, 3 p + 3 n, k)
-    O = np.zeros((C, 2, 2 * k, 3 * p + 3 * n))
-    O[:, 0, :k] = np.swapaxes(shapes, 1, 2)
-    O[:, 1, k:] = np.swapaxes(shapes, 1, 2)
-    return SlotBlock(A, X, np.zeros((C, 2 * k, 6)), S, G, O)
-
-
-SLOT_MODELS = (flexible_base_block,)
+SLOT_MODELS = (flexible_base_block, servo_block)
 """The models of the extra linear states, in the order of their blocks in ``z``: each a function of the
 batch that returns its ``SlotBlock`` or None when the scene does not use it."""
 
@@ -456,6 +376,7 @@ def linear_slot(b: SceneBatch) -> SlotBlock:
     S = np.zeros((C, nz, m))
     G = np.zeros((C, 6, nz))
     O = np.zeros((C, 2, nz, 3 * p + 3 * n))
+    B = np.zeros((C, 6, nz)) if any(blk.B is not None for blk in blocks) else None
     at = 0
     for blk in blocks:
         z = slice(at, at + blk.A.shape[1])
@@ -465,8 +386,10 @@ def linear_slot(b: SceneBatch) -> SlotBlock:
         S[:, z] = blk.S
         G[:, :, z] = blk.G
         O[:, :, z] = blk.O
+        if blk.B is not None and B is not None:
+            B[:, :, z] = blk.B
         at = z.stop
-    return SlotBlock(A, X, Q, S, G, O)
+    return SlotBlock(A, X, Q, S, G, O, B)
 
 
 def slot_static(
@@ -541,6 +464,17 @@ def _params(b: SceneBatch) -> Params:
     n = b.n_isolators
     fftb = _feedforward_breakpoints(b) if ffon else np.full((b.n_cases, 1), np.inf)
     slot = linear_slot(b)
+    a21, a22, zG, sM = -minv @ K, -minv @ Cm, slot.G, np.zeros((b.n_cases, 6, 0))
+    if slot.B is not None:
+        # states that carry inertia the base no longer does (a servo stage): M acc = f + G z + B z' with
+        # z' = A z + X x + Q acc + S s'' folds into (M - B Q) acc = f + (G + B A) z + B X x + B S s''
+        minv = np.linalg.inv(M - slot.B @ slot.Q)
+        BX = slot.B @ slot.X
+        a21 = minv @ (-K + BX[:, :, :6])
+        a22 = minv @ (-Cm + BX[:, :, 6:])
+        zG = slot.G + slot.B @ slot.A
+        sM = minv @ (slot.B @ slot.S)
+    pr = np.asarray(b.point_relative) == 0
     return Params(
         mass=f64(b.mass, dtype=float),
         mtot=f64(b.mass + b.stage_mass.sum(axis=1), dtype=float),
@@ -561,14 +495,14 @@ def _params(b: SceneBatch) -> Params:
         pv=f64(b.prof_v, dtype=float),
         pa=f64(b.prof_a, dtype=float),
         pj=f64(b.prof_j, dtype=float),
-        pts=f64(pts),
+        pts=f64(np.where(pr[..., None], pts, 0.0)),
         famp=f64(b.floor_amp, dtype=float),
         fomega=f64(2 * np.pi * np.asarray(b.floor_freq, dtype=float)),
         fphase=f64(b.floor_phase, dtype=float),
         ft=f64(b.floor_t, dtype=float),
         fd=f64(b.floor_disp, dtype=float),
-        a21=f64(-minv @ K),
-        a22=f64(-minv @ Cm),
+        a21=f64(a21),
+        a22=f64(a22),
         minv=f64(minv),
         g=float(b.g),
         gstiff=bool(b.gravity_stiffness),
@@ -587,10 +521,11 @@ def _params(b: SceneBatch) -> Params:
         zX=f64(slot.X),
         zQ=f64(slot.Q),
         zS=f64(slot.S),
-        zG=f64(slot.G),
-        zM=f64(minv @ slot.G),
-        sM=np.zeros((b.n_cases, 6, 0)),
+        zG=f64(zG),
+        zM=f64(minv @ zG),
+        sM=f64(sM),
         zO=f64(slot.O),
+        pr=f64(pr, dtype=float),
     )
 
 

@@ -319,9 +319,21 @@ class SimulationResult:
             "floor spectrum)",
         ),
     )
+    peak_following_error: np.ndarray | None = field(
+        default=None,
+        metadata=_output(
+            unit="m",
+            long_name="peak following error of the stages on a servo, worst over them (0 without one)",
+        ),
+    )
+    stage_following_error: np.ndarray | None = field(default=None)
+    """(C, m) each stage's peak following error, m (0 for a stage that follows its profile exactly); the
+    stored output is the worst of them, ``peak_following_error``."""
     history: dict[str, np.ndarray] | None = field(default=None)
 
     def __post_init__(self) -> None:
+        if self.peak_following_error is None:
+            self.peak_following_error = np.zeros(np.shape(self.status)[0])
         # a result assembled without the floor-spectrum outputs has none: zeros (no floor spectrum)
         for name in ("floor_point_velocity", "floor_point_velocity_band"):
             if getattr(self, name) is None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from isolab.engine import frequency, modal, model, stability
@@ -115,6 +117,61 @@ def check_slot(batch: SceneBatch, fidelity: str, integrator: str) -> None:
             raise SceneError(field, f"a flexible base is not modelled together with {name} (not yet)")
 
 
+SERVO_LEVELS = ("lti",)
+"""The levels that model a stage on a servo (its mass along the axis leaves the base's mass matrix, which
+only the LTI level keeps constant)."""
+
+
+def check_servo(batch: SceneBatch, fidelity: str, integrator: str) -> None:
+    """Refuse a stage on a servo (``stage_servo_frequency``) where it is not modelled, naming the input and
+    the levels and integrators that model it."""
+    if not len(batch.servo_stages):
+        return
+    field = "stage_servo_frequency"
+    if fidelity not in SERVO_LEVELS:
+        raise SceneError(
+            field,
+            f"a stage on a servo is modelled at the {' and '.join(SERVO_LEVELS)} level, not {fidelity!r} "
+            "(its mass along the axis leaves the base's mass matrix, which the time-varying levels "
+            "rebuild as the stages travel); choose lti, or stages that follow their profiles exactly",
+        )
+    if integrator not in SLOT_INTEGRATORS:
+        raise SceneError(
+            field, f"a stage on a servo is integrated by {' or '.join(SLOT_INTEGRATORS)}, not {integrator!r}"
+        )
+    for name, used in (
+        ("a flexible base", batch.n_base_modes > 0),
+        ("iso_ff_gain", batch.has_feedforward),
+    ):
+        if used:
+            raise SceneError(field, f"a stage on a servo is not modelled together with {name} (not yet)")
+
+
+def with_following_errors(batch: SceneBatch) -> SceneBatch:
+    """``batch`` with one more point of interest per stage on a servo: its following error, read along X
+    (``SceneBatch.point_relative`` 2), so that its peak and settling come with the points'. ``batch``
+    itself when no stage is on a servo."""
+    servo = batch.servo_stages
+    s = len(servo)
+    if s == 0:
+        return batch
+    C = batch.n_cases
+
+    def more(a: np.ndarray, extra: np.ndarray) -> np.ndarray:
+        return np.concatenate([np.asarray(a), extra.astype(np.asarray(a).dtype)], axis=1)
+
+    k = batch.n_base_modes
+    return replace(
+        batch,
+        points=more(batch.points, np.zeros((C, s, 3))),
+        point_settle_tol=more(batch.point_settle_tol, np.repeat(np.asarray(batch.settle_tol)[:, None], s, 1)),
+        base_mode_point=more(batch.base_mode_point, np.zeros((C, s, 3, k))),
+        point_relative=more(batch.point_relative, np.full((C, s), 2)),
+        point_tool_stage=more(batch.point_tool_stage, np.broadcast_to(servo, (C, s)).copy()),
+        point_work_stage=more(batch.point_work_stage, np.full((C, s), -1)),
+    )
+
+
 def simulate(
     batch: SceneBatch,
     fidelity: str = "ltv",
@@ -145,6 +202,10 @@ def simulate(
         raise SceneError("dt", f"must be a positive, finite step in s, got {dt!r}")
     validate(batch)
     check_slot(batch, fidelity, integrator)
+    check_servo(batch, fidelity, integrator)
+    given = batch
+    p_given = batch.n_points
+    batch = with_following_errors(batch)
     C = batch.n_cases
     if record:
         bad = [r for r in record if not 0 <= r < C]
@@ -303,12 +364,15 @@ def simulate(
         T = np.zeros((C, 3))
 
     # steady-state response to the floor spectrum: no stepping, so every case but a tipping one has it
-    fpv = np.zeros((C, batch.n_points, 3))
-    fpb = np.zeros((C, batch.n_points, 3))
+    fpv = np.zeros((C, p_given, 3))
+    fpb = np.zeros((C, p_given, 3))
     if batch.has_floor_spectrum:
-        bands = frequency.batch_point_band_velocity(batch, matrices=(M0, K0, C0), modes=md)
+        bands = frequency.batch_point_band_velocity(given, matrices=(M0, K0, C0), modes=md)
         bands[status == TIPPING] = np.nan
         fpv, fpb = frequency.worst_band(bands)
+        relative = np.asarray(given.point_relative) != 0  # the floor moves tool and work together
+        fpv[relative] = 0.0
+        fpb[relative] = 0.0
 
     bad = status != OK
     nan = np.nan
@@ -325,17 +389,19 @@ def simulate(
             "time": O.h_t,
             "displacement": O.h_u,
             "rotation": O.h_th,
-            "point_displacement": O.h_poi,
+            "point_displacement": O.h_poi[:, :, :p_given],
             "isolator_force": O.h_force,
             "n_samples": n_steps[list(record)] + 1,
         }
+    errors = np.zeros((C, batch.n_stages))
+    errors[:, batch.servo_stages] = O.poi[:, p_given:, 0]
     return SimulationResult(
         status=status,
         message=message,
         dt=np.asarray(steps, dtype=float),
         peak_displacement=per_case(O.u),
         peak_rotation=per_case(O.th),
-        peak_point_displacement=per_case(O.poi),
+        peak_point_displacement=per_case(O.poi[:, :p_given]),
         peak_isolator_force=per_case(O.force),
         static_isolator_load=np.array(P.f0),
         min_isolator_load=per_case(O.min_load),
@@ -343,7 +409,7 @@ def simulate(
         final_displacement=per_case(target),
         settling_time=per_case(settling),
         settled=np.where(bad, False, settled),
-        point_settling_time=per_case(point_settling),
+        point_settling_time=per_case(point_settling[:, :p_given]),
         peak_isolator_deflection=per_case(O.defl),
         max_isolator_load=per_case(O.max_load),
         natural_frequency=np.array(md.frequency),
@@ -353,5 +419,7 @@ def simulate(
         transmissibility=per_case(T),
         floor_point_velocity=fpv,
         floor_point_velocity_band=fpb,
+        peak_following_error=per_case(errors.max(axis=1) if batch.n_stages else np.zeros(C)),
+        stage_following_error=per_case(errors),
         history=history,
     )

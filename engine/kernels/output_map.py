@@ -81,7 +81,8 @@ def build(
     rows = np.concatenate(
         [
             np.broadcast_to(np.eye(6), (C, 6, 6)),
-            _arm_rows(pts).reshape(C, -1, 6),
+            # a relative point (or a following error) does not move with the base (``Params.pr``)
+            np.where(np.asarray(P.pr, dtype=bool)[..., None, None], _arm_rows(pts), 0.0).reshape(C, -1, 6),
             _arm_rows(d).reshape(C, -1, 6),
         ],
         axis=1,

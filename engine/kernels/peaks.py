@@ -290,27 +290,37 @@ def observe(P, c, level, t, x, W, O, step):
         d0, d1, d2 = P.pts[c, p, 0], P.pts[c, p, 1], P.pts[c, p, 2]
         r0, r1, r2 = mount_offset(level, x, W.R, d0, d1, d2)
         q0, q1, q2 = _arm_rate(level, wf0, wf1, wf2, r0, r1, r2, d0, d1, d2)
-        pv0, pv1, pv2 = u0 + r0, u1 + r1, u2 + r2
-        if nz > 0:  # the extra linear states' share (a flexible base's modes)
+        # a material point moves with the base; a relative point (or a following error) only by ``zO``
+        material = P.pr[c, p] != 0.0
+        b0, b1, b2 = (u0, u1, u2) if material else (0.0, 0.0, 0.0)
+        s0, s1, s2 = (v0, v1, v2) if material else (0.0, 0.0, 0.0)
+        pv0, pv1, pv2 = b0 + r0, b1 + r1, b2 + r2
+        if nz > 0:  # the extra linear states' share (a flexible base's modes, servo errors)
             pv0, q0 = _slot_share(P.zO, c, 3 * p, x, pv0, q0)
             pv1, q1 = _slot_share(P.zO, c, 3 * p + 1, x, pv1, q1)
             pv2, q2 = _slot_share(P.zO, c, 3 * p + 2, x, pv2, q2)
-        _peak_point(O.poi, O.last_poi, c, p, 0, pv0, v0 + q0, h, between)
-        _peak_point(O.poi, O.last_poi, c, p, 1, pv1, v1 + q1, h, between)
-        _peak_point(O.poi, O.last_poi, c, p, 2, pv2, v2 + q2, h, between)
+        _peak_point(O.poi, O.last_poi, c, p, 0, pv0, s0 + q0, h, between)
+        _peak_point(O.poi, O.last_poi, c, p, 1, pv1, s1 + q1, h, between)
+        _peak_point(O.poi, O.last_poi, c, p, 2, pv2, s2 + q2, h, between)
         if settle:
             # target point displacement from the static offset (linearised, plus the nonlinear rest)
-            e0 = O.target[c, 4] * d2 - O.target[c, 5] * d1 + O.target[c, 0] + O.point_offset[c, p, 0]
-            e1 = O.target[c, 5] * d0 - O.target[c, 3] * d2 + O.target[c, 1] + O.point_offset[c, p, 1]
-            e2 = O.target[c, 3] * d1 - O.target[c, 4] * d0 + O.target[c, 2] + O.point_offset[c, p, 2]
+            t0, t1, t2 = (O.target[c, 0], O.target[c, 1], O.target[c, 2]) if material else (0.0, 0.0, 0.0)
+            e0 = O.target[c, 4] * d2 - O.target[c, 5] * d1 + t0 + O.point_offset[c, p, 0]
+            e1 = O.target[c, 5] * d0 - O.target[c, 3] * d2 + t1 + O.point_offset[c, p, 1]
+            e2 = O.target[c, 3] * d1 - O.target[c, 4] * d0 + t2 + O.point_offset[c, p, 2]
             e = max(abs(pv0 - e0), abs(pv1 - e1), abs(pv2 - e2))
             if e > err:
                 err = e
         if rest:
             # the static position of the point in this rest interval
-            e0 = O.rest_target[c, k, 4] * d2 - O.rest_target[c, k, 5] * d1 + O.rest_target[c, k, 0]
-            e1 = O.rest_target[c, k, 5] * d0 - O.rest_target[c, k, 3] * d2 + O.rest_target[c, k, 1]
-            e2 = O.rest_target[c, k, 3] * d1 - O.rest_target[c, k, 4] * d0 + O.rest_target[c, k, 2]
+            t0, t1, t2 = (
+                (O.rest_target[c, k, 0], O.rest_target[c, k, 1], O.rest_target[c, k, 2])
+                if material
+                else (0.0, 0.0, 0.0)
+            )
+            e0 = O.rest_target[c, k, 4] * d2 - O.rest_target[c, k, 5] * d1 + t0
+            e1 = O.rest_target[c, k, 5] * d0 - O.rest_target[c, k, 3] * d2 + t1
+            e2 = O.rest_target[c, k, 3] * d1 - O.rest_target[c, k, 4] * d0 + t2
             e0 += O.rest_point_offset[c, k, p, 0]
             e1 += O.rest_point_offset[c, k, p, 1]
             e2 += O.rest_point_offset[c, k, p, 2]

@@ -25,6 +25,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from isolab.engine.scene import SceneBatch
+from isolab.studies.inputs.precision.relative_points import work_positions
 from isolab.studies.inputs.schema.scene_paths import (
     BLOCK_CORNER,
     BLOCK_DENSITY,
@@ -178,6 +179,10 @@ def flexible_base(batch: SceneBatch, cases: CaseValues) -> SceneBatch:
         phi = _raw_shapes(np.asarray(points, dtype=float), size, corner) * scale[:, None, None, :]
         return np.take_along_axis(phi, keep[:, None, None, :], axis=3)
 
+    point_shapes = shapes(np.asarray(batch.points, dtype=float))
+    if batch.has_relative_points:  # a relative point moves by the shapes' difference between tool and work
+        relative = (np.asarray(batch.point_relative) == 1)[..., None, None]
+        point_shapes = point_shapes - relative * shapes(work_positions(batch, cases.scenes[0]))
     return replace(
         batch,
         base_mode_frequency=freq[rows, keep],
@@ -185,5 +190,5 @@ def flexible_base(batch: SceneBatch, cases: CaseValues) -> SceneBatch:
         base_mode_mass=mass[rows, keep],
         base_mode_iso=shapes(np.asarray(batch.iso_pos, dtype=float)),
         base_mode_stage=shapes(np.asarray(batch.stage_home, dtype=float)),
-        base_mode_point=shapes(np.asarray(batch.points, dtype=float)),
+        base_mode_point=point_shapes,
     )

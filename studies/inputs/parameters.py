@@ -57,6 +57,7 @@ from isolab.studies.inputs.schema.scene_paths import (
     MACHINE_INERTIA_DIAGONAL,
     MACHINE_MASS,
     MOUNT_FIGURES,
+    SERVO_KEYS,
     SHAPER_KEYS,
     SIMULATION_DURATION,
     SIMULATION_SETTLE_TOLERANCE,
@@ -70,6 +71,7 @@ from isolab.studies.inputs.schema.scene_paths import (
     profile_shaper,
     stage,
     stage_profile,
+    stage_servo,
 )
 from isolab.studies.questions.designs import Design, Factor
 from isolab.studies.questions.tolerances import Spread, Tolerance, draw, resolve_spread
@@ -110,6 +112,10 @@ _LEAVES: dict[str, tuple[str, str | None]] = {
     "damping": ("dimensionless", "ge0"),
     "duration": ("time", "gt0"),
     "settle_tolerance": ("length", "gt0"),
+    "servo.bandwidth": ("frequency", "gt0"),
+    "servo.damping_ratio": ("dimensionless", "ge0"),
+    "servo.stiffness": ("stiffness", "gt0"),
+    "servo.damping": ("damping", "ge0"),
 }
 
 
@@ -151,6 +157,8 @@ def _leaf_key(path: str) -> str:
     parts = path.split(".")
     if parts[0] == "points":
         return "point"
+    if len(parts) > 2 and parts[-2] == "servo":  # a stage's servo: its damping is N s/m, not a ratio
+        return f"servo.{parts[-1]}"
     if parts[-1].isdigit() or (parts[0] == ISOLATORS and parts[-2] in EXPLICIT_VALUES):
         return parts[-2]
     return parts[-1]
@@ -233,7 +241,10 @@ def available_paths(scene: Scene) -> list[str]:
             keys.append("dwell")
         keys.append("start")
         out += [f"{stage_profile(s.name)}.{key}" for key in keys]
-    for name in scene.points:
+    for s in scene.stages:
+        if s.servo is not None:
+            out += [f"{stage_servo(s.name)}.{key}" for key in SERVO_KEYS if getattr(s.servo, key) is not None]
+    for name in scene.material_points():
         out += components(point(name))
     if scene.floor is not None and scene.floor.sine is not None:
         for key in FLOOR_SINE_KEYS:

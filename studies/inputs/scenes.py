@@ -36,6 +36,7 @@ from isolab.studies.inputs.isolators import (
 )
 from isolab.studies.inputs.mount_physics import apply_mount_physics
 from isolab.studies.inputs.parameters import check_leaf_values
+from isolab.studies.inputs.precision import point_signature, precision_inputs, servo_kind
 from isolab.studies.inputs.schema import (
     AUTO_DURATION_CAP,
     AUTO_DURATION_DECAYS,
@@ -114,14 +115,14 @@ def shape_signature(scene: Scene) -> tuple:
             kind = (p.type,)
         if p.shaper is not None:  # a shaped profile has SHAPER_IMPULSES times the pieces
             kind = (*kind, "shaped")
-        stages.append((s.name, s.parent, kind))
+        stages.append((s.name, s.parent, kind, servo_kind(s)))
     floor: tuple[object, ...] | None = None  # the time-domain floor motion (a spectrum shapes nothing)
     if scene.floor is not None and scene.floor.sine is not None:
         floor = ("sine",)
     elif scene.floor is not None and scene.floor.recorded is not None:
         rec = scene.floor.recorded
         floor = ("recorded", rec.dt, len(rec.displacement.samples()[0]))
-    return machine, mounts, tuple(stages), tuple(scene.points), floor
+    return machine, mounts, tuple(stages), point_signature(scene), floor
 
 
 class _Cases:
@@ -552,7 +553,7 @@ def build_batch(
     for i, name in enumerate(point_names):
 
         def material_point(s: Scene, name: str = name) -> Sequence[float]:
-            return s.points[name]
+            return s.material_points().get(name, (0.0, 0.0, 0.0))  # a relative point: precision_inputs
 
         points[:, i] = cases.vec(point(name), material_point)
     floor_amp = np.zeros((c, 3))
@@ -645,7 +646,7 @@ def build_batch(
         preload_with_base="base" in preload,
         preload_balanced="balanced" in preload,
     )
-    batch = flexible_base(batch, cases)  # a block base's elastic modes, when the scene asks for them
+    batch = flexible_base(precision_inputs(batch, cases), cases)  # servos, relative points, elastic modes
     auto = np.isnan(duration)
     if auto.any():
         decay = slowest_decay_time(batch.take(np.flatnonzero(auto)))

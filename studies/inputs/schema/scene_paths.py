@@ -78,6 +78,15 @@ def stage_profile(name: str) -> str:
     return f"{stage(name)}.profile"
 
 
+SERVO_KEYS = ("bandwidth", "damping_ratio", "stiffness", "damping")
+"""The numbers of a stage's servo (``stages.<name>.servo.bandwidth``): a study may vary each one given."""
+
+
+def stage_servo(name: str) -> str:
+    """The servo of the stage called ``name``: ``stages.<name>.servo``."""
+    return f"{stage(name)}.servo"
+
+
 SHAPER_KEYS = ("frequency", "damping")
 """The numbers of a profile's input shaper a study may vary (its ``type`` is categorical)."""
 
@@ -95,6 +104,11 @@ def profile_segment(name: str, k: int) -> str:
 def point(name: str) -> str:
     """The point of interest called ``name`` (a position vector): ``points.<name>``."""
     return f"points.{name}"
+
+
+def relative_point(name: str) -> str:
+    """The relative point called ``name`` (tool to work): ``points.<name>.relative``."""
+    return f"{point(name)}.relative"
 
 
 def floor_sine(key: str) -> str:
