@@ -136,7 +136,8 @@ class SimulationResult:
     A case whose ``status`` is not OK has NaN in ``peak_displacement``, ``peak_rotation``,
     ``peak_point_displacement``, ``peak_isolator_force``, ``min_isolator_load``, ``rms_displacement``,
     ``final_displacement``, ``settling_time``, ``point_settling_time``, ``peak_isolator_deflection``,
-    ``max_isolator_load`` and ``transmissibility``, and ``settled`` False. What does
+    ``max_isolator_load``, ``transmissibility`` and ``peak_following_error`` (``stage_following_error``),
+    and ``settled`` False. What does
     not depend on integrating its motion stays filled: ``dt`` (the step it was or would have been run
     with), ``static_isolator_load`` and the modal analysis (``natural_frequency``, ``damping_ratio``,
     ``mode_energy``, ``mechanism``), so an unstable or tipping case still shows its modes and preloads.

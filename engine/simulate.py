@@ -157,7 +157,7 @@ def with_following_errors(batch: SceneBatch) -> SceneBatch:
         return batch
     C = batch.n_cases
 
-    def more(a: np.ndarray, extra: np.ndarray) -> np.ndarray:
+    def more(a: np.ndarray | None, extra: np.ndarray) -> np.ndarray:
         return np.concatenate([np.asarray(a), extra.astype(np.asarray(a).dtype)], axis=1)
 
     k = batch.n_base_modes
