@@ -14,6 +14,7 @@ from isolab.engine.kernels.params import Params, Work
 from isolab.engine.kernels.structs import kernel_struct
 from isolab.engine.linear_states.block import SlotBlock
 from isolab.engine.linear_states.flexible_base import flexible_base_block
+from isolab.engine.linear_states.levelling import levelling_block
 from isolab.engine.linear_states.servo import servo_block
 from isolab.engine.scene import SceneBatch
 
@@ -359,7 +360,7 @@ def feedforward_distribution(b: SceneBatch) -> np.ndarray:
     return D.reshape(C, n, 3, 6)
 
 
-SLOT_MODELS = (flexible_base_block, servo_block)
+SLOT_MODELS = (flexible_base_block, servo_block, levelling_block)
 """The models of the extra linear states, in the order of their blocks in ``z``: each a function of the
 batch that returns its ``SlotBlock`` or None when the scene does not use it."""
 
@@ -377,6 +378,7 @@ def linear_slot(b: SceneBatch) -> SlotBlock:
     G = np.zeros((C, 6, nz))
     O = np.zeros((C, 2, nz, 3 * p + 3 * n))
     B = np.zeros((C, 6, nz)) if any(blk.B is not None for blk in blocks) else None
+    D = np.zeros((C, nz))
     at = 0
     for blk in blocks:
         z = slice(at, at + blk.A.shape[1])
@@ -388,8 +390,10 @@ def linear_slot(b: SceneBatch) -> SlotBlock:
         O[:, :, z] = blk.O
         if blk.B is not None and B is not None:
             B[:, :, z] = blk.B
+        if blk.D is not None:
+            D[:, z] = blk.D
         at = z.stop
-    return SlotBlock(A, X, Q, S, G, O, B)
+    return SlotBlock(A, X, Q, S, G, O, B, D)
 
 
 def slot_static(
@@ -525,6 +529,7 @@ def _params(b: SceneBatch) -> Params:
         zM=f64(minv @ zG),
         sM=f64(sM),
         zO=f64(slot.O),
+        zdb=f64(slot.D if slot.D is not None else np.zeros((b.n_cases, 0))),
         pr=f64(pr, dtype=float),
     )
 

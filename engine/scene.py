@@ -109,6 +109,12 @@ class SceneBatch:
         point_tool_stage: (C, p) int64: the stage a relative point's tool rides on (-1: the base); for a
             following-error point, its stage.
         point_work_stage: (C, p) int64: the stage its work point rides on (-1: the base).
+        iso_valve: (C, n) int64: the levelling valve each mount is plumbed to (-1, the default: none;
+            docs/isolators.md, "Levelling valves"); the same in every case. Mounts with the same index share
+            one valve, at most three valves.
+        iso_level_time: (C, n) the levelling time constant of each mount's valve, s (the same for the mounts
+            of one valve; ignored without one).
+        iso_level_band: (C, n) its dead band on the mounts' mean height, m (0: none, the default).
     """
 
     mass: np.ndarray
@@ -160,6 +166,9 @@ class SceneBatch:
     point_relative: np.ndarray | None = None
     point_tool_stage: np.ndarray | None = None
     point_work_stage: np.ndarray | None = None
+    iso_valve: np.ndarray | None = None
+    iso_level_time: np.ndarray | None = None
+    iso_level_band: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         c = np.shape(self.mass)[0] if np.ndim(self.mass) else 1
@@ -190,6 +199,12 @@ class SceneBatch:
             self.point_settle_tol = np.repeat(tol.reshape(-1, 1), p, axis=1)
         self._base_mode_defaults(c, n)
         self._servo_defaults(c)
+        if self.iso_valve is None:
+            self.iso_valve = np.full((c, n), -1, dtype=np.int64)
+        if self.iso_level_time is None:
+            self.iso_level_time = np.zeros((c, n))
+        if self.iso_level_band is None:
+            self.iso_level_band = np.zeros((c, n))
 
     def _servo_defaults(self, c: int) -> None:
         """Every stage following its profile exactly and every point a material point, unless the scene

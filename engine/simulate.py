@@ -10,6 +10,7 @@ from isolab.engine import frequency, modal, model, stability
 from isolab.engine.integrators import INTEGRATORS
 from isolab.engine.kernels import peaks
 from isolab.engine.kernels.params import FIDELITIES
+from isolab.engine.linear_states.levelling import check_levelling
 from isolab.engine.results import FAILED, OK, TIPPING, UNSTABLE, SimulationResult
 from isolab.engine.scene import SceneBatch, SceneError
 from isolab.engine.validation import validate
@@ -203,6 +204,7 @@ def simulate(
     validate(batch)
     check_slot(batch, fidelity, integrator)
     check_servo(batch, fidelity, integrator)
+    check_levelling(batch, fidelity, integrator)
     given = batch
     p_given = batch.n_points
     batch = with_following_errors(batch)

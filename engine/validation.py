@@ -151,6 +151,7 @@ def validate(b: SceneBatch) -> None:
         if (np.diff(b.prof_t, axis=-1) < 0).any():
             raise SceneError("prof_t", "piece start times must not decrease")
     _check_servo_and_relative(b)
+    _check_levelling(b)
     if (np.asarray(b.duration) <= 0).any():
         raise SceneError("duration", "must be positive")
     if (np.asarray(b.settle_tol) <= 0).any():
@@ -211,3 +212,34 @@ def _check_servo_and_relative(b: SceneBatch) -> None:
         s = np.asarray(getattr(b, name))
         if ((s < -1) | (s >= m)).any():
             raise SceneError(name, f"a stage index must be -1 (the base) or 0..{m - 1}")
+
+
+def _check_levelling(b: SceneBatch) -> None:
+    """The levelling valves: each mount's valve the same in every case, a positive time constant and a
+    dead band not negative on every mount with a valve, one time constant and dead band per valve."""
+    C, n = b.n_cases, b.n_isolators
+    for name in ("iso_valve", "iso_level_time", "iso_level_band"):
+        if np.shape(getattr(b, name)) != (C, n):
+            raise SceneError(name, f"shape {np.shape(getattr(b, name))}, expected {(C, n)}")
+    v = np.asarray(b.iso_valve)
+    if v.dtype.kind not in "iu" or (v < -1).any():
+        raise SceneError("iso_valve", "must be integers: -1 (no valve) or a valve's index from 0")
+    if (v != v[:1]).any():
+        raise SceneError("iso_valve", "a mount's valve must be the same in every case")
+    on = v >= 0
+    tau = np.asarray(b.iso_level_time, dtype=float)
+    band = np.asarray(b.iso_level_band, dtype=float)
+    if (on & ~(tau > 0)).any():
+        raise SceneError(
+            "iso_level_time",
+            "a levelling valve needs a positive time constant, s" + _case((on & ~(tau > 0)).any(1)),
+        )
+    if (on & ~(band >= 0)).any():
+        raise SceneError(
+            "iso_level_band", "a dead band must not be negative, m" + _case((on & ~(band >= 0)).any(1))
+        )
+    for k in np.unique(v[0][on[0]]).tolist():
+        j = np.flatnonzero(v[0] == k)
+        for name, a in (("iso_level_time", tau), ("iso_level_band", band)):
+            if (a[:, j] != a[:, j[:1]]).any():
+                raise SceneError(name, f"the mounts {j.tolist()} share valve {k}: give them the same value")

@@ -67,9 +67,9 @@ def pair_driver(method: int, level: int) -> Any:
         idx = np.zeros(P.sm.shape[1], dtype=np.int64)
         G, KF, tgt, rtgt, still, GZ = outmap
         m = G.shape[2]
-        # exact: a whole step inside one piece with no actuator, oscillator or recorded floor input takes the
-        # lean path (exact.full_step)
-        lean = not P.ffon and not osc and P.ft.shape[0] == 0 and nx <= 13
+        # exact: a whole step inside one piece with no actuator, oscillator, recorded floor input or extra
+        # linear state takes the lean path (exact.full_step, which advances the base's 12 rows)
+        lean = not P.ffon and not osc and P.ft.shape[0] == 0 and nx == 12
         Smap = np.zeros((10, max(m, 1)))  # the output map's running state and scratch (output_map.observe)
         Vmap = np.zeros((9, max(m, 1)))
         Qmap = np.zeros(13)

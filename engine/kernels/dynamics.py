@@ -374,7 +374,8 @@ def slot_forces(P, c, t, x, idx, acc):
 def slot_rates(P, c, t, x, idx, acc, dx):
     """The extra linear states' rates ``dx[12:] = zA z + zX x + zQ acc + zS s''`` at ``t`` (s): ``x`` the
     state ``[base (12), z (nz)]``, ``acc`` (6,) the base's accelerations just computed, ``s''`` each stage's
-    acceleration along its axis on its piece ``idx`` (``engine.kernels.params.Params``)."""
+    acceleration along its axis on its piece ``idx`` (``engine.kernels.params.Params``); a row with a dead
+    band (``Params.zdb`` > 0, a levelling valve's) loses it from its rate, ``sign(r) max(|r| - zdb, 0)``."""
     nz = x.shape[0] - 12
     zA, zX, zQ, zS = P.zA, P.zX, P.zQ, P.zS
     for i in range(nz):
@@ -387,4 +388,7 @@ def slot_rates(P, c, t, x, idx, acc, dx):
             s += zQ[c, i, j] * acc[j]
         for q in range(zS.shape[2]):
             s += zS[c, i, q] * stage_acceleration(P, c, q, t, idx)
+        band = P.zdb[c, i]
+        if band > 0.0:  # a dead band on the row's rate: sign(s) max(|s| - band, 0)
+            s = s - band if s > band else (s + band if s < -band else 0.0)
         dx[12 + i] = s

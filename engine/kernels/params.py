@@ -122,6 +122,9 @@ class Params(NamedTuple):
     zO: np.ndarray
     """(C, 2, nz, 3 p + 3 n) what ``z`` adds to each point's displacement and each mount's deflection
     (row 0, m per unit) and to their rates (row 1, m/s per unit ``z``)."""
+    zdb: np.ndarray
+    """(C, nz) each extra linear state's dead band on its rate (its units per second; 0: the row is linear):
+    a levelling valve's ``(k_v / tau) d`` (``engine.linear_states.block.SlotBlock.D``)."""
     pr: np.ndarray
     """(C, p) 1 for a material point of the base (it moves by ``u + theta x d``), 0 for a relative point
     or a following error (only ``zO`` moves it; ``pts`` is zero there)."""

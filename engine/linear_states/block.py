@@ -31,6 +31,10 @@ class SlotBlock(NamedTuple):
     whose states carry inertia the base no longer does (a servo stage's mass along its axis). The LTI level
     folds it into its matrices: ``(M - B Q) acc = f + (G + B A) z + B X x + B S s''``; the LTV level refuses
     it."""
+    D: np.ndarray | None = None
+    """(C, nz) each row's dead band on its rate (the row's units per second), or None: every row linear. A
+    row with a threshold ``D > 0`` (a levelling valve's) has its rate ``r`` replaced by ``sign(r) max(|r| -
+    D, 0)`` in the stepping kernels (``engine.kernels.dynamics.slot_rates``); zero keeps a row linear."""
 
 
 def arm_map(d: np.ndarray) -> np.ndarray:
