@@ -1,22 +1,29 @@
 """Mounts from their physics: air springs (stiffness from pressure, area and volume; an orifice's
-relaxation) and mounts on their own axes, applied to a batch's stiffness and damping arrays.
+relaxation) and mounts on their own axes, applied to a batch's stiffness and damping arrays; air mounts'
+levelling valves, applied to a batch's valve arrays.
 
-A scene that gives no ``air`` and no ``orientation`` block keeps its arrays untouched.
+A scene that gives no ``air``, no ``orientation`` and no ``levelling`` block keeps its arrays untouched.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from isolab.engine import mount_laws
-from isolab.engine.scene import SceneError
-from isolab.studies.inputs.schema.mounts import AirSpring, Isolators, Orientation
-from isolab.studies.inputs.schema.scene_paths import ISOLATORS, mount
+from isolab.engine.linear_states.levelling import MAX_VALVES
+from isolab.engine.scene import SceneBatch, SceneError
+from isolab.studies.inputs.schema.mounts import AirSpring, Isolators, Levelling, Orientation
+
+if TYPE_CHECKING:
+    from isolab.studies.inputs.base_flexibility import CaseValues
+from isolab.studies.inputs.schema.scene_paths import ISOLATORS, LEVELLING, mount
 
 
-def _own_or_group(iso: Isolators, j: int, key: str) -> tuple[AirSpring | Orientation | None, str]:
+def _own_or_group(iso: Isolators, j: int, key: str) -> tuple[AirSpring | Orientation | Levelling | None, str]:
     """A listed mount's own ``key`` block, else the group's, with the path it was given at."""
     listed = iso.listed
     if listed and getattr(listed[j], key) is not None:
@@ -108,3 +115,96 @@ def apply_mount_physics(
                 if np.isnan(c_explicit[c, j, 2]):
                     iso_c[c, j, 2] = cz_set
     return iso_k, iso_c, frame if turned else None
+
+
+def valve_names(iso: Isolators) -> list[str | None]:
+    """The name of the levelling valve each mount of ``iso`` is plumbed to (None: no valve). A mount
+    whose block names no valve has one of its own (``mount <j>``)."""
+    names: list[str | None] = []
+    for j in range(iso.count):
+        spec, _ = _own_or_group(iso, j, LEVELLING)
+        if not isinstance(spec, Levelling):
+            names.append(None)
+        else:
+            names.append(spec.valve if spec.valve is not None else f"mount {j}")
+    return names
+
+
+def valve_signature(iso: Isolators) -> tuple:
+    """What scenes of one batch must share of their levelling valves (``()`` without any: the same
+    signature as before valves existed)."""
+    names = valve_names(iso)
+    return () if all(v is None for v in names) else (("valves", tuple(names)),)
+
+
+def _is_air(iso: Isolators, j: int) -> bool:
+    """Whether mount ``j`` is an air mount: its type (own preset, else the group's) is ``air``, or it has an
+    ``air`` block."""
+    own = iso.listed[j].preset if iso.listed else None
+    return (own or iso.preset) == "air" or _own_or_group(iso, j, "air")[0] is not None
+
+
+def levelling_valves(batch: SceneBatch, cases: CaseValues) -> SceneBatch:
+    """``batch`` with its air mounts' levelling valves (``SceneBatch.iso_valve``, ``iso_level_time``,
+    ``iso_level_band``), or ``batch`` itself when no mount has one. A study may vary a valve's
+    ``time_constant`` and ``dead_band`` (``isolators.levelling.time_constant`` or
+    ``isolators.list.<j>.levelling.time_constant``).
+
+    Raises:
+        SceneError: naming the ``levelling`` block of a mount that is not an air mount, of a valve whose
+            mounts give it different figures, or of the fourth valve.
+    """
+    iso = cases.scenes[0].isolators
+    names = valve_names(iso)
+    if all(v is None for v in names):
+        return batch
+    C, n = batch.n_cases, batch.n_isolators
+    order: list[str] = []
+    valve = np.full((C, n), -1, dtype=np.int64)
+    tau = np.zeros((C, n))
+    band = np.zeros((C, n))
+    first: dict[str, str] = {}
+    for j, name in enumerate(names):
+        if name is None:
+            continue
+        spec, where = _own_or_group(iso, j, LEVELLING)
+        if not all(_is_air(s.isolators, j) for s in cases.scenes):
+            raise SceneError(
+                where, f"mount {j} is not an air mount: a levelling valve belongs to an air mount"
+            )
+        if name not in order:
+            order.append(name)
+            if len(order) > MAX_VALVES:
+                raise SceneError(
+                    where,
+                    f"valve {name!r} is the {len(order)}th levelling valve: more than {MAX_VALVES} "
+                    "over-determine the base's heave, roll and pitch (the valves would fight and the load "
+                    f"split is indeterminate); plumb two mounts to one valve (valve: <name>), three-point "
+                    "levelling",
+                )
+        valve[:, j] = order.index(name)
+
+        def figure(s: object, key: str, j: int = j) -> float:
+            block, _ = _own_or_group(s.isolators, j, LEVELLING)  # type: ignore[attr-defined]
+            return float(getattr(block, key))
+
+        tau[:, j] = cases.get(f"{where}.time_constant", lambda s: figure(s, "time_constant"))
+        band[:, j] = cases.get(f"{where}.dead_band", lambda s: figure(s, "dead_band"))
+        if name in first:
+            k = names.index(name)
+            for key, a in (("time_constant", tau), ("dead_band", band)):
+                if (a[:, j] != a[:, k]).any():
+                    raise SceneError(
+                        f"{where}.{key}",
+                        f"mount {j} and mount {k} share valve {name!r} but give it different {key}s; give "
+                        "them the same",
+                    )
+        first.setdefault(name, where)
+    return replace(batch, iso_valve=valve, iso_level_time=tau, iso_level_band=band)
+
+
+def valve_time(batch: SceneBatch) -> np.ndarray:
+    """(C,) the longest levelling time constant of a batch's valves, s (0 without any): the slowest decay
+    the valves add (the valve's pole sits near ``-1 / time_constant`` on a stiff mount)."""
+    t = np.where(np.asarray(batch.iso_valve) >= 0, np.asarray(batch.iso_level_time, dtype=float), 0.0)
+    return t.max(axis=1) if t.shape[1] else np.zeros(batch.n_cases)

@@ -53,6 +53,8 @@ from isolab.studies.inputs.schema.scene_paths import (
     LAYOUT_HEIGHT,
     LAYOUT_SPAN_X,
     LAYOUT_SPAN_Y,
+    LEVELLING,
+    LEVELLING_KEYS,
     MACHINE_CG,
     MACHINE_INERTIA_DIAGONAL,
     MACHINE_MASS,
@@ -116,6 +118,8 @@ _LEAVES: dict[str, tuple[str, str | None]] = {
     "servo.damping_ratio": ("dimensionless", "ge0"),
     "servo.stiffness": ("stiffness", "gt0"),
     "servo.damping": ("damping", "ge0"),
+    "time_constant": ("time", "gt0"),
+    "dead_band": ("length", "ge0"),
 }
 
 
@@ -208,6 +212,8 @@ def available_paths(scene: Scene) -> list[str]:
     out += [ISOLATOR_PRESET] + [isolator_group(key) for key in MOUNT_FIGURES]
     for kc in EXPLICIT_VALUES:
         out += [group_axis(kc, a) for a in (*AXES, *AXIS_ALIASES)]
+    if iso.levelling is not None:
+        out += [f"{isolator_group(LEVELLING)}.{key}" for key in LEVELLING_KEYS]
     if iso.layout is not None:
         out += [LAYOUT_SPAN_X, LAYOUT_SPAN_Y, LAYOUT_HEIGHT]
     else:
@@ -218,6 +224,8 @@ def available_paths(scene: Scene) -> list[str]:
             for kc in EXPLICIT_VALUES:
                 if getattr(listed, kc) is not None:
                     out += components(f"{p}.{kc}")
+            if listed.levelling is not None:
+                out += [f"{p}.{LEVELLING}.{key}" for key in LEVELLING_KEYS]
     for s in scene.stages:
         p = stage(s.name)
         out += [f"{p}.mass"] + components(f"{p}.home")

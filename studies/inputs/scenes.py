@@ -25,6 +25,7 @@ import numpy as np
 from isolab.engine import profiles
 from isolab.engine.results import AXES
 from isolab.engine.scene import GRAVITY, SceneBatch, SceneError
+from isolab.studies.inputs import mount_physics
 from isolab.studies.inputs.base_flexibility import flexible_base
 from isolab.studies.inputs.block import MAX_TRAVEL, beyond_travel, block_properties, travel_bound
 from isolab.studies.inputs.isolators import (
@@ -34,7 +35,6 @@ from isolab.studies.inputs.isolators import (
     load_share,
     stiffness_from_frequency,
 )
-from isolab.studies.inputs.mount_physics import apply_mount_physics
 from isolab.studies.inputs.parameters import check_leaf_values
 from isolab.studies.inputs.precision import point_signature, precision_inputs, servo_kind
 from isolab.studies.inputs.schema import (
@@ -122,7 +122,7 @@ def shape_signature(scene: Scene) -> tuple:
     elif scene.floor is not None and scene.floor.recorded is not None:
         rec = scene.floor.recorded
         floor = ("recorded", rec.dt, len(rec.displacement.samples()[0]))
-    return machine, mounts, tuple(stages), point_signature(scene), floor
+    return machine, mounts + mount_physics.valve_signature(iso), tuple(stages), point_signature(scene), floor
 
 
 class _Cases:
@@ -520,7 +520,7 @@ def build_batch(
     safe_load = np.where(load > 0.0, load, 0.0)[..., None]
     iso_k = _first_set(k_explicit, stiffness_from_frequency(safe_load, freq, g))
     iso_c = _first_set(c_explicit, damping_from_ratio(iso_k, safe_load, zeta[..., None], g))
-    iso_k, iso_c, iso_frame = apply_mount_physics(
+    iso_k, iso_c, iso_frame = mount_physics.apply_mount_physics(
         cases.each(lambda s: s.isolators), load, iso_k, iso_c, k_explicit, c_explicit, g
     )
     _fail(
@@ -646,7 +646,7 @@ def build_batch(
         preload_with_base="base" in preload,
         preload_balanced="balanced" in preload,
     )
-    batch = flexible_base(precision_inputs(batch, cases), cases)  # servos, relative points, elastic modes
+    batch = mount_physics.levelling_valves(flexible_base(precision_inputs(batch, cases), cases), cases)
     auto = np.isnan(duration)
     if auto.any():
         decay = slowest_decay_time(batch.take(np.flatnonzero(auto)))
@@ -685,7 +685,7 @@ def slowest_decay_time(batch: SceneBatch) -> np.ndarray:
     w = 2 * np.pi * md.frequency
     rate = md.damping_ratio * w
     tau = np.where((w > 0) & (rate > 0), 1.0 / np.where(rate > 0, rate, 1.0), 0.0)
-    return tau.max(axis=1)
+    return np.maximum(tau.max(axis=1), mount_physics.valve_time(batch))
 
 
 def _axis(values: object, axis: str) -> float | None:

@@ -30,6 +30,7 @@ from isolab.studies.inputs.schema.fields import (
     DampingRatio,
     InputModel,
     MountFrequency,
+    Name,
     NonNegativeDamping,
     NonNegativeStiffness,
     Position,
@@ -47,6 +48,7 @@ from isolab.studies.units import (
     Frequency,
     Length,
     Pressure,
+    Time,
     Viscosity,
     Volume,
 )
@@ -217,6 +219,23 @@ class AirSpring(InputModel):
         return self
 
 
+class Levelling(InputModel):
+    """An air mount's levelling (height-control) valve (docs/isolators.md, "Levelling valves"): it lets air
+    in or out at a rate proportional to the mounts' mean height error beyond ``dead_band``, bringing them
+    back to their set height within about ``time_constant``. Mounts that name the same ``valve`` are
+    plumbed to it (and must give it the same figures); at most three valves level a rigid base."""
+
+    time_constant: Annotated[
+        Time, Field(gt=0), within(0.05, 600.0, "time", "a levelling valve's, typically 1 to 10 s")
+    ] = Field(description="levelling time constant: the force's rate is the height error times k / this, s")
+    dead_band: Annotated[
+        Length, Field(ge=0), within(0.0, 0.01, "length", "a valve's dead band, up to 10 mm")
+    ] = Field(0.0, description="height error the valve ignores, m (0: none; a dead band needs rk4)")
+    valve: Name | None = Field(
+        None, description="the valve's name: mounts naming one share it (default: its own)"
+    )
+
+
 class Mount(InputModel):
     """One isolator of an explicit list. Its own values win over the group's: explicit ``k``/``c`` first,
     then its overrides, then its own ``preset``; without a preset of its own it takes the group's
@@ -240,6 +259,7 @@ class Mount(InputModel):
     )
     orientation: Orientation | None = Field(None, description="the mount's own axes (default: the floor's)")
     air: AirSpring | None = Field(None, description="an air spring from its physics (vertical, own z axis)")
+    levelling: Levelling | None = Field(None, description="an air mount's levelling valve (default: none)")
 
 
 class PresetTuning(InputModel):
@@ -290,6 +310,9 @@ class Isolators(InputModel):
     c: AxisDamping | None = None
     orientation: Orientation | None = Field(None, description="every mount's own axes (default: the floor's)")
     air: AirSpring | None = Field(None, description="every mount an air spring from its physics")
+    levelling: Levelling | None = Field(
+        None, description="every mount's levelling valve (a mount's own wins; without a valve name: one each)"
+    )
     layout: Layout | None = None
     mounts: list[Mount] | None = Field(None, alias="list", max_length=MAX_MOUNTS)
 

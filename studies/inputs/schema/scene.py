@@ -5,6 +5,11 @@ from __future__ import annotations
 
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
+from isolab.engine.linear_states.levelling import (
+    DEAD_BAND_INTEGRATORS,
+    LEVELLING_INTEGRATORS,
+    LEVELLING_LEVELS,
+)
 from isolab.studies.inputs.block import MAX_TRAVEL, beyond_travel, travel_bound
 from isolab.studies.inputs.schema.fields import (
     MAX_POINTS,
@@ -17,7 +22,13 @@ from isolab.studies.inputs.schema.fields import (
 from isolab.studies.inputs.schema.floor_motion import Floor
 from isolab.studies.inputs.schema.machine import Machine
 from isolab.studies.inputs.schema.mounts import Isolators
-from isolab.studies.inputs.schema.scene_paths import relative_point, stage_entry
+from isolab.studies.inputs.schema.scene_paths import (
+    LEVELLING,
+    isolator_group,
+    mount,
+    relative_point,
+    stage_entry,
+)
 from isolab.studies.inputs.schema.simulation import Simulation
 from isolab.studies.inputs.schema.stages import Stage, profile_excursion
 from isolab.studies.questions.criteria import Criteria
@@ -148,6 +159,49 @@ class Scene(InputModel):
                     )
             if ends.tool == ends.work:
                 raise ValueError(f"{relative_point(name)}: tool and work are both {ends.tool!r}")
+        return self
+
+    @model_validator(mode="after")
+    def _levelling_simulation(self) -> Scene:
+        """Levelling valves are stepped at lti and ltv by rk4 or exact, a dead band by rk4 alone."""
+        iso = self.isolators
+        blocks = [(f"{isolator_group(LEVELLING)}", iso.levelling)] + [
+            (f"{mount(j)}.{LEVELLING}", m.levelling) for j, m in enumerate(iso.listed)
+        ]
+        given = [(where, b) for where, b in blocks if b is not None]
+        if not given:
+            return self
+        sim = self.simulation
+        where = given[0][0]
+        if sim.request is not None:
+            key = "accuracy" if sim.accuracy is not None else "tolerance"
+            raise ValueError(
+                f"simulation.{key}: the accuracy chooser measures errors against the nonlinear level, which "
+                f"does not model levelling valves ({where}); choose the fidelity "
+                f"({' or '.join(LEVELLING_LEVELS)}) and the integrator ({' or '.join(LEVELLING_INTEGRATORS)})"
+            )
+        if sim.fidelity not in (None, *LEVELLING_LEVELS):
+            raise ValueError(
+                f"simulation.fidelity: levelling valves ({where}) are modelled at the "
+                f"{' and '.join(LEVELLING_LEVELS)} levels, not {sim.fidelity!r}"
+            )
+        if sim.integrator not in (None, *LEVELLING_INTEGRATORS):
+            raise ValueError(
+                f"simulation.integrator: levelling valves ({where}) are integrated by "
+                f"{' or '.join(LEVELLING_INTEGRATORS)}, not {sim.integrator!r}"
+            )
+        if self.floor is not None and (self.floor.sine is not None or self.floor.recorded is not None):
+            raise ValueError(
+                f"floor: levelling valves ({where}) are not modelled together with a floor motion in time "
+                "(sine or recorded) yet; give the floor as a spectrum, or leave the valves out"
+            )
+        banded = [w for w, b in given if b.dead_band > 0]
+        if banded and sim.integrator is not None and sim.integrator not in DEAD_BAND_INTEGRATORS:
+            raise ValueError(
+                f"{banded[0]}.dead_band: a dead band is a nonlinearity that the {sim.integrator!r} "
+                "integrator (linear maps) does not step; integrate with "
+                f"{' or '.join(DEAD_BAND_INTEGRATORS)}, or give a dead band of 0"
+            )
         return self
 
     def material_points(self) -> dict[str, tuple[float, float, float]]:

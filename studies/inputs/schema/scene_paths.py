@@ -68,6 +68,13 @@ def mount(j: int) -> str:
     return f"{ISOLATORS}.list.{j}"
 
 
+LEVELLING = "levelling"
+"""An air mount's levelling valve: ``isolators.levelling`` (every mount), ``isolators.list.<j>.levelling``
+(one mount)."""
+LEVELLING_KEYS = ("time_constant", "dead_band")
+"""The numbers of a levelling valve a study may vary (its ``valve`` name is structure)."""
+
+
 def stage(name: str) -> str:
     """The stage called ``name``: ``stages.<name>``."""
     return f"stages.{name}"
