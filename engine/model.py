@@ -12,6 +12,9 @@ from isolab.engine.kernels.cached_terms import CM_WIDTH
 from isolab.engine.kernels.feedforward import feedforward_transients
 from isolab.engine.kernels.params import Params, Work
 from isolab.engine.kernels.structs import kernel_struct
+from isolab.engine.linear_states.block import SlotBlock
+from isolab.engine.linear_states.flexible_base import flexible_base_block
+from isolab.engine.linear_states.servo import servo_block
 from isolab.engine.scene import SceneBatch
 
 
@@ -329,6 +332,7 @@ def point_rest_offsets(b: SceneBatch, offset: np.ndarray) -> np.ndarray:
     ``u + theta x p`` of the static ``offset`` (..., C, 6) (m, rad; ``theta`` a rotation vector):
     ``(R - I) p - theta x p`` (..., C, p, 3), m, second order in the rotation."""
     _, _, pts = relative_geometry(b)
+    pts = np.where((np.asarray(b.point_relative) == 0)[..., None], pts, 0.0)  # a relative point: no arm
     q = np.asarray(offset, dtype=float)
     flat = q.reshape(-1, q.shape[-2], 6)
     out = np.zeros(flat.shape[:2] + (b.n_points, 3))
@@ -353,6 +357,78 @@ def feedforward_distribution(b: SceneBatch) -> np.ndarray:
     B *= on[:, None, :, None]
     D = np.linalg.pinv(B.reshape(C, 6, 3 * n), rcond=1e-12)  # (C, 3n, 6)
     return D.reshape(C, n, 3, 6)
+
+
+SLOT_MODELS = (flexible_base_block, servo_block)
+"""The models of the extra linear states, in the order of their blocks in ``z``: each a function of the
+batch that returns its ``SlotBlock`` or None when the scene does not use it."""
+
+
+def linear_slot(b: SceneBatch) -> SlotBlock:
+    """Every model's block of the extra linear states, joined block-diagonally (``nz = 0`` when the scene
+    uses none: the kernels then run exactly as without them)."""
+    blocks = [blk for blk in (model(b) for model in SLOT_MODELS) if blk is not None]
+    C, m, n, p = b.n_cases, b.n_stages, b.n_isolators, b.n_points
+    nz = sum(blk.A.shape[1] for blk in blocks)
+    A = np.zeros((C, nz, nz))
+    X = np.zeros((C, nz, 12))
+    Q = np.zeros((C, nz, 6))
+    S = np.zeros((C, nz, m))
+    G = np.zeros((C, 6, nz))
+    O = np.zeros((C, 2, nz, 3 * p + 3 * n))
+    B = np.zeros((C, 6, nz)) if any(blk.B is not None for blk in blocks) else None
+    at = 0
+    for blk in blocks:
+        z = slice(at, at + blk.A.shape[1])
+        A[:, z, z] = blk.A
+        X[:, z] = blk.X
+        Q[:, z] = blk.Q
+        S[:, z] = blk.S
+        G[:, :, z] = blk.G
+        O[:, :, z] = blk.O
+        if blk.B is not None and B is not None:
+            B[:, :, z] = blk.B
+        at = z.stop
+    return SlotBlock(A, X, Q, S, G, O, B)
+
+
+def slot_static(
+    b: SceneBatch, fidelity: str, q0: np.ndarray, rho: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The static state with the extra linear states (C, 6) and (C, nz): the rigid static offset ``q0``
+    (C, 6) (:func:`static_offset`, stages at ``rho``) corrected for the states' coupling, from ``K q - G z
+    = K q0`` and ``A z + X[:, :, :6] q = 0`` (every rate and acceleration zero)."""
+    slot = linear_slot(b)
+    nz = slot.A.shape[1]
+    if nz == 0:
+        return q0, np.zeros((b.n_cases, 0))
+    rho_f = final_positions(b) if rho is None else rho
+    K = stiffness_matrix(b, None if fidelity == "lti" else rho_f)
+    C = b.n_cases
+    L = np.zeros((C, 6 + nz, 6 + nz))
+    L[:, :6, :6] = K
+    L[:, :6, 6:] = -slot.G
+    L[:, 6:, :6] = slot.X[:, :, :6]
+    L[:, 6:, 6:] = slot.A
+    rhs = np.zeros((C, 6 + nz))
+    rhs[:, :6] = np.einsum("cij,cj->ci", K, q0)
+    sol = np.einsum("cij,cj->ci", np.linalg.pinv(L), rhs)
+    return sol[:, :6], sol[:, 6:]
+
+
+def slot_state_matrix(P: Params) -> np.ndarray:
+    """The LTI level's state matrix with the extra linear states (C, 12 + nz, 12 + nz), 1/s: ``x' = A x``
+    without forcing (for the stability guard and the fastest mode)."""
+    C, nz = P.zA.shape[0], P.zA.shape[1]
+    A = np.zeros((C, 12 + nz, 12 + nz))
+    A[:, :6, 6:12] = np.eye(6)
+    A[:, 6:12, :6] = P.a21
+    A[:, 6:12, 6:12] = P.a22
+    A[:, 6:12, 12:] = P.zM
+    A[:, 12:, :12] = P.zX
+    A[:, 12:, 12:] = P.zA
+    A[:, 12:, :] += P.zQ @ A[:, 6:12, :]
+    return A
 
 
 def params(b: SceneBatch) -> Params:
@@ -387,6 +463,18 @@ def _params(b: SceneBatch) -> Params:
     ffon = bool(b.has_feedforward and b.n_stages)
     n = b.n_isolators
     fftb = _feedforward_breakpoints(b) if ffon else np.full((b.n_cases, 1), np.inf)
+    slot = linear_slot(b)
+    a21, a22, zG, sM = -minv @ K, -minv @ Cm, slot.G, np.zeros((b.n_cases, 6, 0))
+    if slot.B is not None:
+        # states that carry inertia the base no longer does (a servo stage): M acc = f + G z + B z' with
+        # z' = A z + X x + Q acc + S s'' folds into (M - B Q) acc = f + (G + B A) z + B X x + B S s''
+        minv = np.linalg.inv(M - slot.B @ slot.Q)
+        BX = slot.B @ slot.X
+        a21 = minv @ (-K + BX[:, :, :6])
+        a22 = minv @ (-Cm + BX[:, :, 6:])
+        zG = slot.G + slot.B @ slot.A
+        sM = minv @ (slot.B @ slot.S)
+    pr = np.asarray(b.point_relative) == 0
     return Params(
         mass=f64(b.mass, dtype=float),
         mtot=f64(b.mass + b.stage_mass.sum(axis=1), dtype=float),
@@ -407,14 +495,14 @@ def _params(b: SceneBatch) -> Params:
         pv=f64(b.prof_v, dtype=float),
         pa=f64(b.prof_a, dtype=float),
         pj=f64(b.prof_j, dtype=float),
-        pts=f64(pts),
+        pts=f64(np.where(pr[..., None], pts, 0.0)),
         famp=f64(b.floor_amp, dtype=float),
         fomega=f64(2 * np.pi * np.asarray(b.floor_freq, dtype=float)),
         fphase=f64(b.floor_phase, dtype=float),
         ft=f64(b.floor_t, dtype=float),
         fd=f64(b.floor_disp, dtype=float),
-        a21=f64(-minv @ K),
-        a22=f64(-minv @ Cm),
+        a21=f64(a21),
+        a22=f64(a22),
         minv=f64(minv),
         g=float(b.g),
         gstiff=bool(b.gravity_stiffness),
@@ -429,6 +517,15 @@ def _params(b: SceneBatch) -> Params:
         pbase=2 if b.preload_balanced else int(bool(b.preload_with_base)),
         orient=b.has_orientation,
         qm=f64(b.iso_frame, dtype=float),
+        zA=f64(slot.A),
+        zX=f64(slot.X),
+        zQ=f64(slot.Q),
+        zS=f64(slot.S),
+        zG=f64(zG),
+        zM=f64(minv @ zG),
+        sM=f64(sM),
+        zO=f64(slot.O),
+        pr=f64(pr, dtype=float),
     )
 
 
@@ -459,6 +556,6 @@ def work(b: SceneBatch) -> Work:
         cc=np.concatenate([[-1.0], np.zeros(24)]),
         cs=np.zeros((m, 8 + 5 * b.prof_t.shape[-1])),
         cm=np.zeros((n, CM_WIDTH + (9 if b.has_orientation else 0))),
-        cK=np.zeros((12, 6)),
+        cK=np.zeros((12 + linear_slot(b).A.shape[1], 6)),
         sw=np.zeros((m, 9)),
     )

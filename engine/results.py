@@ -136,7 +136,8 @@ class SimulationResult:
     A case whose ``status`` is not OK has NaN in ``peak_displacement``, ``peak_rotation``,
     ``peak_point_displacement``, ``peak_isolator_force``, ``min_isolator_load``, ``rms_displacement``,
     ``final_displacement``, ``settling_time``, ``point_settling_time``, ``peak_isolator_deflection``,
-    ``max_isolator_load`` and ``transmissibility``, and ``settled`` False. What does
+    ``max_isolator_load``, ``transmissibility`` and ``peak_following_error`` (``stage_following_error``),
+    and ``settled`` False. What does
     not depend on integrating its motion stays filled: ``dt`` (the step it was or would have been run
     with), ``static_isolator_load`` and the modal analysis (``natural_frequency``, ``damping_ratio``,
     ``mode_energy``, ``mechanism``), so an unstable or tipping case still shows its modes and preloads.
@@ -319,9 +320,21 @@ class SimulationResult:
             "floor spectrum)",
         ),
     )
+    peak_following_error: np.ndarray | None = field(
+        default=None,
+        metadata=_output(
+            unit="m",
+            long_name="peak following error of the stages on a servo, worst over them (0 without one)",
+        ),
+    )
+    stage_following_error: np.ndarray | None = field(default=None)
+    """(C, m) each stage's peak following error, m (0 for a stage that follows its profile exactly); the
+    stored output is the worst of them, ``peak_following_error``."""
     history: dict[str, np.ndarray] | None = field(default=None)
 
     def __post_init__(self) -> None:
+        if self.peak_following_error is None:
+            self.peak_following_error = np.zeros(np.shape(self.status)[0])
         # a result assembled without the floor-spectrum outputs has none: zeros (no floor spectrum)
         for name in ("floor_point_velocity", "floor_point_velocity_band"):
             if getattr(self, name) is None:

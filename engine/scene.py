@@ -89,6 +89,26 @@ class SceneBatch:
         iso_frame: (C, n, 3, 3) each mount's own axes in the floor frame (columns: the mount's x, y, z; a
             rotation). ``iso_k`` and ``iso_c`` act along these axes, so the mount's stiffness in the floor
             frame is ``Q diag(k) Q^T``. Default: the identity (the floor's axes).
+        base_mode_frequency: (C, k) the base's elastic modes' free-free natural frequencies, Hz (k = 0, the
+            default: a rigid base; docs/physics.md, "A flexible base").
+        base_mode_damping: (C, k) their modal damping ratios.
+        base_mode_mass: (C, k) their modal masses, kg (the shapes' scale: ``m_k = int rho |phi_k|^2 dV``).
+        base_mode_iso: (C, n, 3, k) each mode's shape at the mounts' points of action (displacement per unit
+            modal coordinate, floor axes).
+        base_mode_stage: (C, m, 3, k) at the stages' homes (where their reactions enter the base).
+        base_mode_point: (C, p, 3, k) at the points of interest (of a relative point: at its tool minus at
+            its work).
+        stage_servo_frequency: (C, m) the natural frequency of each stage's following error under its
+            servo, Hz (0, the default: the stage follows its profile exactly; docs/physics.md, "Servo
+            stages"). A stage is on a servo in every case of a batch or in none.
+        stage_servo_damping: (C, m) the damping ratio of that error, 1.
+        point_relative: (C, p) int8: 0 a material point of the base (the default); 1 a relative point, the
+            motion of a tool relative to a work point as the process sees it (in the machine's frame, minus
+            the commanded relative motion: docs/physics.md, "Relative points"); 2 a stage's following error
+            (added by ``simulate`` for each servo stage, read along X).
+        point_tool_stage: (C, p) int64: the stage a relative point's tool rides on (-1: the base); for a
+            following-error point, its stage.
+        point_work_stage: (C, p) int64: the stage its work point rides on (-1: the base).
     """
 
     mass: np.ndarray
@@ -129,6 +149,17 @@ class SceneBatch:
     preload_with_base: bool = False
     preload_balanced: bool = False
     iso_frame: np.ndarray | None = None
+    base_mode_frequency: np.ndarray | None = None
+    base_mode_damping: np.ndarray | None = None
+    base_mode_mass: np.ndarray | None = None
+    base_mode_iso: np.ndarray | None = None
+    base_mode_stage: np.ndarray | None = None
+    base_mode_point: np.ndarray | None = None
+    stage_servo_frequency: np.ndarray | None = None
+    stage_servo_damping: np.ndarray | None = None
+    point_relative: np.ndarray | None = None
+    point_tool_stage: np.ndarray | None = None
+    point_work_stage: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         c = np.shape(self.mass)[0] if np.ndim(self.mass) else 1
@@ -157,6 +188,55 @@ class SceneBatch:
             tol = np.asarray(self.settle_tol, dtype=float)
             p = np.shape(self.points)[1] if np.ndim(self.points) == 3 else 0
             self.point_settle_tol = np.repeat(tol.reshape(-1, 1), p, axis=1)
+        self._base_mode_defaults(c, n)
+        self._servo_defaults(c)
+
+    def _servo_defaults(self, c: int) -> None:
+        """Every stage following its profile exactly and every point a material point, unless the scene
+        says otherwise."""
+        m = np.shape(self.stage_mass)[1] if np.ndim(self.stage_mass) == 2 else 0
+        p = np.shape(self.points)[1] if np.ndim(self.points) == 3 else 0
+        for name, value in (
+            ("stage_servo_frequency", np.zeros((c, m))),
+            ("stage_servo_damping", np.zeros((c, m))),
+            ("point_relative", np.zeros((c, p), dtype=np.int8)),
+            ("point_tool_stage", np.full((c, p), -1, dtype=np.int64)),
+            ("point_work_stage", np.full((c, p), -1, dtype=np.int64)),
+        ):
+            if getattr(self, name) is None:
+                setattr(self, name, value)
+
+    @property
+    def servo_stages(self) -> np.ndarray:
+        """The indices of the stages on a servo (``stage_servo_frequency`` > 0), ascending."""
+        f = np.asarray(self.stage_servo_frequency, dtype=float)
+        return np.flatnonzero((f > 0).any(axis=0)) if f.ndim == 2 else np.zeros(0, dtype=np.int64)
+
+    @property
+    def has_relative_points(self) -> bool:
+        """True when some point of interest is not a material point of the base."""
+        return bool(np.any(np.asarray(self.point_relative) != 0))
+
+    def _base_mode_defaults(self, c: int, n: int) -> None:
+        """A rigid base (no elastic mode) unless the scene gives one."""
+        k = np.shape(self.base_mode_frequency)[1] if self.base_mode_frequency is not None else 0
+        m = np.shape(self.stage_mass)[1] if np.ndim(self.stage_mass) == 2 else 0
+        p = np.shape(self.points)[1] if np.ndim(self.points) == 3 else 0
+        for name, shape in (
+            ("base_mode_frequency", (c, k)),
+            ("base_mode_damping", (c, k)),
+            ("base_mode_mass", (c, k)),
+            ("base_mode_iso", (c, n, 3, k)),
+            ("base_mode_stage", (c, m, 3, k)),
+            ("base_mode_point", (c, p, 3, k)),
+        ):
+            if getattr(self, name) is None:
+                setattr(self, name, np.zeros(shape) if name != "base_mode_mass" else np.ones(shape))
+
+    @property
+    def n_base_modes(self) -> int:
+        """The number of the base's elastic modes (0: rigid)."""
+        return int(np.asarray(self.base_mode_frequency).shape[1])
 
     @property
     def has_floor_spectrum(self) -> bool:

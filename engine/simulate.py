@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from isolab.engine import frequency, modal, model, stability
@@ -84,6 +86,92 @@ def _divergence_cause(integrator: str, step: float) -> str:
     )
 
 
+SLOT_LEVELS = ("lti", "ltv")
+"""The levels that model the extra linear states (a flexible base)."""
+SLOT_INTEGRATORS = ("rk4", "exact")
+"""The integrators that step them."""
+
+
+def check_slot(batch: SceneBatch, fidelity: str, integrator: str) -> None:
+    """Refuse a flexible base (``base_mode_*``) where it is not modelled, naming the input and the levels
+    and integrators that model it."""
+    if batch.n_base_modes == 0:
+        return
+    field = "base_mode_frequency"
+    if fidelity not in SLOT_LEVELS:
+        raise SceneError(
+            field,
+            f"a flexible base is modelled at the {' and '.join(SLOT_LEVELS)} levels, not {fidelity!r}; "
+            "choose one of them or a rigid base",
+        )
+    if integrator not in SLOT_INTEGRATORS:
+        raise SceneError(
+            field, f"a flexible base is integrated by {' or '.join(SLOT_INTEGRATORS)}, not {integrator!r}"
+        )
+    for name, used in (
+        ("floor", batch.has_floor_motion or batch.has_floor_spectrum),
+        ("iso_ff_gain", batch.has_feedforward),
+        ("iso_frame", batch.has_orientation),
+    ):
+        if used:
+            raise SceneError(field, f"a flexible base is not modelled together with {name} (not yet)")
+
+
+SERVO_LEVELS = ("lti",)
+"""The levels that model a stage on a servo (its mass along the axis leaves the base's mass matrix, which
+only the LTI level keeps constant)."""
+
+
+def check_servo(batch: SceneBatch, fidelity: str, integrator: str) -> None:
+    """Refuse a stage on a servo (``stage_servo_frequency``) where it is not modelled, naming the input and
+    the levels and integrators that model it."""
+    if not len(batch.servo_stages):
+        return
+    field = "stage_servo_frequency"
+    if fidelity not in SERVO_LEVELS:
+        raise SceneError(
+            field,
+            f"a stage on a servo is modelled at the {' and '.join(SERVO_LEVELS)} level, not {fidelity!r} "
+            "(its mass along the axis leaves the base's mass matrix, which the time-varying levels "
+            "rebuild as the stages travel); choose lti, or stages that follow their profiles exactly",
+        )
+    if integrator not in SLOT_INTEGRATORS:
+        raise SceneError(
+            field, f"a stage on a servo is integrated by {' or '.join(SLOT_INTEGRATORS)}, not {integrator!r}"
+        )
+    for name, used in (
+        ("a flexible base", batch.n_base_modes > 0),
+        ("iso_ff_gain", batch.has_feedforward),
+    ):
+        if used:
+            raise SceneError(field, f"a stage on a servo is not modelled together with {name} (not yet)")
+
+
+def with_following_errors(batch: SceneBatch) -> SceneBatch:
+    """``batch`` with one more point of interest per stage on a servo: its following error, read along X
+    (``SceneBatch.point_relative`` 2), so that its peak and settling come with the points'. ``batch``
+    itself when no stage is on a servo."""
+    servo = batch.servo_stages
+    s = len(servo)
+    if s == 0:
+        return batch
+    C = batch.n_cases
+
+    def more(a: np.ndarray | None, extra: np.ndarray) -> np.ndarray:
+        return np.concatenate([np.asarray(a), extra.astype(np.asarray(a).dtype)], axis=1)
+
+    k = batch.n_base_modes
+    return replace(
+        batch,
+        points=more(batch.points, np.zeros((C, s, 3))),
+        point_settle_tol=more(batch.point_settle_tol, np.repeat(np.asarray(batch.settle_tol)[:, None], s, 1)),
+        base_mode_point=more(batch.base_mode_point, np.zeros((C, s, 3, k))),
+        point_relative=more(batch.point_relative, np.full((C, s), 2)),
+        point_tool_stage=more(batch.point_tool_stage, np.broadcast_to(servo, (C, s)).copy()),
+        point_work_stage=more(batch.point_work_stage, np.full((C, s), -1)),
+    )
+
+
 def simulate(
     batch: SceneBatch,
     fidelity: str = "ltv",
@@ -113,6 +201,11 @@ def simulate(
     if not (np.isfinite(dt) and dt > 0):
         raise SceneError("dt", f"must be a positive, finite step in s, got {dt!r}")
     validate(batch)
+    check_slot(batch, fidelity, integrator)
+    check_servo(batch, fidelity, integrator)
+    given = batch
+    p_given = batch.n_points
+    batch = with_following_errors(batch)
     C = batch.n_cases
     if record:
         bad = [r for r in record if not 0 <= r < C]
@@ -152,8 +245,10 @@ def simulate(
     steps = np.full(C, float(dt))
     n_div = np.ones(C, dtype=np.int64)
     method = INTEGRATORS[integrator]
+    nz = P.zA.shape[1]
+    A0 = model.slot_state_matrix(P) if nz else modal.state_matrix(M0, K0, C0)
     if method.guarded:
-        n_div = stability.subdivisions(modal.state_matrix(M0, K0, C0), dt, method.step_matrix)
+        n_div = stability.subdivisions(A0, dt, method.step_matrix)
         for M, K in placed:
             more = stability.subdivisions(modal.state_matrix(M, K, C0), dt, method.step_matrix)
             n_div = np.where((n_div == 0) | (more == 0), 0, np.maximum(n_div, more))
@@ -185,6 +280,28 @@ def simulate(
 
     target = model.static_offset(batch, fidelity)
     rest, rest_n, rest_target = model.rest_offsets(batch, fidelity)
+    slot_run: dict[str, np.ndarray] = {}
+    point_offset = rest_point_offset = None
+    fastest_hz = np.asarray(md.frequency).max(axis=1)
+    if nz:
+        target, z_end = model.slot_static(batch, fidelity, target)
+        z_rest = np.zeros(rest_target.shape[:2] + (nz,))
+        for k in range(rest_target.shape[1]):
+            has = rest_n > k
+            when = np.where(
+                has, np.where(np.isfinite(rest[:, k, 1]), 0.5 * (rest[:, k, 0] + rest[:, k, 1]), 0.0), 0.0
+            )
+            rho = model.placed_positions(batch, model.positions_at(batch, when))
+            q, z = model.slot_static(batch, fidelity, rest_target[:, k], rho)
+            rest_target[has, k] = q[has]
+            z_rest[has, k] = z[has]
+        slot_run = {"slot_target": z_end, "slot_rest_target": z_rest}
+        p3 = 3 * batch.n_points
+        point_offset = np.einsum("czr,cz->cr", P.zO[:, 0, :, :p3], z_end).reshape(C, -1, 3)
+        rest_point_offset = np.einsum("czr,ckz->ckr", P.zO[:, 0, :, :p3], z_rest).reshape(
+            C, rest_target.shape[1], -1, 3
+        )
+        fastest_hz = np.maximum(fastest_hz, np.abs(np.linalg.eigvals(A0)).max(axis=1) / (2.0 * np.pi))
     O = peaks.allocate(
         C,
         batch.n_points,
@@ -199,13 +316,14 @@ def simulate(
         rest_target=rest_target,
         point_tol=batch.point_settle_tol,
         # a peak between output times is interpolated over intervals of at most 1/omega of the fastest mode
-        h_interp=1.0 / (2.0 * np.pi * np.maximum(np.asarray(md.frequency).max(axis=1), 1e-300)),
-        # the nonlinear level's rest of a point is u + (R - I) p, not the linearised u + theta x p
-        point_offset=model.point_rest_offsets(batch, target) if fidelity == "nonlinear" else None,
+        h_interp=1.0 / (2.0 * np.pi * np.maximum(fastest_hz, 1e-300)),
+        # the nonlinear level's rest of a point is u + (R - I) p, not the linearised u + theta x p (with
+        # extra linear states, what they add at rest)
+        point_offset=model.point_rest_offsets(batch, target) if fidelity == "nonlinear" else point_offset,
         rest_point_offset=(
             np.moveaxis(model.point_rest_offsets(batch, np.moveaxis(rest_target, 1, 0)), 0, 1)
             if fidelity == "nonlinear"
-            else None
+            else rest_point_offset
         ),
     )
     sampled = sampled_peak_message(steps, np.asarray(O.h_interp))
@@ -214,7 +332,7 @@ def simulate(
             message[c] = f"{message[c]}; {sampled[c]}" if message[c] else sampled[c]
     W = model.work(batch)
     run_status = status.copy()
-    method.run(P, level, steps, n_steps, O, W, run_status, messages=message)
+    method.run(P, level, steps, n_steps, O, W, run_status, messages=message, **slot_run)
     for c in range(C):
         if status[c] != OK:
             continue
@@ -246,12 +364,15 @@ def simulate(
         T = np.zeros((C, 3))
 
     # steady-state response to the floor spectrum: no stepping, so every case but a tipping one has it
-    fpv = np.zeros((C, batch.n_points, 3))
-    fpb = np.zeros((C, batch.n_points, 3))
+    fpv = np.zeros((C, p_given, 3))
+    fpb = np.zeros((C, p_given, 3))
     if batch.has_floor_spectrum:
-        bands = frequency.batch_point_band_velocity(batch, matrices=(M0, K0, C0), modes=md)
+        bands = frequency.batch_point_band_velocity(given, matrices=(M0, K0, C0), modes=md)
         bands[status == TIPPING] = np.nan
         fpv, fpb = frequency.worst_band(bands)
+        relative = np.asarray(given.point_relative) != 0  # the floor moves tool and work together
+        fpv[relative] = 0.0
+        fpb[relative] = 0.0
 
     bad = status != OK
     nan = np.nan
@@ -268,17 +389,19 @@ def simulate(
             "time": O.h_t,
             "displacement": O.h_u,
             "rotation": O.h_th,
-            "point_displacement": O.h_poi,
+            "point_displacement": O.h_poi[:, :, :p_given],
             "isolator_force": O.h_force,
             "n_samples": n_steps[list(record)] + 1,
         }
+    errors = np.zeros((C, batch.n_stages))
+    errors[:, batch.servo_stages] = O.poi[:, p_given:, 0]
     return SimulationResult(
         status=status,
         message=message,
         dt=np.asarray(steps, dtype=float),
         peak_displacement=per_case(O.u),
         peak_rotation=per_case(O.th),
-        peak_point_displacement=per_case(O.poi),
+        peak_point_displacement=per_case(O.poi[:, :p_given]),
         peak_isolator_force=per_case(O.force),
         static_isolator_load=np.array(P.f0),
         min_isolator_load=per_case(O.min_load),
@@ -286,7 +409,7 @@ def simulate(
         final_displacement=per_case(target),
         settling_time=per_case(settling),
         settled=np.where(bad, False, settled),
-        point_settling_time=per_case(point_settling),
+        point_settling_time=per_case(point_settling[:, :p_given]),
         peak_isolator_deflection=per_case(O.defl),
         max_isolator_load=per_case(O.max_load),
         natural_frequency=np.array(md.frequency),
@@ -296,5 +419,7 @@ def simulate(
         transmissibility=per_case(T),
         floor_point_velocity=fpv,
         floor_point_velocity_band=fpb,
+        peak_following_error=per_case(errors.max(axis=1) if batch.n_stages else np.zeros(C)),
+        stage_following_error=per_case(errors),
         history=history,
     )

@@ -150,6 +150,7 @@ def validate(b: SceneBatch) -> None:
                 )
         if (np.diff(b.prof_t, axis=-1) < 0).any():
             raise SceneError("prof_t", "piece start times must not decrease")
+    _check_servo_and_relative(b)
     if (np.asarray(b.duration) <= 0).any():
         raise SceneError("duration", "must be positive")
     if (np.asarray(b.settle_tol) <= 0).any():
@@ -170,3 +171,43 @@ def validate(b: SceneBatch) -> None:
             raise SceneError("floor_disp", f"shape {disp.shape}, expected {(C, 3, len(b.floor_t))}")
         if (np.diff(b.floor_t) <= 0).any():
             raise SceneError("floor_t", "sample times must increase")
+
+
+def _check_servo_and_relative(b: SceneBatch) -> None:
+    """The servo stages' figures and the relative points' stages."""
+    C, m, p = b.n_cases, b.n_stages, b.n_points
+    for name, shape in (
+        ("stage_servo_frequency", (C, m)),
+        ("stage_servo_damping", (C, m)),
+        ("point_relative", (C, p)),
+        ("point_tool_stage", (C, p)),
+        ("point_work_stage", (C, p)),
+    ):
+        if np.shape(getattr(b, name)) != shape:
+            raise SceneError(name, f"shape {np.shape(getattr(b, name))}, expected {shape}")
+    f = np.asarray(b.stage_servo_frequency, dtype=float)
+    z = np.asarray(b.stage_servo_damping, dtype=float)
+    if not (np.isfinite(f).all() and (f >= 0).all()):
+        raise SceneError(
+            "stage_servo_frequency", "must be finite and not negative" + _case(~(f >= 0).all(axis=1))
+        )
+    mixed = (f > 0).any(axis=0) & ~(f > 0).all(axis=0)
+    if mixed.any():
+        raise SceneError(
+            "stage_servo_frequency",
+            f"stage {int(np.flatnonzero(mixed)[0])} is on a servo in some cases and not in others; give "
+            "every case a positive frequency or none",
+        )
+    if not (np.isfinite(z).all() and (z >= 0).all()):
+        raise SceneError(
+            "stage_servo_damping", "must be finite and not negative" + _case(~(z >= 0).all(axis=1))
+        )
+    kind = np.asarray(b.point_relative)
+    if not np.isin(kind, (0, 1, 2)).all():
+        raise SceneError(
+            "point_relative", "must be 0 (a material point), 1 (relative) or 2 (following error)"
+        )
+    for name in ("point_tool_stage", "point_work_stage"):
+        s = np.asarray(getattr(b, name))
+        if ((s < -1) | (s >= m)).any():
+            raise SceneError(name, f"a stage index must be -1 (the base) or 0..{m - 1}")

@@ -53,25 +53,41 @@ def _polynomial_degree(P: Params) -> int:
     return 0
 
 
+def base_rows(P: Params) -> int:
+    """Rows of the state the step maps advance: the base's 12 and the extra linear states' ``nz``
+    (``Params.zA``)."""
+    return 12 + P.zA.shape[1]
+
+
+def stage_rows(P: Params) -> int:
+    """Entries of the stages' accelerations along their axes and their jerks carried in the augmented
+    state (``2 m``) when extra linear states take them as forcing, else 0."""
+    return 2 * P.sm.shape[1] if P.zA.shape[1] else 0
+
+
 def augmented(P: Params) -> tuple[np.ndarray, int, int]:
     """The augmented continuous-time matrix (C, N, N), the forcing degree, and the oscillator flag.
 
-    Layout: ``[x (12), F0..F_deg (6 each), sine-floor oscillator (6, optional)]``.
+    Layout: ``[x (12), z (nz), F0..F_deg (6 each), stage accelerations and jerks (m each, with z only),
+    sine-floor oscillator (6, optional)]``. The extra linear states (``Params.zA`` ...) enter as
+    ``z' = zA z + zX x + zQ acc + zS s''`` and add ``zM z + sM s''`` to the base's accelerations.
     """
     C = P.mass.shape[0]
     deg = _degree(P)
     osc = int(np.any(P.famp != 0.0))
     nF = 6 * (deg + 1)
-    N = 12 + nF + 6 * osc
+    nb = base_rows(P)
+    nA = stage_rows(P)
+    N = nb + nF + nA + 6 * osc
     Z = np.zeros((C, N, N))
     Z[:, :6, 6:12] = np.eye(6)
     Z[:, 6:12, :6] = P.a21
     Z[:, 6:12, 6:12] = P.a22
-    Z[:, 6:12, 12:18] = P.minv
+    Z[:, 6:12, nb : nb + 6] = P.minv
     for q in range(deg):
-        Z[:, 12 + 6 * q : 18 + 6 * q, 18 + 6 * q : 24 + 6 * q] = np.eye(6)
+        Z[:, nb + 6 * q : nb + 6 + 6 * q, nb + 6 + 6 * q : nb + 12 + 6 * q] = np.eye(6)
     if osc:
-        o = 12 + nF
+        o = nb + nF + nA
         # generalised force of the floor: per axis a, K_a amp_a sin + C'_a amp_a w_a cos
         Bf = np.zeros((C, 6, 6))
         rel = 1.0 - P.sky
@@ -88,6 +104,17 @@ def augmented(P: Params) -> tuple[np.ndarray, int, int]:
             w = P.fomega[:, a]
             Z[:, o + 2 * a, o + 2 * a + 1] = w
             Z[:, o + 2 * a + 1, o + 2 * a] = -w
+    if nb > 12:
+        m = P.sm.shape[1]
+        a = nb + nF  # the stages' accelerations, then their jerks
+        Z[:, a : a + m, a + m : a + 2 * m] = np.eye(m)
+        Z[:, 6:12, 12:nb] = P.zM
+        if P.sM.shape[2]:
+            Z[:, 6:12, a : a + m] += P.sM
+        Z[:, 12:nb, 12:nb] += P.zA
+        Z[:, 12:nb, :12] += P.zX
+        Z[:, 12:nb, a : a + m] += P.zS
+        Z[:, 12:nb, :] += P.zQ @ Z[:, 6:12, :]  # the base's accelerations are linear in the same
     return Z, deg, osc
 
 
@@ -100,30 +127,32 @@ def _expm(Z: np.ndarray, h: np.ndarray) -> np.ndarray:
     return scipy.linalg.expm(A.reshape(-1, N, N)).reshape(A.shape)  # one flat batch: much faster than nd
 
 
-def _top(E: np.ndarray) -> np.ndarray:
-    """The rows of a step map that advance the base's state, transposed for the kernel: (..., N, 12)."""
-    return np.ascontiguousarray(np.swapaxes(E[..., :12, :], -1, -2))
+def _top(E: np.ndarray, nb: int = 12) -> np.ndarray:
+    """The rows of a step map that advance the state (the base's 12 and ``nb - 12`` extra linear states),
+    transposed for the kernel: (..., N, nb)."""
+    return np.ascontiguousarray(np.swapaxes(E[..., :nb, :], -1, -2))
 
 
-def step_maps(Z: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """The rows of ``expm(Z h)`` that advance the base's state, transposed: (..., N, 12). ``h`` broadcasts
-    over cases."""
-    return _top(_expm(Z, h))
+def step_maps(Z: np.ndarray, h: np.ndarray, nb: int = 12) -> np.ndarray:
+    """The rows of ``expm(Z h)`` that advance the state (``nb`` rows), transposed: (..., N, nb). ``h``
+    broadcasts over cases."""
+    return _top(_expm(Z, h), nb)
 
 
-def _rest_of_step(E_full: np.ndarray, E_before: np.ndarray) -> np.ndarray:
+def _rest_of_step(E_full: np.ndarray, E_before: np.ndarray, nb: int = 12) -> np.ndarray:
     """``expm(Z (h - b)) = expm(Z h) expm(Z b)^-1`` from the full step's map (C, N, N) and the maps of
     its first parts ``b`` (C, E, N, N): one block-triangular inverse instead of a second exponential.
 
     The augmented matrix is block upper triangular, ``[[A, G], [0, J]]``, and so are its exponentials:
-    ``[[P, Q], [0, S]]^-1 = [[P^-1, -P^-1 Q S^-1], [0, S^-1]]`` with ``P`` (12, 12) the base's own map."""
-    P_inv = np.linalg.inv(E_before[..., :12, :12])
-    S_inv = np.linalg.inv(E_before[..., 12:, 12:])
+    ``[[P, Q], [0, S]]^-1 = [[P^-1, -P^-1 Q S^-1], [0, S^-1]]`` with ``P`` (nb, nb) the state's own map
+    (the base's 12 rows and the extra linear states')."""
+    P_inv = np.linalg.inv(E_before[..., :nb, :nb])
+    S_inv = np.linalg.inv(E_before[..., nb:, nb:])
     inv = np.zeros_like(E_before)
-    inv[..., :12, :12] = P_inv
-    inv[..., :12, 12:] = -P_inv @ E_before[..., :12, 12:] @ S_inv
-    inv[..., 12:, 12:] = S_inv
-    return E_full[:, None, :12, :] @ inv
+    inv[..., :nb, :nb] = P_inv
+    inv[..., :nb, nb:] = -P_inv @ E_before[..., :nb, nb:] @ S_inv
+    inv[..., nb:, nb:] = S_inv
+    return E_full[:, None, :nb, :] @ inv
 
 
 def breakpoints(P: Params, dt: np.ndarray, duration: np.ndarray) -> np.ndarray:
@@ -186,24 +215,28 @@ def prepare(
     s_a = np.zeros((C, E, N0, 12))
     a21, a22, minv = (np.ascontiguousarray(a, dtype=float) for a in (P.a21, P.a22, P.minv))
     h = np.asarray(dt, dtype=float)
-    structured_maps(a21, a22, minv, deg, h, before, offset, n_events, s_full, s_b, s_a)
-    if not osc:
+    nb = base_rows(P)
+    if nb == 12:
+        structured_maps(a21, a22, minv, deg, h, before, offset, n_events, s_full, s_b, s_a)
+    if not osc and nb == 12:
         return s_full, ev, s_b, s_a, deg, osc
-    # a case with a sine floor: scipy's dense expm of the augmented matrix with the oscillator
+    # a case with a sine floor or extra linear states: scipy's dense expm of the augmented matrix
     Z, deg, osc = augmented(P)
     E_full = _expm(Z, dt)
-    full = _top(E_full)
+    full = _top(E_full, nb)
     N = Z.shape[-1]
-    sub_b = np.empty((C, E, N, 12))
-    sub_a = np.empty((C, E, N, 12))
+    sub_b = np.empty((C, E, N, nb))
+    sub_a = np.empty((C, E, N, nb))
     for lo in range(0, C, PREPARE_BLOCK):  # the full (N, N) maps only for a block of cases at a time
         blk = slice(lo, min(lo + PREPARE_BLOCK, C))
         E_offset = _expm(Z[blk, None], offset[blk])
-        sub_a[blk] = _top(_rest_of_step(E_full[blk], E_offset))
+        sub_a[blk] = _top(_rest_of_step(E_full[blk], E_offset, nb), nb)
         cs, es = np.nonzero(before[blk] != offset[blk])  # a second breakpoint in the same step
         if cs.size:
             E_offset[cs, es] = _expm(Z[blk][cs], before[blk][cs, es])
-        sub_b[blk] = _top(E_offset)
+        sub_b[blk] = _top(E_offset, nb)
+    if nb > 12:
+        return full, ev, sub_b, sub_a, deg, osc
     # the others keep the structured maps (their oscillator columns are zero), so that a case's maps do
     # not depend on the batch it runs in
     still = ~np.any(np.asarray(P.famp) != 0.0, axis=1)
@@ -254,6 +287,14 @@ def _forcing_poly(P, c, t, idx, W, deg, Fv):
             Fv[21] += -2.0 * m * p0 - m * j1 * g
             Fv[22] += -2.0 * m * p1 + m * j0 * g
             Fv[23] += -2.0 * m * p2
+    nA = Fv.shape[0] - 6 * (deg + 1)  # the stages' accelerations and jerks along their axes (with z)
+    if nA > 0:
+        m = nA // 2
+        for q in range(m):
+            k = idx[q]
+            if k >= 0:
+                Fv[6 * (deg + 1) + q] = P.pa[c, q, k] + P.pj[c, q, k] * (t - P.pt[c, q, k])
+                Fv[6 * (deg + 1) + m + q] = P.pj[c, q, k]
     if P.ft.shape[0] > 0:
         for j in range(P.d.shape[1]):
             p0 = P.k[c, j, 0] * W.vf[0]
@@ -286,6 +327,10 @@ def _shift(Fv, deg, h):
                     Fv[6 + i] = f1 + h * f2
             else:
                 Fv[i] += h * f1
+    off = 6 * (deg + 1)
+    m = (Fv.shape[0] - off) // 2  # the stages' accelerations ramp with their jerks (with extra states)
+    for q in range(m):
+        Fv[off + q] += h * Fv[off + m + q]
 
 
 @njit(cache=True, inline="always")
@@ -313,17 +358,33 @@ def _product(ET, z, out):
     out[6], out[7], out[8], out[9], out[10], out[11] = a6, a7, a8, a9, a10, a11
 
 
+@njit(cache=True, inline="always")
+def _product_rows(ET, z, out):
+    """``out = E z`` for a step map with more rows than the base's 12 (extra linear states), ``ET``
+    (N, nb); ``out`` (nb,) is not ``z``."""
+    nb = out.shape[0]
+    for i in range(nb):
+        out[i] = 0.0
+    for j in range(z.shape[0]):
+        zj = z[j]
+        for i in range(nb):
+            out[i] += ET[j, i] * zj
+
+
 @njit(cache=True)
 def _apply(ET, z, osc_on, t, P, c, xn):
-    """``xn = E [x, F, oscillator(t)]`` for one (sub)step map given transposed, ``ET`` (N, 12); ``z``
+    """``xn = E [x, F, oscillator(t)]`` for one (sub)step map given transposed, ``ET`` (N, nb); ``z``
     holds ``[x, F]`` (:func:`_product`), the oscillator's columns follow."""
-    _product(ET, z, xn)
+    if xn.shape[0] == 12:
+        _product(ET, z, xn)
+    else:
+        _product_rows(ET, z, xn)
     nz = z.shape[0]
     if osc_on:
         for a in range(3):
             arg = P.fomega[c, a] * t + P.fphase[c, a]
             sa, ca = np.sin(arg), np.cos(arg)
-            for i in range(12):
+            for i in range(xn.shape[0]):
                 xn[i] += ET[nz + 2 * a, i] * sa + ET[nz + 2 * a + 1, i] * ca
 
 
@@ -382,7 +443,7 @@ def step(P, c, ta, tb, t0, t1, fresh, passed, z, Fv, xn, idx, W, full, sub_b, su
         _apply(sub_b[c, passed], z, osc_on, ta, P, c, xn)
         if P.ffon:
             _feedforward_ramp(P, c, ta, tb, idx, W, Fv, -1.0)
-        z[:12] = xn
+        z[: xn.shape[0]] = xn
         return True
     split = ta > t0
     if split or fresh or P.ft.shape[0] > 0:
@@ -395,6 +456,6 @@ def step(P, c, ta, tb, t0, t1, fresh, passed, z, Fv, xn, idx, W, full, sub_b, su
         _apply(full[c], z, osc_on, ta, P, c, xn)
     if P.ffon:
         _feedforward_ramp(P, c, ta, t1, idx, W, Fv, -1.0)
-    z[:12] = xn
+    z[: xn.shape[0]] = xn
     _shift(Fv, deg, t1 - ta)
     return True

@@ -21,7 +21,7 @@ from isolab.engine.kernels.cached_terms import (
     set_key,
     stages_and_floor,
 )
-from isolab.engine.kernels.dynamics import derivative, ltv_acc, nonlinear_acc, rates
+from isolab.engine.kernels.dynamics import derivative, ltv_acc, nonlinear_acc, rates, slot_rates
 from isolab.engine.kernels.params import LTI, LTV, NONLINEAR
 
 NAME = "rk4"
@@ -71,6 +71,8 @@ def step(P, c, level, t, h, x, S, idx, W):
         else:
             nonlinear_acc(xs, tc, cc, cm, R, F, acc, g, pbase)
         rates(level, xs, acc, k)
+        if level == LTV and nx > 12:
+            slot_rates(P, c, ts, xs, idx, acc, k)
         if s < 3:
             a = h if s == 2 else 0.5 * h
             for i in range(nx):

@@ -52,23 +52,24 @@ def pair_driver(method: int, level: int) -> Any:
         ``status[c]`` becomes UNSTABLE when the base runs away (``engine.kernels.peaks.observe``) and
         FAILED on a singular mass matrix; the case stops there. ``full``, ``ev``, ``sub_b``, ``sub_a``,
         ``deg``, ``osc`` are the exact method's prepared maps (empty for the others). ``outmap`` is the
-        linear output map ``(G, KF, target, rest_target, still)`` (``engine.kernels.output_map``; empty at
+        linear output map ``(G, KF, target, rest_target, still, GZ)`` (``engine.kernels.output_map``; empty at
         the nonlinear level), through which the linear levels observe every case whose floor stands still
         and that is not recorded.
         """
         C = dt.shape[0]
-        nx = 13 if level == NONLINEAR else 12
-        z = np.zeros(nx + 6 * (deg + 1))  # the state, then exact's forcing derivatives carried between steps
+        nx = 13 if level == NONLINEAR else 12 + P.zA.shape[1]  # the base, then the extra linear states
+        nA = 2 * P.sm.shape[1] if method == EXACT and nx > 13 else 0  # exact: the stages' accelerations
+        z = np.zeros(nx + 6 * (deg + 1) + nA)  # the state, then exact's forcing carried between steps
         x = z[:nx]
         Fv = z[nx:]
         S = np.zeros((rk4.SCRATCH_ROWS, nx))  # RK4's stage state and slopes
         xn = np.zeros(nx)  # exact: the new state
         idx = np.zeros(P.sm.shape[1], dtype=np.int64)
-        G, KF, tgt, rtgt, still = outmap
+        G, KF, tgt, rtgt, still, GZ = outmap
         m = G.shape[2]
         # exact: a whole step inside one piece with no actuator, oscillator or recorded floor input takes the
         # lean path (exact.full_step)
-        lean = not P.ffon and not osc and P.ft.shape[0] == 0
+        lean = not P.ffon and not osc and P.ft.shape[0] == 0 and nx <= 13
         Smap = np.zeros((10, max(m, 1)))  # the output map's running state and scratch (output_map.observe)
         Vmap = np.zeros((9, max(m, 1)))
         Qmap = np.zeros(13)
@@ -90,7 +91,7 @@ def pair_driver(method: int, level: int) -> Any:
             passed = 0
             piece_end = -np.inf  # the earliest start of a stage's next piece, s
             if linear:
-                output_map.observe(c, 0.0, x, 0, G, KF, F0, tgt, rtgt, rest, ptol, Smap, Vmap, Qmap)
+                output_map.observe(c, 0.0, x, 0, G, KF, F0, tgt, rtgt, rest, ptol, Smap, Vmap, Qmap, GZ)
             else:
                 observe(P, c, level, 0.0, x, W, O, first)
             ET = full[c if method == EXACT else 0]
@@ -146,7 +147,7 @@ def pair_driver(method: int, level: int) -> Any:
                     break
                 if linear:
                     seen = output_map.observe(
-                        c, t1, x, k + 1, G, KF, F0, tgt, rtgt, rest, ptol, Smap, Vmap, Qmap
+                        c, t1, x, k + 1, G, KF, F0, tgt, rtgt, rest, ptol, Smap, Vmap, Qmap, GZ
                     )
                 else:
                     seen = observe(P, c, level, t1, x, W, O, k + 1)
@@ -189,6 +190,7 @@ _NO_OUTPUT_MAP = (
     np.zeros((0, 0)),
     np.zeros((0, 1, 0)),
     np.zeros(0, dtype=np.bool_),
+    np.zeros((0, 2, 0, 0)),
 )
 
 
@@ -202,17 +204,21 @@ def run(
     W: Work,
     status: np.ndarray,
     messages: list[str] | None = None,
+    slot_target: np.ndarray | None = None,
+    slot_rest_target: np.ndarray | None = None,
 ) -> None:
     """Integrate every OK case with the stepped method ``name`` (``euler``, ``rk4`` or ``exact``).
 
     ``dt`` (C,) s and ``n_steps`` (C,) per case; ``O`` the peak accumulators, ``W`` scratch, ``status``
     (C,) int8 updated in place (see :func:`drive`). ``messages`` is accepted for the common interface; the
-    status says all a stepped method has to say.
+    status says all a stepped method has to say. ``slot_target`` (C, nz) and ``slot_rest_target`` (C, K, nz)
+    are the extra linear states' static values at the end and in each rest interval (None: zero).
     """
     maps = exact.prepare(P, dt, dt * n_steps) if name == "exact" else _NO_MAPS
     full, ev, sub_b, sub_a, deg, osc = maps
     if level != NONLINEAR:
-        outmap = (*output_map.build(P, O.target, O.rest_target), output_map.still_floor(P))
+        built = output_map.build(P, O.target, O.rest_target, slot_target, slot_rest_target)
+        outmap = (*built[:4], output_map.still_floor(P), built.GZ)
     else:
         outmap = _NO_OUTPUT_MAP
     ENTRIES[name, _LEVEL_NAMES[level]](

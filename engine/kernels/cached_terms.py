@@ -112,6 +112,9 @@ def _pack_case(P, c, W):
         for q in range(6):
             W.cK[k, q] = out[q]
         x[k] = 0.0
+    for k in range(P.zG.shape[2]):  # the extra linear states' generalised force (``Params.zG``)
+        for q in range(6):
+            W.cK[12 + k, q] = P.zG[c, q, k]
     cc[0] = c
 
 

@@ -102,6 +102,14 @@ def ltv_acc(x, tc, K, cc, g, ffon, gstiff, acc):
         r0 += K[k, 3] * xk
         r1 += K[k, 4] * xk
         r2 += K[k, 5] * xk
+    for k in range(12, K.shape[0]):  # the extra linear states' generalised force (``Params.zG``)
+        xk = x[k]
+        f0 += K[k, 0] * xk
+        f1 += K[k, 1] * xk
+        f2 += K[k, 2] * xk
+        r0 += K[k, 3] * xk
+        r1 += K[k, 4] * xk
+        r2 += K[k, 5] * xk
     t0, t1, t2 = x[3], x[4], x[5]
     w0, w1, w2 = x[9], x[10], x[11]
     # translation: -sum m (theta x a_rel + 2 w x v_rel) (+ theta x sum f_j, the actuators turn with the base)
@@ -299,7 +307,10 @@ def accel(P, c, level, t, x, idx, W):
     if not time_terms(P, c, level, t, idx, W):
         return False
     if level == LTI:
-        return accel_lti(P, c, x, W)
+        ok = accel_lti(P, c, x, W)
+        if x.shape[0] > 12:
+            slot_forces(P, c, t, x, idx, W.acc)
+        return ok
     if level == LTV:
         return accel_ltv(P, c, x, W)
     return accel_nonlinear(P, c, x, W)
@@ -329,4 +340,51 @@ def derivative(P, c, level, t, x, idx, W, dx):
     """Time derivative ``dx`` of the state ``x`` at ``t`` (s). Returns False on a singular mass matrix."""
     okm = accel(P, c, level, t, x, idx, W)
     rates(level, x, W.acc, dx)
+    if level != NONLINEAR and x.shape[0] > 12:
+        slot_rates(P, c, t, x, idx, W.acc, dx)
     return okm
+
+
+@njit(cache=True, inline="always")
+def stage_acceleration(P, c, q, t, idx):
+    """Stage ``q``'s acceleration along its own axis at ``t`` (s) on its piece ``idx[q]``, m/s^2 (0 before
+    its profile starts)."""
+    k = idx[q]
+    if k < 0:
+        return 0.0
+    return P.pa[c, q, k] + P.pj[c, q, k] * (t - P.pt[c, q, k])
+
+
+@njit(cache=True)
+def slot_forces(P, c, t, x, idx, acc):
+    """What the extra linear states ``z = x[12:]`` add to the LTI level's accelerations ``acc`` (6,):
+    ``zM z``, and ``sM s''`` where a model takes a stage's inertia off the base (``Params.sM``)."""
+    nz = x.shape[0] - 12
+    zM, sM = P.zM, P.sM
+    for i in range(6):
+        s = 0.0
+        for j in range(nz):
+            s += zM[c, i, j] * x[12 + j]
+        for q in range(sM.shape[2]):
+            s += sM[c, i, q] * stage_acceleration(P, c, q, t, idx)
+        acc[i] += s
+
+
+@njit(cache=True)
+def slot_rates(P, c, t, x, idx, acc, dx):
+    """The extra linear states' rates ``dx[12:] = zA z + zX x + zQ acc + zS s''`` at ``t`` (s): ``x`` the
+    state ``[base (12), z (nz)]``, ``acc`` (6,) the base's accelerations just computed, ``s''`` each stage's
+    acceleration along its axis on its piece ``idx`` (``engine.kernels.params.Params``)."""
+    nz = x.shape[0] - 12
+    zA, zX, zQ, zS = P.zA, P.zX, P.zQ, P.zS
+    for i in range(nz):
+        s = 0.0
+        for j in range(nz):
+            s += zA[c, i, j] * x[12 + j]
+        for j in range(12):
+            s += zX[c, i, j] * x[j]
+        for j in range(6):
+            s += zQ[c, i, j] * acc[j]
+        for q in range(zS.shape[2]):
+            s += zS[c, i, q] * stage_acceleration(P, c, q, t, idx)
+        dx[12 + i] = s

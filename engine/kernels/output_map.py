@@ -30,10 +30,11 @@ from isolab.engine.kernels.peaks import (
     hermite,
 )
 
-Map = namedtuple("Map", ["G", "KF", "target", "rest_target"])
+Map = namedtuple("Map", ["G", "KF", "target", "rest_target", "GZ"])
 """``G`` (C, 6, m): positions (m, rad) to outputs (m); ``KF`` (C, 2, 3 n) each mount's stiffness (N/m) and
 damping (N s/m) per axis; ``target`` (C, m) the outputs at the final static state; ``rest_target``
-(C, K, m) at the static state of each rest interval."""
+(C, K, m) at the static state of each rest interval; ``GZ`` (C, 2, nz, m) what the extra linear states
+``z = x[12:]`` add to the outputs (row 0) and to their rates (row 1) (``Params.zO``; nz = 0 without)."""
 
 
 def still_floor(P: Params) -> np.ndarray:
@@ -64,16 +65,24 @@ def _arm_rows(d: np.ndarray) -> np.ndarray:
     return out
 
 
-def build(P: Params, target: np.ndarray, rest_target: np.ndarray) -> Map:
+def build(
+    P: Params,
+    target: np.ndarray,
+    rest_target: np.ndarray,
+    slot_target: np.ndarray | None = None,
+    slot_rest_target: np.ndarray | None = None,
+) -> Map:
     """The output map of a batch (see the module's docstring) from its kernel parameters ``P``, the final
-    static offset ``target`` (C, 6) (m, rad) and each rest interval's ``rest_target`` (C, K, 6)."""
+    static offset ``target`` (C, 6) (m, rad) and each rest interval's ``rest_target`` (C, K, 6); with
+    extra linear states, their static values ``slot_target`` (C, nz) and ``slot_rest_target`` (C, K, nz)."""
     pts = np.asarray(P.pts, dtype=float)
     d = np.asarray(P.d, dtype=float)
     C = d.shape[0]
     rows = np.concatenate(
         [
             np.broadcast_to(np.eye(6), (C, 6, 6)),
-            _arm_rows(pts).reshape(C, -1, 6),
+            # a relative point (or a following error) does not move with the base (``Params.pr``)
+            np.where(np.asarray(P.pr, dtype=bool)[..., None, None], _arm_rows(pts), 0.0).reshape(C, -1, 6),
             _arm_rows(d).reshape(C, -1, 6),
         ],
         axis=1,
@@ -84,7 +93,15 @@ def build(P: Params, target: np.ndarray, rest_target: np.ndarray) -> Map:
     KF = np.ascontiguousarray(
         np.stack([np.asarray(P.k).reshape(C, -1), np.asarray(P.cd).reshape(C, -1)], axis=1)
     )
-    return Map(G, KF, np.ascontiguousarray(tgt), np.ascontiguousarray(rtgt))
+    nz = P.zA.shape[1]
+    GZ = np.zeros((C, 2, nz, G.shape[2]))
+    if nz:
+        GZ[..., 6:] = P.zO
+        if slot_target is not None:
+            tgt = tgt + np.einsum("czm,cz->cm", GZ[:, 0], slot_target)
+        if slot_rest_target is not None:
+            rtgt = rtgt + np.einsum("czm,ckz->ckm", GZ[:, 0], slot_rest_target)
+    return Map(G, KF, np.ascontiguousarray(tgt), np.ascontiguousarray(rtgt), GZ)
 
 
 @njit(cache=True)
@@ -154,22 +171,21 @@ def finish(O, c, S, Q):
 
 
 @njit(cache=True, inline="always")
-def observe(c, t, x, step, G, KF, F0, tgt, rtgt, rest, ptol, S, V, Q):
+def observe(c, t, x, step, G, KF, F0, tgt, rtgt, rest, ptol, S, V, Q, GZ):
     """Update case ``c``'s peaks with the linear-level state ``x`` (12,) at time ``t`` (s), output sample
     ``step``, the floor at rest, as ``engine.kernels.peaks.observe`` does.
 
-    ``G``, ``KF``, ``tgt``, ``rtgt`` are the output map (:func:`build`), ``F0`` (C, n) the static loads
-    (N), ``rest`` (C, K, 2) the rest intervals (s) and ``ptol`` (C, p) the points' settling tolerances (m)
-    of ``engine.kernels.peaks.Peaks``. The case's running state lives in ``S`` (10, m): rows 0 the peaks,
+    ``G``, ``KF``, ``tgt``, ``rtgt``, ``GZ`` are the output map (:func:`build`), ``F0`` (C, n) the static
+    loads (N), ``rest`` (C, K, 2) the rest intervals (s) and ``ptol`` (C, p) the points' settling tolerances
+    (m) of ``engine.kernels.peaks.Peaks``. The case's running state lives in ``S`` (10, m): rows 0 the peaks,
     1 and 2 the previous values and rates, 3 the force peaks and 4 the previous forces (3 n), 5 and 6 the
-    smallest and largest loads (n), 7 a flag, 8 and 9 each point's last violation and worst settling time
-    (p); and ``Q`` (13,): the last move's end, the settling tolerance, the longest interpolated interval, the
-    last output time, the rest-interval cursor and count, the last output time inside a rest interval, the
-    last violation, the sums of squares (3), the number of outputs and the divergence time.
-    (:func:`start` and :func:`finish` move them in and out of the accumulators.) ``V`` (9, m) is scratch.
-    Rows are indexed, not sliced: a view per call costs more than the arithmetic. Returns False (and
-    keeps ``t`` as the divergence time) when the state is not finite or has left any physically possible
-    range.
+    smallest and largest loads (n), 7 a flag, 8 and 9 each point's last violation and worst settling time (p);
+    and ``Q`` (13,): the last move's end, the settling tolerance, the longest interpolated interval, the last
+    output time, the rest-interval cursor and count, the last output time inside a rest interval, the last
+    violation, the sums of squares (3), the number of outputs and the divergence time. (:func:`start` and
+    :func:`finish` move them in and out of the accumulators.) ``V`` (9, m) is scratch. Rows are indexed, not
+    sliced: a view per call costs more than the arithmetic. Returns False (and keeps ``t`` as the divergence
+    time) when the state is not finite or has left any physically possible range.
     """
     ok = True
     for i in range(3):
@@ -210,6 +226,11 @@ def observe(c, t, x, step, G, KF, F0, tgt, rtgt, rest, ptol, S, V, Q):
         g0, g1, g2, g3, g4, g5 = G[c, 0, r], G[c, 1, r], G[c, 2, r], G[c, 3, r], G[c, 4, r], G[c, 5, r]
         V[0, r] = g0 * x0 + g1 * x1 + g2 * x2 + g3 * x3 + g4 * x4 + g5 * x5
         V[1, r] = g0 * v0 + g1 * v1 + g2 * v2 + g3 * v3 + g4 * v4 + g5 * v5
+    for j in range(GZ.shape[2]):  # the extra linear states (a flexible base's modes ...)
+        zj = x[12 + j]
+        for r in range(m):
+            V[0, r] += GZ[c, 0, j, r] * zj
+            V[1, r] += GZ[c, 1, j, r] * zj
     # peaks at the output times, and a flag on the outputs whose cubic's inner Bernstein control points
     # reach past them (the cubic stays in their hull: only those can peak between the output times)
     hth = h * ONE_THIRD

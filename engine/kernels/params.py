@@ -103,6 +103,28 @@ class Params(NamedTuple):
     """Some mount acts along its own axes (``qm``), not the floor's."""
     qm: np.ndarray
     """(C, n, 3, 3) each mount's own axes in the floor frame (columns); ``k``, ``cd`` act along them."""
+    zA: np.ndarray
+    """(C, nz, nz) the extra linear states' own matrix (``z' = zA z + zX x + zQ acc + zS s''``), 1/s; nz = 0
+    (the default) when the scene has none (``engine.model.linear_slot``)."""
+    zX: np.ndarray
+    """(C, nz, 12) ``z'`` per unit base state ``[u, theta, v, w]``."""
+    zQ: np.ndarray
+    """(C, nz, 6) ``z'`` per unit base acceleration ``[a, alpha]``."""
+    zS: np.ndarray
+    """(C, nz, m) ``z'`` per unit stage acceleration along its own axis (m/s^2; the known forcing)."""
+    zG: np.ndarray
+    """(C, 6, nz) the base's generalised force per unit ``z`` (N, N m)."""
+    zM: np.ndarray
+    """(C, 6, nz) the LTI level's accelerations per unit ``z``: ``minv @ zG``."""
+    sM: np.ndarray
+    """(C, 6, m) the LTI level's accelerations per unit stage acceleration beyond the stages' own forcing
+    (a servo stage's inertial force taken off the base); (C, 6, 0) when no model needs it."""
+    zO: np.ndarray
+    """(C, 2, nz, 3 p + 3 n) what ``z`` adds to each point's displacement and each mount's deflection
+    (row 0, m per unit) and to their rates (row 1, m/s per unit ``z``)."""
+    pr: np.ndarray
+    """(C, p) 1 for a material point of the base (it moves by ``u + theta x d``), 0 for a relative point
+    or a following error (only ``zO`` moves it; ``pts`` is zero there)."""
 
 
 class Work(NamedTuple):

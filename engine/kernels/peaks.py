@@ -247,6 +247,7 @@ def observe(P, c, level, t, x, W, O, step):
     inv_h = 1.0 / h if between else 0.0
     orient = P.orient  # a mount with its own axes: its force peaks at the output times (no per-axis cubic)
     off = 7 if level == NONLINEAR else 6
+    nz = 0 if level == NONLINEAR else x.shape[0] - 12
     if level == NONLINEAR:
         # angular velocity in the floor frame: the rate of the rotation vector, linearised
         wb0, wb1, wb2 = x[off + 3], x[off + 4], x[off + 5]
@@ -289,23 +290,37 @@ def observe(P, c, level, t, x, W, O, step):
         d0, d1, d2 = P.pts[c, p, 0], P.pts[c, p, 1], P.pts[c, p, 2]
         r0, r1, r2 = mount_offset(level, x, W.R, d0, d1, d2)
         q0, q1, q2 = _arm_rate(level, wf0, wf1, wf2, r0, r1, r2, d0, d1, d2)
-        pv0, pv1, pv2 = u0 + r0, u1 + r1, u2 + r2
-        _peak_point(O.poi, O.last_poi, c, p, 0, pv0, v0 + q0, h, between)
-        _peak_point(O.poi, O.last_poi, c, p, 1, pv1, v1 + q1, h, between)
-        _peak_point(O.poi, O.last_poi, c, p, 2, pv2, v2 + q2, h, between)
+        # a material point moves with the base; a relative point (or a following error) only by ``zO``
+        material = P.pr[c, p] != 0.0
+        b0, b1, b2 = (u0, u1, u2) if material else (0.0, 0.0, 0.0)
+        s0, s1, s2 = (v0, v1, v2) if material else (0.0, 0.0, 0.0)
+        pv0, pv1, pv2 = b0 + r0, b1 + r1, b2 + r2
+        if nz > 0:  # the extra linear states' share (a flexible base's modes, servo errors)
+            pv0, q0 = _slot_share(P.zO, c, 3 * p, x, pv0, q0)
+            pv1, q1 = _slot_share(P.zO, c, 3 * p + 1, x, pv1, q1)
+            pv2, q2 = _slot_share(P.zO, c, 3 * p + 2, x, pv2, q2)
+        _peak_point(O.poi, O.last_poi, c, p, 0, pv0, s0 + q0, h, between)
+        _peak_point(O.poi, O.last_poi, c, p, 1, pv1, s1 + q1, h, between)
+        _peak_point(O.poi, O.last_poi, c, p, 2, pv2, s2 + q2, h, between)
         if settle:
             # target point displacement from the static offset (linearised, plus the nonlinear rest)
-            e0 = O.target[c, 4] * d2 - O.target[c, 5] * d1 + O.target[c, 0] + O.point_offset[c, p, 0]
-            e1 = O.target[c, 5] * d0 - O.target[c, 3] * d2 + O.target[c, 1] + O.point_offset[c, p, 1]
-            e2 = O.target[c, 3] * d1 - O.target[c, 4] * d0 + O.target[c, 2] + O.point_offset[c, p, 2]
+            t0, t1, t2 = (O.target[c, 0], O.target[c, 1], O.target[c, 2]) if material else (0.0, 0.0, 0.0)
+            e0 = O.target[c, 4] * d2 - O.target[c, 5] * d1 + t0 + O.point_offset[c, p, 0]
+            e1 = O.target[c, 5] * d0 - O.target[c, 3] * d2 + t1 + O.point_offset[c, p, 1]
+            e2 = O.target[c, 3] * d1 - O.target[c, 4] * d0 + t2 + O.point_offset[c, p, 2]
             e = max(abs(pv0 - e0), abs(pv1 - e1), abs(pv2 - e2))
             if e > err:
                 err = e
         if rest:
             # the static position of the point in this rest interval
-            e0 = O.rest_target[c, k, 4] * d2 - O.rest_target[c, k, 5] * d1 + O.rest_target[c, k, 0]
-            e1 = O.rest_target[c, k, 5] * d0 - O.rest_target[c, k, 3] * d2 + O.rest_target[c, k, 1]
-            e2 = O.rest_target[c, k, 3] * d1 - O.rest_target[c, k, 4] * d0 + O.rest_target[c, k, 2]
+            t0, t1, t2 = (
+                (O.rest_target[c, k, 0], O.rest_target[c, k, 1], O.rest_target[c, k, 2])
+                if material
+                else (0.0, 0.0, 0.0)
+            )
+            e0 = O.rest_target[c, k, 4] * d2 - O.rest_target[c, k, 5] * d1 + t0
+            e1 = O.rest_target[c, k, 5] * d0 - O.rest_target[c, k, 3] * d2 + t1
+            e2 = O.rest_target[c, k, 3] * d1 - O.rest_target[c, k, 4] * d0 + t2
             e0 += O.rest_point_offset[c, k, p, 0]
             e1 += O.rest_point_offset[c, k, p, 1]
             e2 += O.rest_point_offset[c, k, p, 2]
@@ -338,6 +353,15 @@ def observe(P, c, level, t, x, W, O, step):
             dl -= W.xf[i]
             dd -= W.vf[i]
             F1 = W.F[j, i]
+            if nz > 0:  # the mount point's share of the extra linear states, and its force
+                r = 3 * P.pts.shape[1] + 3 * j + i
+                sl, sd = _slot_share(P.zO, c, r, x, 0.0, 0.0)
+                dl += sl
+                dd += sd
+                F1 -= P.k[c, j, i] * sl + P.cd[c, j, i] * sd
+                W.F[j, i] = F1
+                if i == 2:
+                    lo = hi = P.f0[c, j] + F1
             a = max(abs(F1), O.force[c, j, i])
             b = max(abs(dl), O.defl[c, j, i])
             if between and not orient:
@@ -479,6 +503,17 @@ def _peak_point(peak, last, c, p, i, value, rate, h, between):
         peak[c, p, i] = a
     last[c, p, i, 0] = value
     last[c, p, i, 1] = rate
+
+
+@njit(cache=True, inline="always")
+def _slot_share(zO, c, r, x, value, rate):
+    """``value`` (m) and ``rate`` (m/s) of output ``r`` (a point's or a mount's axis, ``Params.zO``) with
+    the extra linear states ``x[12:]`` added."""
+    for k in range(zO.shape[2]):
+        zk = x[12 + k]
+        value += zO[c, 0, k, r] * zk
+        rate += zO[c, 1, k, r] * zk
+    return value, rate
 
 
 @njit(cache=True, inline="always")

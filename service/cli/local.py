@@ -53,6 +53,7 @@ UNITS_STATED = (
     "rms_displacement",
     "settling_time",
     "point_settling_time",
+    "peak_following_error",
     "natural_frequency",
     "damping_ratio",
     "transmissibility",
@@ -62,8 +63,10 @@ UNITS_STATED = (
 ``simulate`` states under ``units``, in order."""
 
 
-def case_outputs(result, case: int, isolators: list[str], points: list[str]) -> dict:
-    """One case's outputs keyed by quantity and by axis, isolator, point or mode (SI units)."""
+def case_outputs(
+    result, case: int, isolators: list[str], points: list[str], stages: list[str] | None = None
+) -> dict:
+    """One case's outputs keyed by quantity and by axis, isolator, point, stage or mode (SI units)."""
     from isolab.studies import AXES, DOF_NAMES, OUTPUTS, ROTATIONS, STATUS_NAMES
 
     r = result
@@ -118,6 +121,9 @@ def case_outputs(result, case: int, isolators: list[str], points: list[str]) -> 
         }
     if getattr(r, "point_settling_time", None) is not None:
         out["point_settling_time"] = _labelled(r.point_settling_time[case], points)
+    errors = getattr(r, "stage_following_error", None)
+    if stages and errors is not None and np.any(np.asarray(errors[case]) > 0):  # stages on a servo
+        out["peak_following_error"] = _labelled(errors[case], stages)
     return out
 
 
@@ -197,7 +203,7 @@ def simulate(
         "points": names["points"],
         "stages": names["stages"],
         "wall_time": elapsed,
-        **case_outputs(result, 0, names["isolators"], names["points"]),
+        **case_outputs(result, 0, names["isolators"], names["points"], names["stages"]),
     }
     if sc.criteria is not None:
         from isolab.studies.questions.criteria import result_margins
@@ -310,6 +316,11 @@ def simulate_text(out: dict) -> list[str]:
         lines.append(
             f"  {'point settling time':<26}"
             + ", ".join(f"{p} {t:.3f} s" for p, t in out["point_settling_time"].items())
+        )
+    if out.get("peak_following_error"):
+        lines.append(
+            f"  {'peak following error':<26}"
+            + ", ".join(f"{s} {e * 1e6:.1f} um" for s, e in out["peak_following_error"].items())
         )
     return lines
 

@@ -45,6 +45,8 @@ from isolab.studies.inputs.schema.scene_paths import (
     BLOCK_DENSITY,
     BLOCK_SIZE,
     EXPLICIT_VALUES,
+    FLEXIBLE_DAMPING,
+    FLEXIBLE_YOUNG_MODULUS,
     FLOOR_SINE_KEYS,
     ISOLATOR_PRESET,
     ISOLATORS,
@@ -55,6 +57,7 @@ from isolab.studies.inputs.schema.scene_paths import (
     MACHINE_INERTIA_DIAGONAL,
     MACHINE_MASS,
     MOUNT_FIGURES,
+    SERVO_KEYS,
     SHAPER_KEYS,
     SIMULATION_DURATION,
     SIMULATION_SETTLE_TOLERANCE,
@@ -68,6 +71,7 @@ from isolab.studies.inputs.schema.scene_paths import (
     profile_shaper,
     stage,
     stage_profile,
+    stage_servo,
 )
 from isolab.studies.questions.designs import Design, Factor
 from isolab.studies.questions.tolerances import Spread, Tolerance, draw, resolve_spread
@@ -86,6 +90,7 @@ _LEAVES: dict[str, tuple[str, str | None]] = {
     "f_vertical": ("frequency", "gt0"),
     "f_horizontal": ("frequency", "gt0"),
     "zeta": ("dimensionless", "ge0"),
+    "young_modulus": ("pressure", "gt0"),
     "k": ("stiffness", "ge0"),
     "c": ("damping", "ge0"),
     "span_x": ("length", "gt0"),
@@ -107,6 +112,10 @@ _LEAVES: dict[str, tuple[str, str | None]] = {
     "damping": ("dimensionless", "ge0"),
     "duration": ("time", "gt0"),
     "settle_tolerance": ("length", "gt0"),
+    "servo.bandwidth": ("frequency", "gt0"),
+    "servo.damping_ratio": ("dimensionless", "ge0"),
+    "servo.stiffness": ("stiffness", "gt0"),
+    "servo.damping": ("damping", "ge0"),
 }
 
 
@@ -148,6 +157,8 @@ def _leaf_key(path: str) -> str:
     parts = path.split(".")
     if parts[0] == "points":
         return "point"
+    if len(parts) > 2 and parts[-2] == "servo":  # a stage's servo: its damping is N s/m, not a ratio
+        return f"servo.{parts[-1]}"
     if parts[-1].isdigit() or (parts[0] == ISOLATORS and parts[-2] in EXPLICIT_VALUES):
         return parts[-2]
     return parts[-1]
@@ -187,6 +198,8 @@ def available_paths(scene: Scene) -> list[str]:
     m = scene.machine
     if m.block is not None:
         out += components(BLOCK_SIZE) + [BLOCK_DENSITY] + components(BLOCK_CORNER)
+        if m.flexible is not None:
+            out += [FLEXIBLE_YOUNG_MODULUS, FLEXIBLE_DAMPING]
     else:
         out += [MACHINE_MASS] + components(MACHINE_CG)
         if m.inertia_diagonal is not None:
@@ -228,7 +241,10 @@ def available_paths(scene: Scene) -> list[str]:
             keys.append("dwell")
         keys.append("start")
         out += [f"{stage_profile(s.name)}.{key}" for key in keys]
-    for name in scene.points:
+    for s in scene.stages:
+        if s.servo is not None:
+            out += [f"{stage_servo(s.name)}.{key}" for key in SERVO_KEYS if getattr(s.servo, key) is not None]
+    for name in scene.material_points():
         out += components(point(name))
     if scene.floor is not None and scene.floor.sine is not None:
         for key in FLOOR_SINE_KEYS:

@@ -11,9 +11,8 @@ What the builder works out:
   around the machine's c.g., order :data:`studies.inputs.schema.LAYOUT_ORDER`);
 - the static load of each mount under the total weight of machine and stages at home
   (:func:`studies.inputs.isolators.load_share`, about the composite c.g.), and from it preset stiffness per
-  floor
-  axis (X, Y from ``f_horizontal``, Z from ``f_vertical``) and damping from ``zeta``; explicit values win;
-- stage motion profiles (:mod:`engine.profiles`), points, floor motion, duration and settling tolerance.
+  floor axis (X, Y from ``f_horizontal``, Z from ``f_vertical``) and damping from ``zeta``; explicit values
+  win; stage motion profiles (:mod:`engine.profiles`), points, floor motion, duration and settling tolerance.
 """
 
 from __future__ import annotations
@@ -26,6 +25,7 @@ import numpy as np
 from isolab.engine import profiles
 from isolab.engine.results import AXES
 from isolab.engine.scene import GRAVITY, SceneBatch, SceneError
+from isolab.studies.inputs.base_flexibility import flexible_base
 from isolab.studies.inputs.block import MAX_TRAVEL, beyond_travel, block_properties, travel_bound
 from isolab.studies.inputs.isolators import (
     CollinearIsolatorsError,
@@ -36,6 +36,7 @@ from isolab.studies.inputs.isolators import (
 )
 from isolab.studies.inputs.mount_physics import apply_mount_physics
 from isolab.studies.inputs.parameters import check_leaf_values
+from isolab.studies.inputs.precision import point_signature, precision_inputs, servo_kind
 from isolab.studies.inputs.schema import (
     AUTO_DURATION_CAP,
     AUTO_DURATION_DECAYS,
@@ -90,7 +91,7 @@ def shape_signature(scene: Scene) -> tuple:
     """What all scenes of one batch must share (array shapes and which inputs exist)."""
     iso = scene.isolators
     m = scene.machine
-    machine = ("block",) if m.block is not None else ("direct", m.inertia is not None)
+    machine = ("block", m.flexible and m.flexible.modes) if m.block else ("direct", m.inertia is not None)
     mounts = (
         ("layout",)
         if iso.layout is not None
@@ -114,14 +115,14 @@ def shape_signature(scene: Scene) -> tuple:
             kind = (p.type,)
         if p.shaper is not None:  # a shaped profile has SHAPER_IMPULSES times the pieces
             kind = (*kind, "shaped")
-        stages.append((s.name, s.parent, kind))
+        stages.append((s.name, s.parent, kind, servo_kind(s)))
     floor: tuple[object, ...] | None = None  # the time-domain floor motion (a spectrum shapes nothing)
     if scene.floor is not None and scene.floor.sine is not None:
         floor = ("sine",)
     elif scene.floor is not None and scene.floor.recorded is not None:
         rec = scene.floor.recorded
         floor = ("recorded", rec.dt, len(rec.displacement.samples()[0]))
-    return machine, mounts, tuple(stages), tuple(scene.points), floor
+    return machine, mounts, tuple(stages), point_signature(scene), floor
 
 
 class _Cases:
@@ -416,9 +417,7 @@ def build_batch(
     sizes = {len(scenes)} | {a.size for a in ov.values()}
     c = n_cases if n_cases is not None else max(sizes)
     if not sizes <= {1, c}:
-        raise ValueError(
-            f"build_batch: scenes and overrides disagree on the number of cases: {sorted(sizes)}"
-        )
+        raise ValueError(f"build_batch: scenes and overrides disagree on the case count: {sorted(sizes)}")
     ov = {k: np.broadcast_to(a, (c,)) for k, a in ov.items()}
     cases = _Cases(scenes, ov, c)
     s0 = scenes[0]
@@ -554,7 +553,7 @@ def build_batch(
     for i, name in enumerate(point_names):
 
         def material_point(s: Scene, name: str = name) -> Sequence[float]:
-            return s.points[name]
+            return s.material_points().get(name, (0.0, 0.0, 0.0))  # a relative point: precision_inputs
 
         points[:, i] = cases.vec(point(name), material_point)
     floor_amp = np.zeros((c, 3))
@@ -647,6 +646,7 @@ def build_batch(
         preload_with_base="base" in preload,
         preload_balanced="balanced" in preload,
     )
+    batch = flexible_base(precision_inputs(batch, cases), cases)  # servos, relative points, elastic modes
     auto = np.isnan(duration)
     if auto.any():
         decay = slowest_decay_time(batch.take(np.flatnonzero(auto)))

@@ -281,6 +281,7 @@ NAN_WHEN_NOT_OK = {
     "peak_isolator_deflection",
     "max_isolator_load",
     "transmissibility",
+    "peak_following_error",
 }
 """The outputs SimulationResult's docstring says are NaN for a case that is not OK."""
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import cast
+from typing import Annotated, cast
 
 import numpy as np
 from pydantic import Field, field_validator, model_validator
@@ -18,8 +18,13 @@ from isolab.studies.inputs.schema.fields import (
     PositiveDensity,
     PositiveInertia,
 )
-from isolab.studies.inputs.schema.scene_paths import MACHINE_BLOCK, MACHINE_INERTIA, MACHINE_INERTIA_DIAGONAL
-from isolab.studies.units import Inertia
+from isolab.studies.inputs.schema.scene_paths import (
+    MACHINE_BLOCK,
+    MACHINE_FLEXIBLE,
+    MACHINE_INERTIA,
+    MACHINE_INERTIA_DIAGONAL,
+)
+from isolab.studies.units import Dimensionless, Inertia, Pressure
 
 
 def _check_principal_moments(moments: np.ndarray, field: str) -> None:
@@ -46,6 +51,23 @@ class Block(InputModel):
         return float(mass), inertia, cg
 
 
+class Flexible(InputModel):
+    """A block base's elastic modes, computed from its size, density and Young's modulus: the free-free
+    bending modes along its long and its short side and its first torsion mode, the lowest ``modes`` of
+    them (docs/physics.md, "A flexible base")."""
+
+    modes: int = Field(3, ge=1, le=3, description="how many of the lowest elastic modes to keep (1 to 3)")
+    young_modulus: Annotated[Pressure, Field(gt=0)] = Field(
+        description="Young's modulus of the block's material, Pa (granite: about 50 GPa)"
+    )
+    damping: Annotated[Dimensionless, Field(ge=0, le=0.5)] = Field(
+        0.01, description="modal damping ratio of every elastic mode (granite: 0.005 to 0.02)"
+    )
+    poisson_ratio: Annotated[Dimensionless, Field(ge=0, lt=0.5)] = Field(
+        0.25, description="Poisson's ratio (the torsion mode's shear modulus E / (2 (1 + nu)))"
+    )
+
+
 class Machine(InputModel):
     """The rigid machine base, without its stages.
 
@@ -60,6 +82,9 @@ class Machine(InputModel):
     )
     cg: Position | None = Field(None, description="c.g. position, m")
     block: Block | None = None
+    flexible: Flexible | None = Field(
+        None, description="the block's elastic modes (only with a block; none: a rigid base)"
+    )
 
     @field_validator("inertia")
     @classmethod
@@ -91,6 +116,11 @@ class Machine(InputModel):
     @model_validator(mode="after")
     def _one_description(self) -> Machine:
         direct = {k for k in ("mass", "inertia", "inertia_diagonal", "cg") if getattr(self, k) is not None}
+        if self.flexible is not None and self.block is None:
+            raise ValueError(
+                f"{MACHINE_FLEXIBLE}: the elastic modes are computed from a block's size and density; "
+                "describe the base as a block"
+            )
         if self.block is not None:
             if direct:
                 raise ValueError(

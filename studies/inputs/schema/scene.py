@@ -17,11 +17,27 @@ from isolab.studies.inputs.schema.fields import (
 from isolab.studies.inputs.schema.floor_motion import Floor
 from isolab.studies.inputs.schema.machine import Machine
 from isolab.studies.inputs.schema.mounts import Isolators
-from isolab.studies.inputs.schema.scene_paths import stage_entry
+from isolab.studies.inputs.schema.scene_paths import relative_point, stage_entry
 from isolab.studies.inputs.schema.simulation import Simulation
 from isolab.studies.inputs.schema.stages import Stage, profile_excursion
 from isolab.studies.questions.criteria import Criteria
 from isolab.studies.questions.tolerances import Tolerances
+
+
+class RelativeEnds(InputModel):
+    """The two ends of a relative point: each the name of a stage (the point it carries at its home c.g.)
+    or of a material point of the base."""
+
+    tool: Name = Field(description="a stage (what the tool rides on) or a point of the base")
+    work: Name = Field(description="a point of the base (where the work sits) or another stage")
+
+
+class RelativePoint(InputModel):
+    """A point of interest that is the motion of a tool relative to the work as the process sees it: in
+    the machine's frame, minus the commanded relative motion (the stages' following errors and the base's
+    elastic deflection between them; docs/physics.md, "Relative points")."""
+
+    relative: RelativeEnds
 
 
 class Scene(InputModel):
@@ -30,8 +46,10 @@ class Scene(InputModel):
     machine: Machine
     isolators: Isolators
     stages: list[Stage] = Field(default_factory=list, max_length=MAX_STAGES)
-    points: dict[Name, Position] = Field(
-        default_factory=dict, max_length=MAX_POINTS, description="material points of the machine, m"
+    points: dict[Name, Position | RelativePoint] = Field(
+        default_factory=dict,
+        max_length=MAX_POINTS,
+        description="material points of the machine, m, or relative points ({relative: {tool, work}})",
     )
     floor: Floor | None = None
     simulation: Simulation = Field(default_factory=Simulation)
@@ -107,6 +125,34 @@ class Scene(InputModel):
                 "leaves the machine almost without rotational inertia"
             )
         return self
+
+    @model_validator(mode="after")
+    def _relative_points(self) -> Scene:
+        """Each end of a relative point names a stage or a material point, and the two ends differ."""
+        stages = [s.name for s in self.stages]
+        material = [n for n, v in self.points.items() if not isinstance(v, RelativePoint)]
+        for name, value in self.points.items():
+            if not isinstance(value, RelativePoint):
+                continue
+            ends = value.relative
+            for key in ("tool", "work"):
+                end = getattr(ends, key)
+                if end in stages and end in material:
+                    raise ValueError(
+                        f"{relative_point(name)}.{key}: {end!r} is both a stage and a point; rename one"
+                    )
+                if end not in stages and end not in material:
+                    raise ValueError(
+                        f"{relative_point(name)}.{key}: no stage or material point named {end!r} (stages: "
+                        f"{', '.join(stages) or 'none'}; points: {', '.join(material) or 'none'})"
+                    )
+            if ends.tool == ends.work:
+                raise ValueError(f"{relative_point(name)}: tool and work are both {ends.tool!r}")
+        return self
+
+    def material_points(self) -> dict[str, tuple[float, float, float]]:
+        """The points of interest that are material points of the base, name -> position (m)."""
+        return {n: v for n, v in self.points.items() if not isinstance(v, RelativePoint)}
 
     @model_validator(mode="after")
     def _criteria_points(self) -> Scene:

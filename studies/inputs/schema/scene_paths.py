@@ -19,6 +19,12 @@ BLOCK_SIZE = f"{MACHINE_BLOCK}.size"
 BLOCK_DENSITY = f"{MACHINE_BLOCK}.density"
 BLOCK_CORNER = f"{MACHINE_BLOCK}.corner"
 """The machine base: given by mass, c.g. and inertia, or as a block (size, density, corner)."""
+MACHINE_FLEXIBLE = "machine.flexible"
+FLEXIBLE_MODES = f"{MACHINE_FLEXIBLE}.modes"
+FLEXIBLE_YOUNG_MODULUS = f"{MACHINE_FLEXIBLE}.young_modulus"
+FLEXIBLE_DAMPING = f"{MACHINE_FLEXIBLE}.damping"
+FLEXIBLE_POISSON_RATIO = f"{MACHINE_FLEXIBLE}.poisson_ratio"
+"""A block base's elastic modes (its Young's modulus and modal damping may vary in a study)."""
 
 ISOLATORS = "isolators"
 ISOLATOR_PRESET = f"{ISOLATORS}.preset"
@@ -72,6 +78,15 @@ def stage_profile(name: str) -> str:
     return f"{stage(name)}.profile"
 
 
+SERVO_KEYS = ("bandwidth", "damping_ratio", "stiffness", "damping")
+"""The numbers of a stage's servo (``stages.<name>.servo.bandwidth``): a study may vary each one given."""
+
+
+def stage_servo(name: str) -> str:
+    """The servo of the stage called ``name``: ``stages.<name>.servo``."""
+    return f"{stage(name)}.servo"
+
+
 SHAPER_KEYS = ("frequency", "damping")
 """The numbers of a profile's input shaper a study may vary (its ``type`` is categorical)."""
 
@@ -89,6 +104,11 @@ def profile_segment(name: str, k: int) -> str:
 def point(name: str) -> str:
     """The point of interest called ``name`` (a position vector): ``points.<name>``."""
     return f"points.{name}"
+
+
+def relative_point(name: str) -> str:
+    """The relative point called ``name`` (tool to work): ``points.<name>.relative``."""
+    return f"{point(name)}.relative"
 
 
 def floor_sine(key: str) -> str:

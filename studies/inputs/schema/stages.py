@@ -6,7 +6,7 @@ from __future__ import annotations
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import Discriminator, Field, Tag, field_validator
+from pydantic import Discriminator, Field, Tag, field_validator, model_validator
 
 from isolab.studies.inputs.schema.fields import (
     MAX_SEGMENTS,
@@ -20,7 +20,7 @@ from isolab.studies.inputs.schema.fields import (
     StageVelocity,
     within,
 )
-from isolab.studies.units import Dimensionless, Frequency, Length
+from isolab.studies.units import Damping, Dimensionless, Frequency, Length, Stiffness
 
 
 class ShaperSpec(InputModel):
@@ -125,6 +125,38 @@ def profile_excursion(profile: Any) -> float:
     return abs(profile.travel)
 
 
+class Servo(InputModel):
+    """The stage driven by a servo along its axis instead of following its profile exactly: the following
+    error ``e`` (the profile minus the stage's position) obeys ``e'' + 2 zeta w e' + w^2 e = r'' + (the
+    base's acceleration along the axis)`` (docs/physics.md, "Servo stages"). Give the closed loop's
+    ``bandwidth`` (its natural frequency ``w / 2 pi``) and ``damping_ratio``, or the servo's ``stiffness``
+    and ``damping`` (``w^2 = stiffness / M``, ``M`` the mass the drive moves: the stage and every stage
+    riding on it)."""
+
+    bandwidth: Annotated[Frequency, Field(gt=0)] | None = Field(
+        None, description="natural frequency of the following error, Hz (a linear stage: 20 to 200 Hz)"
+    )
+    damping_ratio: Annotated[Dimensionless, Field(ge=0, le=5)] | None = Field(
+        None, description="damping ratio of the following error, 1 (with bandwidth; 0.7 when omitted)"
+    )
+    stiffness: Annotated[Stiffness, Field(gt=0)] | None = Field(
+        None, description="servo stiffness along the axis, N/m (instead of bandwidth)"
+    )
+    damping: Annotated[Damping, Field(ge=0)] | None = Field(
+        None, description="servo damping along the axis, N s/m (with stiffness; 0 when omitted)"
+    )
+
+    @model_validator(mode="after")
+    def _one_description(self) -> Servo:
+        by_bandwidth = self.bandwidth is not None or self.damping_ratio is not None
+        by_stiffness = self.stiffness is not None or self.damping is not None
+        if by_bandwidth and by_stiffness:
+            raise ValueError("servo: give bandwidth and damping_ratio, or stiffness and damping, not both")
+        if self.bandwidth is None and self.stiffness is None:
+            raise ValueError("servo: give bandwidth (and damping_ratio) or stiffness (and damping)")
+        return self
+
+
 class Stage(InputModel):
     """A moving mass that travels along a unit axis fixed in the machine (or in its parent stage)."""
 
@@ -134,6 +166,9 @@ class Stage(InputModel):
     axis: tuple[Dimensionless, Dimensionless, Dimensionless] = Field(description="travel direction")
     parent: Name | None = Field(None, description="the stage this one rides on (listed earlier)")
     profile: Profile
+    servo: Servo | None = Field(
+        None, description="driven by a servo along its axis (none: the stage follows its profile exactly)"
+    )
 
     @field_validator("axis")
     @classmethod
