@@ -14,6 +14,7 @@ from isolab.engine.kernels.cached_terms import CM_WIDTH
 from isolab.engine.kernels.feedforward import feedforward_transients
 from isolab.engine.kernels.params import Params, Work
 from isolab.engine.kernels.structs import kernel_struct
+from isolab.engine.mount_laws import relaxation_block
 from isolab.engine.scene import SceneBatch
 
 
@@ -439,7 +440,14 @@ def flexible_base_block(b: SceneBatch) -> SlotBlock | None:
     return SlotBlock(A, X, np.zeros((C, 2 * k, 6)), S, G, O)
 
 
-SLOT_MODELS = (flexible_base_block,)
+def mount_relaxation_block(b: SceneBatch) -> SlotBlock | None:
+    """The mounts' relaxation branches (an air mount's orifice, an elastomer's Maxwell ladder) as extra
+    linear states, one per branch and axis (``engine.mount_laws.relaxation_block``), or None."""
+    parts = relaxation_block(b)
+    return None if parts is None else SlotBlock(*parts)
+
+
+SLOT_MODELS = (flexible_base_block, mount_relaxation_block)
 """The models of the extra linear states, in the order of their blocks in ``z``: each a function of the
 batch that returns its ``SlotBlock`` or None when the scene does not use it."""
 

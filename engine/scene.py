@@ -97,6 +97,11 @@ class SceneBatch:
             modal coordinate, floor axes).
         base_mode_stage: (C, m, 3, k) at the stages' homes (where their reactions enter the base).
         base_mode_point: (C, p, 3, k) at the points of interest.
+        iso_branch_k: (C, n, 3, B) each mount's relaxation branches along its own axes, N/m: a spring
+            ``k_b`` in series with a dashpot, in parallel with ``iso_k`` (an air mount's orifice, an
+            elastomer's Maxwell ladder; docs/physics.md, "Mounts with internal states"). B = 0, the
+            default: none. A branch whose stiffness is 0 in every case carries no state.
+        iso_branch_tau: (C, n, 3, B) their relaxation times ``c_b / k_b``, s (positive where ``k_b > 0``).
     """
 
     mass: np.ndarray
@@ -143,6 +148,8 @@ class SceneBatch:
     base_mode_iso: np.ndarray | None = None
     base_mode_stage: np.ndarray | None = None
     base_mode_point: np.ndarray | None = None
+    iso_branch_k: np.ndarray | None = None
+    iso_branch_tau: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         c = np.shape(self.mass)[0] if np.ndim(self.mass) else 1
@@ -172,6 +179,9 @@ class SceneBatch:
             p = np.shape(self.points)[1] if np.ndim(self.points) == 3 else 0
             self.point_settle_tol = np.repeat(tol.reshape(-1, 1), p, axis=1)
         self._base_mode_defaults(c, n)
+        for name in ("iso_branch_k", "iso_branch_tau"):  # no relaxation branch unless the scene gives one
+            if getattr(self, name) is None:
+                setattr(self, name, np.zeros((c, n, 3, 0)))
 
     def _base_mode_defaults(self, c: int, n: int) -> None:
         """A rigid base (no elastic mode) unless the scene gives one."""
@@ -193,6 +203,11 @@ class SceneBatch:
     def n_base_modes(self) -> int:
         """The number of the base's elastic modes (0: rigid)."""
         return int(np.asarray(self.base_mode_frequency).shape[1])
+
+    @property
+    def has_mount_branches(self) -> bool:
+        """True when some mount has a relaxation branch (``iso_branch_k`` > 0)."""
+        return bool(np.any(np.asarray(self.iso_branch_k) > 0))
 
     @property
     def has_floor_spectrum(self) -> bool:

@@ -34,7 +34,7 @@ from isolab.studies.inputs.isolators import (
     load_share,
     stiffness_from_frequency,
 )
-from isolab.studies.inputs.mount_physics import apply_mount_physics
+from isolab.studies.inputs.mount_physics import apply_mount_physics, mount_states
 from isolab.studies.inputs.parameters import check_leaf_values
 from isolab.studies.inputs.schema import (
     AUTO_DURATION_CAP,
@@ -646,6 +646,7 @@ def build_batch(
         preload_balanced="balanced" in preload,
     )
     batch = flexible_base(batch, cases)  # a block base's elastic modes, when the scene asks for them
+    batch = mount_states(batch, cases, load, k_explicit, c_explicit)  # air orifices', elastomers' states
     auto = np.isnan(duration)
     if auto.any():
         decay = slowest_decay_time(batch.take(np.flatnonzero(auto)))
