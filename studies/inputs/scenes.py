@@ -34,7 +34,7 @@ from isolab.studies.inputs.isolators import (
     load_share,
     stiffness_from_frequency,
 )
-from isolab.studies.inputs.mount_physics import apply_mount_physics
+from isolab.studies.inputs.mount_physics import apply_mount_physics, mount_states
 from isolab.studies.inputs.parameters import check_leaf_values
 from isolab.studies.inputs.precision import point_signature, precision_inputs, servo_kind
 from isolab.studies.inputs.schema import (
@@ -490,10 +490,10 @@ def build_batch(
     for a, axis in enumerate(AXES):
 
         def group_k(s: Scene, axis: str = axis) -> float | None:
-            return _axis(s.isolators.k, axis)
+            return getattr(s.isolators.k, axis, None)  # None: no explicit stiffness
 
         def group_c(s: Scene, axis: str = axis) -> float | None:
-            return _axis(s.isolators.c, axis)
+            return getattr(s.isolators.c, axis, None)
 
         k_explicit[:, :, a] = cases.get(group_axis("k", axis), group_k)[:, None]
         c_explicit[:, :, a] = cases.get(group_axis("c", axis), group_c)[:, None]
@@ -647,6 +647,7 @@ def build_batch(
         preload_balanced="balanced" in preload,
     )
     batch = flexible_base(precision_inputs(batch, cases), cases)  # servos, relative points, elastic modes
+    batch = mount_states(batch, cases, load, k_explicit, c_explicit)  # air orifices', elastomers' states
     auto = np.isnan(duration)
     if auto.any():
         decay = slowest_decay_time(batch.take(np.flatnonzero(auto)))
@@ -686,10 +687,6 @@ def slowest_decay_time(batch: SceneBatch) -> np.ndarray:
     rate = md.damping_ratio * w
     tau = np.where((w > 0) & (rate > 0), 1.0 / np.where(rate > 0, rate, 1.0), 0.0)
     return tau.max(axis=1)
-
-
-def _axis(values: object, axis: str) -> float | None:
-    return None if values is None else getattr(values, axis)
 
 
 def isolator_loads(scene: Scene, g: float = GRAVITY) -> np.ndarray:

@@ -6,7 +6,8 @@
 study
 (:func:`pilot_cases`: the hardest case of each isolator type and the stiffest case, found by a cheap
 screening run) at the reference level (nonlinear model, adaptive reference integrator, at the finest
-candidate step: the "truth"), then tries the candidate fidelity/integrator/step triples in order of their
+candidate step: the "truth"; with extra linear states, :data:`STATES_REFERENCE_PAIR`), then tries the
+candidate fidelity/integrator/step triples in order of their
 estimated cost (:data:`studies.run.costs.STEP_COST`, stability sub-steps included) and takes the first whose
 largest error on the pilot cases stays inside the tolerance. A relative tolerance applies to every sizing
 output (:data:`~isolab.studies.run.error_estimate.SIZING_OUTPUTS`: peak c.g. and point displacement, peak
@@ -40,6 +41,7 @@ from isolab.engine import modal, model, simulate, stability
 from isolab.engine.integrators import INTEGRATORS
 from isolab.engine.results import OK, STATUS_NAMES, SimulationResult
 from isolab.engine.scene import SceneBatch
+from isolab.engine.simulate import SLOT_INTEGRATORS, SLOT_LEVELS
 from isolab.studies.inputs.schema import (
     ACCURACY_LEVELS,
     DEFAULT_DT,
@@ -72,6 +74,9 @@ CANDIDATE_PAIRS = (
     ("nonlinear", "rk4"),
 )
 """Fidelity/integrator pairs the chooser tries, cheapest level first (the order breaks cost ties)."""
+STATES_REFERENCE_PAIR = ("ltv", "rk4")
+"""The truth of a scene with extra linear states (a flexible base, mounts' internal states), which the
+nonlinear level and the reference integrator do not model: the ltv level by RK4 at the finest step."""
 PILOT_MARGIN = 0.5
 """A candidate must meet this fraction of the tolerance on the pilot cases: the other cases of a study
 can err more (on the isolator-comparison example, before the fixed-step integrators split steps at profile
@@ -204,7 +209,12 @@ def choose_for_batch(
     shown = ", ".join(f"{k} {v}" for k, v in texts.items()) if per_output else _fmt_error(tolerance, relative)
     cases = tuple(int(c) for c in (case_numbers if case_numbers is not None else range(batch.n_cases)))
     fine = steps[0]
-    truth: SimulationResult | SimpleNamespace = simulate(batch, *REFERENCE_PAIR, dt=fine, auto_step=auto_step)
+    states = model.linear_slot(batch).A.shape[1]  # extra linear states: only some pairs model them
+    truth_pair = STATES_REFERENCE_PAIR if states else REFERENCE_PAIR
+    if states:
+        pairs = [p for p in pairs if p[0] in SLOT_LEVELS and p[1] in SLOT_INTEGRATORS]
+    truth_name = "/".join(truth_pair)
+    truth: SimulationResult | SimpleNamespace = simulate(batch, *truth_pair, dt=fine, auto_step=auto_step)
     usable = np.flatnonzero(truth.status == OK)
     if usable.size == 0:
         why = "; ".join(
@@ -228,8 +238,12 @@ def choose_for_batch(
         truth = _take_result(truth, usable)
         cases = tuple(cases[i] for i in usable)
     duration = np.asarray(batch.duration, dtype=float)
-    A = modal.state_matrix(
-        model.mass_matrix(batch), model.stiffness_matrix(batch), model.damping_matrix(batch)
+    A = (
+        model.slot_state_matrix(model.params(batch))
+        if states
+        else modal.state_matrix(
+            model.mass_matrix(batch), model.stiffness_matrix(batch), model.damping_matrix(batch)
+        )
     )
     omega_max = 2.0 * np.pi * np.max(modal.modes(*_home_matrices(batch)).frequency)
     candidates = []
@@ -241,7 +255,7 @@ def choose_for_batch(
             if integ == "rk4" and not per_output and relative and rk4_step_too_long(omega_max, dt, bound):
                 continue  # RK4's numerical damping of the fastest mode alone would exceed the tolerance
             n_steps = np.rint(duration / (dt / n_div))
-            cost = float(np.sum(n_steps) * step_cost(fid, integ))
+            cost = float(np.sum(n_steps) * step_cost(fid, integ, states))
             candidates.append((cost, rank, -dt, fid, integ, dt, float(dt / n_div.max())))
     candidates.sort()
     rows: list[dict[str, Any]] = []
@@ -285,7 +299,7 @@ def choose_for_batch(
                 )
             reason = (
                 f"{fid}/{integ} at {dt * 1e3:g} ms is the cheapest candidate whose largest error on "
-                f"pilot cases {list(cases)} ({_fmt_error(worst, fmt)} against nonlinear/reference "
+                f"pilot cases {list(cases)} ({_fmt_error(worst, fmt)} against {truth_name} "
                 f"at {fine * 1e3:g} ms) stays within {margin:g} of the tolerance "
                 f"{shown}" + also
             )
@@ -306,9 +320,9 @@ def choose_for_batch(
     reason = (
         f"no candidate meets {margin:g} of {shown} on pilot cases "
         f"{list(cases)}{near}: the "
-        f"reference itself (nonlinear/reference at {fine * 1e3:g} ms)"
+        f"reference itself ({truth_name} at {fine * 1e3:g} ms)"
     )
-    return Choice(None, *REFERENCE_PAIR, fine, tolerance, relative, reason, cases, tuple(rows), texts or None)
+    return Choice(None, *truth_pair, fine, tolerance, relative, reason, cases, tuple(rows), texts or None)
 
 
 def _home_matrices(batch: SceneBatch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -47,6 +47,7 @@ from isolab.studies.units import (
     Frequency,
     Length,
     Pressure,
+    Time,
     Viscosity,
     Volume,
 )
@@ -190,6 +191,12 @@ class Orifice(InputModel):
     area: Annotated[Area, Field(gt=0)] = Field(description="bore cross-section, m^2")
     length: Annotated[Length, Field(gt=0)] = Field(description="bore length, m")
     viscosity: Annotated[Viscosity, Field(gt=0)] = Field(1.81e-5, description="the gas's viscosity, Pa s")
+    model: Literal["equivalent", "zener"] = Field(
+        "equivalent",
+        description="equivalent: a spring and viscous damper matching the orifice at the mount's own "
+        "vertical frequency; zener: the standard linear solid with its own state (damping that depends "
+        "on frequency; the lti and ltv levels)",
+    )
 
 
 class AirSpring(InputModel):
@@ -217,6 +224,47 @@ class AirSpring(InputModel):
         return self
 
 
+class LadderBranch(InputModel):
+    """One Maxwell branch of an elastomer: a spring in series with a dashpot."""
+
+    stiffness_ratio: Annotated[Dimensionless, Field(gt=0)] = Field(
+        description="the branch's spring over the mount's static stiffness on each axis, 1"
+    )
+    relaxation_time: Annotated[Time, Field(gt=0)] = Field(description="dashpot over spring, s")
+
+
+class Elastomer(InputModel):
+    """An elastomer mount's frequency-dependent stiffness and loss as a Maxwell ladder with a state per
+    branch and axis (the lti and ltv levels): fitted to a ``loss_factor`` nearly constant over
+    ``[f_low, f_high]`` and a dynamic ``stiffening`` (stiffness at ``f_high`` over that at ``f_low``), or
+    given as a ``ladder``. The mount's stiffness from its preset (or ``k``) is the static spring on each of
+    its own axes; the ladder replaces its viscous damping (explicit ``c`` stays, in parallel)."""
+
+    loss_factor: Annotated[Dimensionless, Field(gt=0, le=1)] | None = Field(
+        None, description="loss factor to hold over the band, 1"
+    )
+    stiffening: Annotated[Dimensionless, Field(ge=1, le=10)] | None = Field(
+        None, description="dynamic stiffness at f_high over that at f_low, 1"
+    )
+    f_low: Annotated[Frequency, Field(gt=0)] = Field(2.0, description="the band's low end, Hz")
+    f_high: Annotated[Frequency, Field(gt=0)] = Field(20.0, description="the band's high end, Hz")
+    branches: Annotated[int, Field(ge=1, le=6)] = Field(3, description="Maxwell branches of the fit")
+    ladder: list[LadderBranch] | None = Field(
+        None, min_length=1, max_length=6, description="the branches themselves instead of a fit"
+    )
+
+    @model_validator(mode="after")
+    def _fit_or_ladder(self) -> Elastomer:
+        fit = self.loss_factor is not None or self.stiffening is not None
+        if (self.ladder is None) == (self.loss_factor is None or self.stiffening is None) or (
+            self.ladder is not None and fit
+        ):
+            raise ValueError("elastomer: give loss_factor and stiffening (a fitted ladder), or ladder")
+        if not self.f_low < self.f_high:
+            raise ValueError(f"elastomer.f_high: must be above f_low ({self.f_low:g} Hz): {self.f_high:g}")
+        return self
+
+
 class Mount(InputModel):
     """One isolator of an explicit list. Its own values win over the group's: explicit ``k``/``c`` first,
     then its overrides, then its own ``preset``; without a preset of its own it takes the group's
@@ -240,6 +288,7 @@ class Mount(InputModel):
     )
     orientation: Orientation | None = Field(None, description="the mount's own axes (default: the floor's)")
     air: AirSpring | None = Field(None, description="an air spring from its physics (vertical, own z axis)")
+    elastomer: Elastomer | None = Field(None, description="an elastomer's Maxwell ladder on its own axes")
 
 
 class PresetTuning(InputModel):
@@ -290,6 +339,7 @@ class Isolators(InputModel):
     c: AxisDamping | None = None
     orientation: Orientation | None = Field(None, description="every mount's own axes (default: the floor's)")
     air: AirSpring | None = Field(None, description="every mount an air spring from its physics")
+    elastomer: Elastomer | None = Field(None, description="every mount an elastomer's Maxwell ladder")
     layout: Layout | None = None
     mounts: list[Mount] | None = Field(None, alias="list", max_length=MAX_MOUNTS)
 
