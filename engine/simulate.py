@@ -296,5 +296,8 @@ def simulate(
         transmissibility=per_case(T),
         floor_point_velocity=fpv,
         floor_point_velocity_band=fpb,
+        move_time=np.asarray(t_last, dtype=float),
+        ready_time=per_case(t_last + settling),
+        point_ready_time=per_case(t_last[:, None] + point_settling),
         history=history,
     )

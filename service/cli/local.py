@@ -53,6 +53,9 @@ UNITS_STATED = (
     "rms_displacement",
     "settling_time",
     "point_settling_time",
+    "move_time",
+    "ready_time",
+    "point_ready_time",
     "natural_frequency",
     "damping_ratio",
     "transmissibility",
@@ -72,6 +75,7 @@ def case_outputs(result, case: int, isolators: list[str], points: list[str]) -> 
         "status": STATUS_NAMES[int(r.status[case])],
         "message": r.message[case],
         "dt": float(r.dt[case]),
+        "move_time": float(r.move_time[case]),
         "natural_frequency": [float(f) for f in r.natural_frequency[case]],
         "damping_ratio": [float(z) for z in r.damping_ratio[case]],
         "mode_energy": [_labelled(e, DOF_NAMES) for e in r.mode_energy[case]],
@@ -108,6 +112,8 @@ def case_outputs(result, case: int, isolators: list[str], points: list[str]) -> 
         final_displacement=_labelled(r.final_displacement[case], AXES + ROTATIONS),
         settling_time=float(r.settling_time[case]),
         settled=bool(r.settled[case]),
+        ready_time=float(r.ready_time[case]),
+        point_ready_time=_labelled(r.point_ready_time[case], points),
         transmissibility=_labelled(r.transmissibility[case], AXES),
     )
     if getattr(r, "max_isolator_load", None) is not None:
@@ -311,6 +317,11 @@ def simulate_text(out: dict) -> list[str]:
             f"  {'point settling time':<26}"
             + ", ".join(f"{p} {t:.3f} s" for p, t in out["point_settling_time"].items())
         )
+    ready = ", ".join(f"{p} {t:.3f} s" for p, t in out["point_ready_time"].items())
+    lines.append(
+        f"  {'move end, then ready':<26}{out['move_time']:.3f} s, ready {out['ready_time']:.3f} s"
+        + (f" ({ready})" if ready else "")
+    )
     return lines
 
 
