@@ -436,5 +436,8 @@ def simulate(
         floor_point_velocity_band=fpb,
         peak_following_error=per_case(errors.max(axis=1) if batch.n_stages else np.zeros(C)),
         stage_following_error=per_case(errors),
+        move_time=np.asarray(t_last, dtype=float),
+        ready_time=per_case(t_last + settling),
+        point_ready_time=per_case(t_last[:, None] + point_settling[:, :p_given]),
         history=history,
     )

@@ -54,6 +54,9 @@ UNITS_STATED = (
     "settling_time",
     "point_settling_time",
     "peak_following_error",
+    "move_time",
+    "ready_time",
+    "point_ready_time",
     "natural_frequency",
     "damping_ratio",
     "transmissibility",
@@ -75,6 +78,7 @@ def case_outputs(
         "status": STATUS_NAMES[int(r.status[case])],
         "message": r.message[case],
         "dt": float(r.dt[case]),
+        "move_time": float(r.move_time[case]),
         "natural_frequency": [float(f) for f in r.natural_frequency[case]],
         "damping_ratio": [float(z) for z in r.damping_ratio[case]],
         "mode_energy": [_labelled(e, DOF_NAMES) for e in r.mode_energy[case]],
@@ -111,6 +115,8 @@ def case_outputs(
         final_displacement=_labelled(r.final_displacement[case], AXES + ROTATIONS),
         settling_time=float(r.settling_time[case]),
         settled=bool(r.settled[case]),
+        ready_time=float(r.ready_time[case]),
+        point_ready_time=_labelled(r.point_ready_time[case], points),
         transmissibility=_labelled(r.transmissibility[case], AXES),
     )
     if getattr(r, "max_isolator_load", None) is not None:
@@ -322,6 +328,11 @@ def simulate_text(out: dict) -> list[str]:
             f"  {'peak following error':<26}"
             + ", ".join(f"{s} {e * 1e6:.1f} um" for s, e in out["peak_following_error"].items())
         )
+    ready = ", ".join(f"{p} {t:.3f} s" for p, t in out["point_ready_time"].items())
+    lines.append(
+        f"  {'move end, then ready':<26}{out['move_time']:.3f} s, ready {out['ready_time']:.3f} s"
+        + (f" ({ready})" if ready else "")
+    )
     return lines
 
 

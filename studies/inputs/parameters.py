@@ -222,8 +222,9 @@ def available_paths(scene: Scene) -> list[str]:
         p = stage(s.name)
         out += [f"{p}.mass"] + components(f"{p}.home")
         prof = s.profile
-        if prof.shaper is not None:
-            out += [f"{profile_shaper(s.name)}.{key}" for key in ("type", *SHAPER_KEYS)]
+        if prof.shaper is not None:  # a shaper tuned to a mode takes the mode's frequency and damping
+            tuning = ("type",) if prof.shaper.mode is not None else ("type", *SHAPER_KEYS)
+            out += [f"{profile_shaper(s.name)}.{key}" for key in tuning]
         if isinstance(prof, SequenceProfile):
             for k, seg in enumerate(prof.segments):
                 segment_keys = (
