@@ -158,13 +158,13 @@ class Work(NamedTuple):
     """(m, 9) the stages' positions, velocities and accelerations relative to the c.g."""
 
 
-@intrinsic
-def borrowed(typingctx: Any, array: types.Array) -> Any:
-    """A view of ``array`` (any numba array) whose references numba does not count, for a kernel's hot
-    loop: the same data, shape and strides, no owner. Numba counts a reference (an atomic add and
-    subtract, dearer than the arithmetic of a small kernel) at every binding of an array, every slice and
-    every call that passes one; on a view without owner those are a test of a null pointer. The view must
-    not outlive the call that made it (the caller's array keeps the memory alive)."""
+def _view_without_owner(typingctx: Any, array: types.Array) -> Any:
+    """``borrowed(array)``: a view of ``array`` (any numba array) whose references numba does not count,
+    for a kernel's hot loop: the same data, shape and strides, no owner. Numba counts a reference (an atomic
+    add and subtract, dearer than the arithmetic of a small kernel) at every binding of an array, every
+    slice and every call that passes one, and drops a pair only where no other release lies between; on a
+    view without owner it drops them all. The view must not outlive the call that made it (the caller's
+    array keeps the memory alive)."""
     if not isinstance(array, types.Array):
         return None
 
@@ -178,3 +178,7 @@ def borrowed(typingctx: Any, array: types.Array) -> Any:
         return out._getvalue()
 
     return array(array), codegen
+
+
+borrowed: Any = intrinsic(_view_without_owner)
+"""A view of a numba array whose references are not counted (:func:`_view_without_owner`); kernels only."""
