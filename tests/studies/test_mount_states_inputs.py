@@ -109,3 +109,26 @@ def test_the_accuracy_chooser_picks_among_the_pairs_that_model_the_states() -> N
         ("ltv", "rk4"),
     }
     assert step_cost("lti", "rk4", 36) > step_cost("lti", "rk4", 4) > step_cost("lti", "rk4")
+
+
+def test_mount_states_join_a_servo_stage_and_refuse_a_flexible_base_naming_the_field() -> None:
+    """The extra linear states of one scene add up: a stage on a servo (2 states) on elastomer ladders (36
+    states) runs at lti, the exact and RK4 integrators agreeing; a flexible base is refused beside them."""
+    examples = EXAMPLE.parent
+    spec = {"loss_factor": 0.1, "stiffening": 1.16, "f_low": "5 Hz", "f_high": "50 Hz"}
+    servo = yaml.safe_load((examples / "scriber-servo.yaml").read_text())
+    servo["isolators"] = {"preset": "elastomer", "elastomer": spec, "layout": servo["isolators"]["layout"]}
+    servo["simulation"]["duration"] = "2.5 s"
+    batch, _ = scene_batch(validate_scene(servo))
+    assert batch.has_mount_branches and list(batch.servo_stages) == [0]
+    exact = simulate(batch, "lti", "exact", 5e-4)
+    rk4 = simulate(batch, "lti", "rk4", 1e-4)
+    assert exact.status[0] == 0 and rk4.status[0] == 0, (exact.message, rk4.message)
+    np.testing.assert_allclose(rk4.peak_displacement, exact.peak_displacement, rtol=1e-3)
+    np.testing.assert_allclose(rk4.peak_following_error, exact.peak_following_error, rtol=1e-3)
+    assert exact.peak_following_error[0] > 0.0
+    flexible = yaml.safe_load((examples / "scriber-flexible-base.yaml").read_text())
+    flexible["isolators"] = dict(servo["isolators"])
+    both, _ = scene_batch(validate_scene(flexible))
+    with pytest.raises(ValueError, match="iso_branch_k.*base_mode_frequency"):
+        simulate(both, "lti", "exact", 5e-4)
