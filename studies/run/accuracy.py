@@ -1,25 +1,24 @@
 """Speed against accuracy: pick the cheapest model for an accuracy request, and the study as it runs.
 
-**Choosing.** A simulation block may ask for an accuracy instead of naming the model
-(``accuracy: fast | balanced | reference`` or ``tolerance: "10 um" | "1 %"``, see
-:class:`studies.inputs.schema.Simulation`). :func:`choose` then measures: it runs a few pilot cases of the
-study
-(:func:`pilot_cases`: the hardest case of each isolator type and the stiffest case, found by a cheap
-screening run) at the reference level (nonlinear model, adaptive reference integrator, at the finest
-candidate step: the "truth"; with extra linear states, :data:`STATES_REFERENCE_PAIR`), then tries the
-candidate fidelity/integrator/step triples in order of their
-estimated cost (:data:`studies.run.costs.STEP_COST`, stability sub-steps included) and takes the first whose
-largest error on the pilot cases stays inside the tolerance. A relative tolerance applies to every sizing
-output (:data:`~isolab.studies.run.error_estimate.SIZING_OUTPUTS`: peak c.g. and point displacement, peak
-rotation, peak isolator force, relative to the reference's largest of each; the smallest isolator load
-relative to the largest preload); an absolute one (metres) to the peak displacements. A per-output
-tolerance (``tolerance: {settling_time: 5 ms, peak_point_displacement: 1 %}``) bounds instead the worst
-component of each named output
-(:func:`~isolab.studies.run.error_estimate.component_errors`). A candidate the stability guard would
-sub-step on a pilot case is never chosen, nor, for a relative tolerance, RK4 at a step whose damping of the
-pilot cases' fastest mode per cycle exceeds the tolerance (:func:`rk4_step_too_long`). ``fast`` allows
-5 %, ``balanced`` 0.5 %; ``reference`` runs the nonlinear level with the reference integrator at the
-requested step (default 1 ms). When no candidate meets the tolerance the reference itself is chosen.
+**Choosing.** A simulation block may ask for an accuracy instead of naming the model (``accuracy: fast |
+balanced | reference`` or ``tolerance: "10 um" | "1 %"``, see :class:`studies.inputs.schema.Simulation`).
+:func:`choose` then measures: it runs a few pilot cases of the study (:func:`pilot_cases`: the hardest case of
+each isolator type and the stiffest case, found by a cheap screening run) at the reference level (nonlinear
+model, adaptive reference integrator, at the finest candidate step: the "truth"; with extra linear states,
+which that level does not model, the pair :func:`~isolab.studies.run.error_estimate.reference_pair` names:
+ltv/rk4, ``error_estimate.STATES_REFERENCE_PAIR``, or lti/exact with a stage on a servo), then tries the
+candidate fidelity/integrator/step triples in order of their estimated cost
+(:data:`studies.run.costs.STEP_COST`, stability sub-steps included) and takes the first whose largest error on
+the pilot cases stays inside the tolerance. A relative tolerance applies to every sizing output
+(:data:`~isolab.studies.run.error_estimate.SIZING_OUTPUTS`: peak c.g. and point displacement, peak rotation,
+peak isolator force, relative to the reference's largest of each; the smallest isolator load relative to the
+largest preload); an absolute one (metres) to the peak displacements. A per-output tolerance (``tolerance:
+{settling_time: 5 ms, peak_point_displacement: 1 %}``) bounds instead the worst component of each named output
+(:func:`~isolab.studies.run.error_estimate.component_errors`). A candidate the stability guard would sub-step
+on a pilot case is never chosen, nor, for a relative tolerance, RK4 at a step whose damping of the pilot
+cases' fastest mode per cycle exceeds the tolerance (:func:`rk4_step_too_long`). ``fast`` allows 5 %,
+``balanced`` 0.5 %; ``reference`` runs the nonlinear level with the reference integrator at the requested step
+(default 1 ms). When no candidate meets the tolerance the reference itself is chosen.
 Choices are cached per study definition.
 
 How an error is measured, and the error estimate every stored study carries, are
@@ -41,7 +40,7 @@ from isolab.engine import modal, model, simulate, stability
 from isolab.engine.integrators import INTEGRATORS
 from isolab.engine.results import OK, STATUS_NAMES, SimulationResult
 from isolab.engine.scene import SceneBatch
-from isolab.engine.simulate import SLOT_INTEGRATORS, SLOT_LEVELS
+from isolab.engine.simulate import SERVO_LEVELS, SLOT_INTEGRATORS, SLOT_LEVELS
 from isolab.studies.inputs.schema import (
     ACCURACY_LEVELS,
     DEFAULT_DT,
@@ -59,6 +58,7 @@ from isolab.studies.run.error_estimate import (
     case_groups,
     component_errors,
     output_errors,
+    reference_pair,
     sizing_error,
 )
 
@@ -74,9 +74,6 @@ CANDIDATE_PAIRS = (
     ("nonlinear", "rk4"),
 )
 """Fidelity/integrator pairs the chooser tries, cheapest level first (the order breaks cost ties)."""
-STATES_REFERENCE_PAIR = ("ltv", "rk4")
-"""The truth of a scene with extra linear states (a flexible base, mounts' internal states), which the
-nonlinear level and the reference integrator do not model: the ltv level by RK4 at the finest step."""
 PILOT_MARGIN = 0.5
 """A candidate must meet this fraction of the tolerance on the pilot cases: the other cases of a study
 can err more (on the isolator-comparison example, before the fixed-step integrators split steps at profile
@@ -210,9 +207,10 @@ def choose_for_batch(
     cases = tuple(int(c) for c in (case_numbers if case_numbers is not None else range(batch.n_cases)))
     fine = steps[0]
     states = model.linear_slot(batch).A.shape[1]  # extra linear states: only some pairs model them
-    truth_pair = STATES_REFERENCE_PAIR if states else REFERENCE_PAIR
+    truth_pair = reference_pair(batch)
     if states:
-        pairs = [p for p in pairs if p[0] in SLOT_LEVELS and p[1] in SLOT_INTEGRATORS]
+        levels = SERVO_LEVELS if len(batch.servo_stages) else SLOT_LEVELS  # a servo stage: lti only
+        pairs = [p for p in pairs if p[0] in levels and p[1] in SLOT_INTEGRATORS]
     truth_name = "/".join(truth_pair)
     truth: SimulationResult | SimpleNamespace = simulate(batch, *truth_pair, dt=fine, auto_step=auto_step)
     usable = np.flatnonzero(truth.status == OK)
