@@ -10,6 +10,8 @@ from typing import Annotated, Any
 import numpy as np
 import typer
 
+from isolab.service.cli.input_errors import reported_input_errors
+
 #: Columns shown besides the criteria margins: (column, label, scale, unit shown).
 _SHOWN = (
     ("natural_frequency_1", "lowest natural frequency", 1.0, "Hz"),
@@ -33,6 +35,17 @@ def _probability(share: dict[str, Any] | None) -> str:
         return "-"
     lo, hi = share["interval"]
     return f"{share['probability']:.1%} ({lo:.1%}-{hi:.1%})"
+
+
+def _fitted(product: dict[str, Any], currency: str) -> str:
+    """A compared product of a catalogue comparison in words: count, load margin, pressure and cost."""
+    margin = min(m for m in product["load_margin"] if m is not None)
+    text = f"{sum(product['counts'])} isolators ({'/'.join(map(str, product['counts']))} per mount)"
+    text += f", smallest load margin {margin:.0%}"
+    pressures = [p for p in product["pressure"] if p is not None]
+    if pressures:
+        text += f", pressure {min(pressures) / 1e5:.3g}-{max(pressures) / 1e5:.3g} bar"
+    return text + (f", {product['cost']:,.0f} {currency}" if product["cost"] is not None else ", no price")
 
 
 def compare_command(
@@ -68,6 +81,23 @@ def compare_command(
         typer.Option(help="With tolerances: the probability of meeting every criterion a type must reach."),
     ] = 0.95,
     seed: Annotated[int, typer.Option(help="With tolerances: seed of the draws.")] = 0,
+    catalogue: Annotated[
+        str | None,
+        typer.Option(
+            help="Compare the products of this catalogue (a YAML or JSON file, or a shipped one's name) "
+            "instead of the generic types; --types then picks the products' types."
+        ),
+    ] = None,
+    margin: Annotated[
+        float,
+        typer.Option(
+            min=0.0, max=0.9, help="With --catalogue: each static load may change by this fraction."
+        ),
+    ] = 0.10,
+    per_corner: Annotated[
+        str | None,
+        typer.Option(help="With --catalogue: isolators a mount position may take, comma-separated."),
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the answer as JSON (SI units).")] = False,
     csv: Annotated[
         Path | None, typer.Option(help="Write the table (one row per type, units in the header) here.")
@@ -75,43 +105,50 @@ def compare_command(
 ) -> None:
     """Run SCENE on each isolator type and print the side-by-side table: the scene's design criteria
     with each type's margin, the main outputs, and the recommended type (the cheapest that meets every
-    criterion; with a tolerances block, the most probable type to meet them once built)."""
-    from pydantic import ValidationError
+    criterion; with a tolerances block, the most probable type to meet them once built). With
+    --catalogue, the rows are the catalogue's products that carry the scene's static loads, and the
+    recommendation the cheapest priced product that meets every criterion."""
 
     from isolab.studies.answers.comparisons import compare, comparison_frame
-    from isolab.studies.inputs.definitions import DefinitionError
-    from isolab.studies.inputs.schema import error_messages
+    from isolab.studies.answers.product_comparison import compare_products
+    from isolab.studies.inputs.catalogues import read_catalogue_file
     from isolab.studies.inputs.study import load_study, read_definition
     from isolab.studies.units import readable_unit
 
-    try:
+    with reported_input_errors():
         data, _ = read_definition(scene)
         if "scene" in data or "scene_file" in data:  # a study file: its scene on its floor, with its criteria
             study_scene = load_study(scene).scene
             assert study_scene is not None  # a validated study always has its scene
             data = study_scene.model_dump(mode="json", by_alias=True, exclude_none=True)
-        answer = compare(
-            data,
-            [t.strip() for t in types.split(",") if t.strip()],
-            {"duration": duration} if duration else None,
-            [t.strip() for t in cost_order.split(",") if t.strip()] if cost_order else None,
-            tune=tune,
-            samples=samples,
-            require=require,
-            seed=seed,
+        kinds = [t.strip() for t in types.split(",") if t.strip()]
+        if catalogue is not None and (tune or cost_order):
+            raise ValueError("--catalogue compares products on their datasheet figures and prices: leave out "
+                             "--tune and --cost-order")  # fmt: skip
+        answer = (
+            compare_products(
+                data,
+                read_catalogue_file(catalogue) if Path(catalogue).is_file() else catalogue,
+                {"duration": duration} if duration else None,
+                isolator_types=kinds,
+                margin=margin,
+                per_corner=[int(n) for n in per_corner.split(",") if n.strip()] if per_corner else None,
+                samples=samples,
+                require=require,
+                seed=seed,
+            )
+            if catalogue is not None
+            else compare(
+                data,
+                [t.strip() for t in types.split(",") if t.strip()],
+                {"duration": duration} if duration else None,
+                [t.strip() for t in cost_order.split(",") if t.strip()] if cost_order else None,
+                tune=tune,
+                samples=samples,
+                require=require,
+                seed=seed,
+            )
         )
-    except DefinitionError as err:
-        for d in err.details:
-            loc = ".".join(str(x) for x in d["loc"][1:])
-            typer.echo(f"error: {loc}: {d['msg']}" if loc else f"error: {d['msg']}", err=True)
-        raise typer.Exit(code=2) from None
-    except ValidationError as err:
-        for line in error_messages(err):
-            typer.echo(f"error: {line}", err=True)
-        raise typer.Exit(code=2) from None
-    except (OSError, ValueError) as err:
-        typer.echo(f"error: {err}", err=True)
-        raise typer.Exit(code=2) from None
     if as_json:
         typer.echo(json.dumps(answer, indent=2))
         return
@@ -123,7 +160,8 @@ def compare_command(
     from rich.table import Table
 
     names = list(df.index)
-    table = Table(title=f"{scene.name}: isolator types compared")
+    block = answer.get("catalogue")
+    table = Table(title=f"{scene.name}: " + (f"products of {block['name']}" if block else "isolator types"))
     table.add_column("")
     for t in names:
         table.add_column(t, justify="right")
@@ -159,6 +197,12 @@ def compare_command(
             f"{robust['seed']}) that meet every criterion, {robust['confidence']:.0%} Clopper-Pearson "
             "interval"
         )
+    if block:
+        for p in block["products"]:
+            typer.echo(
+                f"  {p['product']}: " + (_fitted(p, block["currency"]) if not p["reason"] else p["reason"])
+            )
     rec = answer["recommendation"]
-    head = f"recommended: {rec['isolator_type']}" if rec["isolator_type"] else "no recommendation"
+    pick = rec.get("product") or rec["isolator_type"]
+    head = f"recommended: {pick}" if pick else "no recommendation"
     typer.echo(f"{head}. {rec['reason']}")

@@ -42,6 +42,9 @@ MAX_PER_CORNER = 8
 CATALOGUE_SUFFIXES = (".yaml", ".yml", ".json")
 """Endings of a catalogue file name (a ``catalogue:`` naming no shipped catalogue but a file)."""
 
+AXIS_DAMPING = ("zeta_vertical", "zeta_horizontal")
+"""Damping ratios per direction a product (and a mount) may give besides ``zeta``."""
+
 ProductId = Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$", max_length=64)]
 """A product's id: letters, digits and ``_ . + -``, starting with a letter or digit."""
 IsolatorType = Literal["active", "air", "elastomer"]
@@ -89,7 +92,9 @@ class Product(CatalogueModel):
     """One isolator product: what it carries, the figures it gives its load, and what it costs.
 
     ``f_vertical``, ``f_horizontal`` and ``zeta`` are the natural frequencies and the damping ratio the
-    maker quotes at rated load; a mount naming the product uses them at whatever load it carries within
+    maker quotes at rated load (``zeta_vertical`` and ``zeta_horizontal`` where the datasheet gives the
+    damping of each direction: either replaces ``zeta`` along its axes, and with both ``zeta`` may be left
+    out); a mount naming the product uses them at whatever load it carries within
     the rated range (a levelled air spring keeps its frequency as its pressure follows the load).
     ``effective_area`` (air springs) gives the gauge pressure ``p = F / A`` at a load ``F``.
     """
@@ -103,7 +108,15 @@ class Product(CatalogueModel):
     rated_load: RatedLoad
     f_vertical: Annotated[Frequency, Field(gt=0)] = Field(description="vertical natural frequency, Hz")
     f_horizontal: Annotated[Frequency, Field(gt=0)] = Field(description="horizontal natural frequency, Hz")
-    zeta: Annotated[Dimensionless, Field(ge=0, le=2)] = Field(description="damping ratio, 1")
+    zeta: Annotated[Dimensionless, Field(ge=0, le=2)] | None = Field(
+        None, description="damping ratio of every axis, 1 (unless zeta_vertical and zeta_horizontal give it)"
+    )
+    zeta_vertical: Annotated[Dimensionless, Field(ge=0, le=2)] | None = Field(
+        None, description="damping ratio along the vertical (the mount's own z), 1"
+    )
+    zeta_horizontal: Annotated[Dimensionless, Field(ge=0, le=2)] | None = Field(
+        None, description="damping ratio along the horizontal (the mount's own x and y), 1"
+    )
     stroke: Annotated[Length, Field(gt=0)] | None = Field(
         None, description="usable travel each way from the working height, m"
     )
@@ -133,6 +146,16 @@ class Product(CatalogueModel):
                 f"engine is tested over), got {value:.6g} Hz"
             )
         return value
+
+    @model_validator(mode="after")
+    def _damping(self) -> Product:
+        if self.zeta is None and (self.zeta_vertical is None or self.zeta_horizontal is None):
+            missing = "zeta_horizontal" if self.zeta_vertical is not None else "zeta_vertical"
+            field = "zeta" if self.zeta_vertical is None and self.zeta_horizontal is None else missing
+            raise ValueError(
+                f"{field}: give the damping ratio, zeta (every axis) or zeta_vertical and zeta_horizontal"
+            )
+        return self
 
     @model_validator(mode="after")
     def _max_load(self) -> Product:
@@ -262,14 +285,19 @@ def scene_catalogue(reference: str | Catalogue | None, field: str = "isolators.c
 
 
 def product_figures(product: Product) -> dict[str, Any]:
-    """What a mount naming ``product`` takes: its type as ``preset`` and its ``f_vertical``,
-    ``f_horizontal`` (Hz) and ``zeta`` (1)."""
-    return {
+    """What a mount naming ``product`` takes: its type as ``preset``, its ``f_vertical``, ``f_horizontal``
+    (Hz) and ``zeta`` (1; without one, the vertical ratio), and ``zeta_vertical`` and ``zeta_horizontal``
+    (1) where the product gives them."""
+    figures: dict[str, Any] = {
         "preset": product.type,
         "f_vertical": product.f_vertical,
         "f_horizontal": product.f_horizontal,
-        "zeta": product.zeta,
+        "zeta": product.zeta if product.zeta is not None else product.zeta_vertical,
     }
+    for key in AXIS_DAMPING:
+        if getattr(product, key) is not None:
+            figures[key] = getattr(product, key)
+    return figures
 
 
 def inline_catalogue_file(scene: Any, here: str | Path) -> Any:
