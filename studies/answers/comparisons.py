@@ -267,14 +267,7 @@ def compare(
     study = resolved_study(comparison_study(scene, isolator_types, simulation))
     robust = study.scene is not None and bool(study.scene.tolerances)
     if robust:
-        samples = robustness.DEFAULT_SAMPLES if samples is None else samples
-        require = robustness.DEFAULT_REQUIRE if require is None else require
-        if not 1 <= samples <= robustness.MAX_SAMPLES:
-            raise DefinitionError(
-                [detail(["body", "samples"], f"draw 1 to {robustness.MAX_SAMPLES} machines, got {samples}")]
-            )
-        if not (math.isfinite(require) and 0.0 < require <= 1.0):
-            raise DefinitionError([detail(["body", "require"], f"a probability in (0, 1], got {require}")])
+        samples, require = robustness.robust_request(samples, require)
         assert study.scene is not None
         nominal = study.scene.model_dump(mode="json", exclude_none=True)
         sim = study.simulation.model_dump(mode="json")

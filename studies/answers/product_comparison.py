@@ -17,7 +17,6 @@ unpriced one with the largest smallest margin.
 from __future__ import annotations
 
 import copy
-import math
 from typing import Any
 
 from isolab.studies.answers import robustness
@@ -199,14 +198,7 @@ def compare_products(
     scene_model = validate_scene(base)
     robust = bool(scene_model.tolerances)
     if robust:
-        samples = robustness.DEFAULT_SAMPLES if samples is None else samples
-        require = robustness.DEFAULT_REQUIRE if require is None else require
-        if not 1 <= samples <= robustness.MAX_SAMPLES:
-            raise DefinitionError(
-                [detail(["body", "samples"], f"draw 1 to {robustness.MAX_SAMPLES} machines, got {samples}")]
-            )
-        if not (math.isfinite(require) and 0.0 < require <= 1.0):
-            raise DefinitionError([detail(["body", "require"], f"a probability in (0, 1], got {require}")])
+        samples, require = robustness.robust_request(samples, require)
     labels = mount_labels(len(loads))
     block = {
         "name": cat.name,

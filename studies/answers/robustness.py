@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from isolab.engine import simulate
-from isolab.studies.inputs.definitions import check_definition
+from isolab.studies.inputs.definitions import DefinitionError, check_definition, detail
 from isolab.studies.inputs.study import Study, study_labels
 from isolab.studies.questions.criteria import add_criteria
 from isolab.studies.questions.tolerances import CONFIDENCE, INTERVAL_METHOD, clopper_pearson, meets_counts
@@ -41,6 +41,24 @@ MAX_SAMPLES = 2000
 """Most machines a comparison draws per type and design."""
 SAMPLING = "random"
 """Independent draws: the Clopper-Pearson interval then holds as stated."""
+
+
+def robust_request(samples: int | None, require: float | None) -> tuple[int, float]:
+    """A request's number of machines to draw per design and its required probability of meeting every
+    criterion (1), defaults filled in.
+
+    Raises:
+        DefinitionError: naming ``samples`` (1 to :data:`MAX_SAMPLES`) or ``require`` (in (0, 1]).
+    """
+    samples = DEFAULT_SAMPLES if samples is None else samples
+    require = DEFAULT_REQUIRE if require is None else require
+    if not 1 <= samples <= MAX_SAMPLES:
+        raise DefinitionError(
+            [detail(["body", "samples"], f"draw 1 to {MAX_SAMPLES} machines, got {samples}")]
+        )
+    if not (math.isfinite(require) and 0.0 < require <= 1.0):
+        raise DefinitionError([detail(["body", "require"], f"a probability in (0, 1], got {require}")])
+    return samples, require
 
 
 @dataclass
