@@ -5,10 +5,19 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from pydantic import ConfigDict, Field, StrictFloat, StrictInt
+from pydantic import BaseModel, ConfigDict, Field, StrictFloat, StrictInt
 
 from isolab.service.api.schemas import EXAMPLE_COMPARISON, Comparison, ComparisonRequest, Recommendation
 from isolab.studies.answers.sizing import DEFAULT_LOAD_MARGIN, MAX_PER_CORNER
+from isolab.studies.inputs.catalogues import CatalogueFormat
+
+MAX_CATALOGUE_TEXT = 2_000_000
+"""Most characters of a catalogue file read by ``POST /catalogues/read``."""
+EXAMPLE_CATALOGUE_CSV = (
+    "id,type,maker,series,rated_load.min [kN],rated_load.max [kN],f_vertical [Hz],f_horizontal [Hz],zeta,"
+    "effective_area [cm^2],price [EUR]\n"
+    "air-40,air,Maker,Series A,10,40,2.5,4,0.12,800,2600\n"
+)
 
 EXAMPLE_CATALOGUE_COMPARISON: dict[str, Any] = {
     "scene": EXAMPLE_COMPARISON["scene"],
@@ -76,3 +85,30 @@ class ProductComparison(Comparison):
         "mount's static_load (N), and per product (products) its counts per mount, load_per_isolator (N), "
         "load_margin (1), pressure (Pa), cost, and verdict (compared, or skipped with the reason)",
     )
+
+
+class CatalogueFile(BaseModel):
+    """A catalogue file's text, as a page reads an uploaded file: the body of ``POST /catalogues/read``."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={"examples": [{"text": EXAMPLE_CATALOGUE_CSV, "format": "csv", "name": "mine"}]},
+    )
+
+    text: str = Field(max_length=MAX_CATALOGUE_TEXT, description="the file's contents")
+    format: CatalogueFormat = Field(
+        "yaml",
+        description="yaml or json (a mapping: name, currency, products), or csv (a header row of product "
+        "fields with their units in brackets, one product a row; the unit of price is the currency)",
+    )
+    name: str = Field("catalogue", min_length=1, max_length=200, description="the name of a CSV catalogue")
+
+
+class CatalogueRead(BaseModel):
+    """A catalogue file, read and checked: as a comparison or a sizing takes it inline."""
+
+    catalogue: dict[str, Any] = Field(
+        description="the catalogue (name, currency, products), every quantity in SI: the catalogue field of "
+        "POST /comparisons or POST /sizings"
+    )
+    products: list[str] = Field(description="the products' ids, in the file's order")

@@ -37,15 +37,122 @@ def _probability(share: dict[str, Any] | None) -> str:
     return f"{share['probability']:.1%} ({lo:.1%}-{hi:.1%})"
 
 
-def _fitted(product: dict[str, Any], currency: str) -> str:
-    """A compared product of a catalogue comparison in words: count, load margin, pressure and cost."""
-    margin = min(m for m in product["load_margin"] if m is not None)
-    text = f"{sum(product['counts'])} isolators ({'/'.join(map(str, product['counts']))} per mount)"
-    text += f", smallest load margin {margin:.0%}"
-    pressures = [p for p in product["pressure"] if p is not None]
-    if pressures:
-        text += f", pressure {min(pressures) / 1e5:.3g}-{max(pressures) / 1e5:.3g} bar"
-    return text + (f", {product['cost']:,.0f} {currency}" if product["cost"] is not None else ", no price")
+CLI_WIDTH = 100
+"""Characters a catalogue comparison's tables are laid out in (narrower terminals wrap the verdicts)."""
+REASON_CHARACTERS = 150
+"""Longest verdict of one product in the table; the whole reason is in ``--json``."""
+
+
+def _span(values: list[float], scale: float) -> str:
+    """The range of ``values`` (SI) times ``scale``: ``3.57-4.22``, one number when they agree, ``-``."""
+    if not values:
+        return "-"
+    lo, hi = min(values) * scale, max(values) * scale
+    return f"{lo:.3g}" if f"{lo:.3g}" == f"{hi:.3g}" else f"{lo:.3g}-{hi:.3g}"
+
+
+def _short(text: str, limit: int = REASON_CHARACTERS) -> str:
+    """``text`` on one line, cut at a word to at most ``limit`` characters (``...`` marks the cut)."""
+    import textwrap
+
+    return textwrap.shorten(" ".join(text.split()), width=limit, placeholder=" ...")
+
+
+def _missing(value: Any) -> bool:
+    """No value: None, NaN or pandas' NA."""
+    import pandas as pd
+
+    return value is None or bool(pd.isna(value))
+
+
+def print_products(answer: dict[str, Any], title: str, width: int = CLI_WIDTH) -> None:
+    """A catalogue comparison in ``width`` characters (less on a narrower terminal), one row per product,
+    cheapest first: each criterion's margin (%); the isolators, cost, smallest load margin (%), pressure
+    (bar), stroke used (%), criteria met and verdict; why each rejected product is rejected, wrapped and
+    cut to :data:`REASON_CHARACTERS` (the whole reason is in ``--json``); and the recommendation."""
+    import shutil
+    import textwrap
+
+    from rich import box
+    from rich.console import Console
+    from rich.table import Table
+    from rich.text import Text
+
+    from isolab.studies.answers.product_comparison import product_frame
+
+    df = product_frame(answer)
+    block = answer["catalogue"]
+    console = Console(width=min(width, shutil.get_terminal_size((width, 24)).columns))
+    reqs = answer.get("requirements") or []
+    rows = answer["rows"]
+    widest = max(len(str(t)) for t in df.index)
+
+    def table(heading: str) -> Table:
+        out = Table(
+            title=Text(f"{title}: {heading}"),  # Text: brackets in a name are no markup
+            box=box.SIMPLE_HEAD,
+            padding=(0, 0, 0, 1),
+            show_edge=False,
+            title_justify="left",
+        )
+        out.add_column("product", no_wrap=True, min_width=widest)
+        return out
+
+    compared = [t for t in df.index if t in rows]
+    if reqs and compared:
+        margins = table("margin to each criterion [%]")
+        for r in reqs:
+            margins.add_column(Text(r["name"].replace("_", " ")), justify="right")
+        for t in compared:
+            values = [rows[t].get(f"margin_{r['name']}") for r in reqs]
+            margins.add_row(Text(str(t)), *(Text(_cell(None if v is None else v * 100)) for v in values))
+        console.print(margins)
+    console.print()
+    products = table(f"products of {block['name']}, load margin {block['margin']:.0%}, cheapest first")
+    for head in ("isolators", f"cost\n[{block['currency']}]", "load\nmargin\n[%]", "pressure\n[bar]",
+                 "stroke\nused\n[%]", "criteria\nmet"):  # fmt: skip
+        products.add_column(Text(head), justify="right")
+    products.add_column("verdict")
+    rejected: list[tuple[str, str]] = []
+    for t, line in df.iterrows():
+        p = next(x for x in block["products"] if x["product"] == t)
+        counts = p["counts"] if t in rows else []
+        count = "-" if not counts else str(sum(counts))
+        if len(set(counts)) > 1:
+            count += f" ({line['per_mount']})"
+        elif counts and counts[0] > 1:
+            count += f" ({counts[0]}/mount)"
+        if line["recommended"]:
+            verdict = "RECOMMENDED"
+        elif line["feasible"]:
+            verdict = "meets all" if reqs else "fits"
+        else:
+            verdict = "rejected" if t in rows else "no fit"
+            rejected.append((str(t), _short(str(line["why_not"]))))
+        products.add_row(
+            Text(str(t)),
+            count,
+            "-" if _missing(line["cost"]) else f"{line['cost']:,.0f}",
+            _cell(line["load_margin"], 100.0),
+            _span([x for x in p["pressure"] if x is not None] if counts else [], 1e-5),
+            _cell(None if _missing(line["stroke_used"]) else line["stroke_used"], 100.0),
+            "-" if _missing(line["criteria_met"]) else f"{line['criteria_met']} of {len(reqs)}",
+            verdict,
+        )
+    console.print(products)
+    if rejected:
+        console.print()
+        why = table("why not")
+        why.add_column("reason", ratio=1)
+        for t, reason in rejected:
+            why.add_row(Text(t), Text(reason))
+        console.print(why)
+    rec = answer["recommendation"]
+    pick = rec.get("product")
+    # the cheaper products' failures are in the table above: the reason without them
+    reason = rec["reason"].split(". Cheaper: ")[0] if pick else rec["reason"]
+    text = f"recommended: {pick}. {reason}" if pick else f"no recommendation. {reason}"
+    typer.echo(textwrap.fill(_short(text, 3 * console.width), width=console.width, break_on_hyphens=False))
 
 
 def compare_command(
@@ -156,11 +263,14 @@ def compare_command(
     if csv is not None:
         units = answer["units"]
         df.rename(columns={c: f"{c} [{units.get(c) or '1'}]" for c in df.columns}).to_csv(csv)
+    block = answer.get("catalogue")
+    if block:
+        print_products(answer, scene.name)
+        return
     from rich.console import Console
     from rich.table import Table
 
     names = list(df.index)
-    block = answer.get("catalogue")
     table = Table(title=f"{scene.name}: " + (f"products of {block['name']}" if block else "isolator types"))
     table.add_column("")
     for t in names:
@@ -197,11 +307,6 @@ def compare_command(
             f"{robust['seed']}) that meet every criterion, {robust['confidence']:.0%} Clopper-Pearson "
             "interval"
         )
-    if block:
-        for p in block["products"]:
-            typer.echo(
-                f"  {p['product']}: " + (_fitted(p, block["currency"]) if not p["reason"] else p["reason"])
-            )
     rec = answer["recommendation"]
     pick = rec.get("product") or rec["isolator_type"]
     head = f"recommended: {pick}" if pick else "no recommendation"

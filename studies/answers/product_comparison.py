@@ -17,6 +17,7 @@ unpriced one with the largest smallest margin.
 from __future__ import annotations
 
 import copy
+import math
 from typing import Any
 
 from isolab.studies.answers import robustness
@@ -64,6 +65,7 @@ def _product_rows(candidates: list[Candidate], compared: set[str]) -> list[dict[
                 "unit_price": p.price,
                 "cost": c.cost,
                 "lead_time": p.lead_time,
+                "stroke": p.stroke,
                 "source": p.source,
                 "verdict": "compared" if p.id in compared else "skipped",
                 "reason": None if p.id in compared else c.reason,
@@ -78,6 +80,21 @@ def _cost_text(c: Candidate, currency: str) -> str:
     )
 
 
+def stroke_text(row: dict[str, Any], stroke: float | None) -> str | None:
+    """Why a compared product cannot be bought, in words, when its peak vertical deflection (the row's
+    ``peak_isolator_deflection_z``, m) is more than its ``stroke`` (m): the isolator would hit its stops.
+    None when it stays inside, or either is unknown."""
+    deflection = row.get("peak_isolator_deflection_z")
+    if stroke is None or deflection is None or not math.isfinite(float(deflection)):
+        return None
+    if float(deflection) <= stroke:
+        return None
+    return (
+        f"(would hit its stops: peak deflection {float(deflection) * 1e3:.3g} mm, "
+        f"{float(deflection) / stroke:.0%} of its {stroke * 1e3:.3g} mm stroke)"
+    )
+
+
 def recommend_product(
     rows: dict[str, dict[str, Any]],
     criteria: list[str],
@@ -89,7 +106,8 @@ def recommend_product(
     """The product to buy of those ``compared`` (their comparison ``rows``, product id -> column -> value):
     the cheapest priced product that meets every criterion, else the unpriced one with the largest smallest
     margin; with ``judged`` (the probability of meeting every criterion under the tolerances) a product
-    must reach ``require`` instead of meeting them as drawn.
+    must reach ``require`` instead of meeting them as drawn. A product whose peak deflection is more than
+    its stroke (:func:`stroke_text`) is never recommended, however it meets the criteria.
 
     Answers ``product`` (None when there are no criteria or none qualifies), its ``isolator_type``, the
     ``cost_order`` the products were ranked in (priced by cost, then unpriced by margin), ``basis``
@@ -101,10 +119,16 @@ def recommend_product(
         key=lambda c: (-robustness.smallest_margin(rows[c.product.id], criteria), c.product.id),
     )
     order = [c.product.id for c in priced + unpriced]
+    over = {
+        c.product.id: stroke_text(rows[c.product.id], c.product.stroke)
+        for c in compared
+        if stroke_text(rows[c.product.id], c.product.stroke) is not None
+    }
+    eligible = [t for t in order if t not in over]
     if judged is None:
-        base = recommend(rows, criteria, order)
+        base = recommend(rows, criteria, eligible)
     else:
-        base = robustness.recommend_on_probability(rows, criteria, judged, require, order)
+        base = robustness.recommend_on_probability(rows, criteria, judged, require, eligible)
     pick = base["isolator_type"]
     by_id = {c.product.id: c for c in compared}
     answer: dict[str, Any] = {
@@ -117,6 +141,8 @@ def recommend_product(
         answer["require"] = float(require)
 
     def shown(pid: str) -> str:
+        if pid in over:
+            return f"{pid} {over[pid]}"
         if judged is not None:
             return f"{pid} {judged[pid].text()}"
         return f"{pid} {failed_criteria(rows[pid], criteria)}"
@@ -266,3 +292,98 @@ def _nothing_fits(cat: Catalogue, scene: Any, block: dict[str, Any]) -> dict[str
         "simulation": scene.simulation.model_dump(mode="json"),
         "catalogue": block,
     }
+
+
+PRODUCT_UNITS: dict[str, str] = {
+    "count": "1",
+    "unit_price": "currency",
+    "cost": "currency",
+    "pressure_min": "Pa",
+    "pressure_max": "Pa",
+    "load_margin": "1",
+    "peak_deflection": "m",
+    "stroke": "m",
+    "stroke_used": "1",
+    "criteria_met": "1",
+}
+"""The unit of each numeric column of :func:`product_frame` (``currency``: the catalogue's)."""
+
+
+def _product_line(
+    p: dict[str, Any], row: dict[str, Any] | None, criteria: list[str], pick: str | None
+) -> dict[str, Any]:
+    """One product of a catalogue comparison as a line of :func:`product_frame`."""
+    compared = row is not None
+    pressures = [x for x in p["pressure"] if x is not None] if compared else []
+    margins = [m for m in p["load_margin"] if m is not None]
+    deflection = None
+    stroke = p.get("stroke")
+    met: list[str] = []
+    feasible = False
+    why_not = p["reason"]
+    if row is not None:
+        deflection = row.get("peak_isolator_deflection_z")
+        met = [c for c in criteria if row.get(f"margin_{c}") is not None and row[f"margin_{c}"] >= 0.0]
+        feasible = bool(row.get("meets_criteria")) if criteria else row.get("status") == "ok"
+        why_not = None if feasible else failed_criteria(row, criteria)
+        stops = stroke_text(row, stroke)
+        if stops is not None:
+            feasible = False
+            why_not = stops[1:-1] if why_not is None else f"{why_not}; {stops[1:-1]}"
+    return {
+        "type": p["type"],
+        "count": sum(p["counts"]) if compared else None,
+        "per_mount": "/".join(map(str, p["counts"])) if compared else None,
+        "unit_price": p["unit_price"],
+        "cost": p["cost"],
+        "feasible": feasible,
+        "why_not": why_not,
+        "pressure_min": min(pressures) if pressures else None,
+        "pressure_max": max(pressures) if pressures else None,
+        "load_margin": min(margins) if margins else None,
+        "peak_deflection": deflection,
+        "stroke": stroke,
+        "stroke_used": deflection / stroke if deflection is not None and stroke else None,
+        "criteria_met": len(met) if compared and criteria else None,
+        "recommended": p["product"] == pick,
+    }
+
+
+def product_frame(answer: dict[str, Any]) -> Any:
+    """A catalogue comparison's answer (:func:`compare_products`, or the JSON of ``POST /comparisons`` with a
+    catalogue) as a pandas DataFrame, one row per product of the catalogue (index ``product``), cheapest
+    first (unpriced, then skipped, after): ``type``; ``count`` (isolators in all) and ``per_mount``;
+    ``unit_price`` and ``cost`` (the catalogue's currency); ``feasible`` (compared and meets every
+    criterion) and ``why_not`` in words (the load out of range, or the criteria missed by how much);
+    ``pressure_min`` and ``pressure_max`` over the mounts (Pa); ``load_margin``, the smallest (1);
+    ``peak_deflection`` (m), ``stroke`` (m) and ``stroke_used`` (1); ``criteria_met`` (of
+    ``len(attrs["requirements"])``); ``recommended``. ``attrs`` carries ``recommendation``,
+    ``requirements``, ``units`` (column -> unit), ``currency``, ``catalogue`` (its name) and ``margin``.
+
+    Raises:
+        KeyError: an answer without a catalogue block (a comparison of the generic types).
+    """
+    import pandas as pd
+
+    block = answer["catalogue"]
+    criteria = [r["name"] for r in answer.get("requirements") or []]
+    pick = answer["recommendation"].get("product")
+    lines = {
+        p["product"]: _product_line(p, answer["rows"].get(p["product"]), criteria, pick)
+        for p in block["products"]
+    }
+    order = sorted(
+        lines,
+        key=lambda t: (lines[t]["count"] is None, lines[t]["cost"] is None, lines[t]["cost"] or 0.0),
+    )
+    df = pd.DataFrame([lines[t] for t in order], index=pd.Index(order, name="product"))
+    df = df.astype({"count": "Int64", "criteria_met": "Int64"})
+    df.attrs.update(
+        recommendation=answer["recommendation"],
+        requirements=answer.get("requirements") or [],
+        units={c: block["currency"] if u == "currency" else u for c, u in PRODUCT_UNITS.items()},
+        currency=block["currency"],
+        catalogue=block["name"],
+        margin=block["margin"],
+    )
+    return df

@@ -99,3 +99,20 @@ def test_with_tolerances_each_product_has_its_probability() -> None:
     assert types["soft"]["nominal"]["probability"] == types["soft_dear"]["nominal"]["probability"] == 1.0
     rec = answer["recommendation"]
     assert rec["basis"] == "probability" and rec["product"] == "soft" and rec["require"] == 0.9
+
+
+def test_a_product_that_would_hit_its_stops_is_not_recommended() -> None:
+    """A product that meets every criterion but deflects more than its stroke is passed over for the next
+    cheapest, with the deflection and the stroke in the reason, as the sizing passes it over."""
+    first = compare_products(SCENE, CATALOGUE)
+    deflection = first["rows"]["soft"]["peak_isolator_deflection_z"]
+    assert deflection > 0
+    cat = copy.deepcopy(CATALOGUE)
+    soft = next(p for p in cat["products"] if p["id"] == "soft")
+    soft["stroke"] = 0.5 * deflection  # m
+    answer = compare_products(SCENE, cat)
+    assert answer["rows"]["soft"]["meets_criteria"] is True  # the criteria alone would take it
+    rec = answer["recommendation"]
+    assert rec["product"] == "soft_dear", rec
+    assert "soft (would hit its stops" in rec["reason"] and "200% of its" in rec["reason"]
+    assert size(SCENE, cat)["design"]["product"] == "soft_dear"

@@ -15,10 +15,13 @@ from __future__ import annotations
 import anyio
 from anyio import to_thread
 from fastapi import APIRouter, Body, HTTPException, Request, Response
+from pydantic import ValidationError
 
 from isolab.service.api.catalogue_schemas import (
     EXAMPLE_CATALOGUE_COMPARISON,
     CatalogueComparisonRequest,
+    CatalogueFile,
+    CatalogueRead,
     ProductComparison,
 )
 from isolab.service.api.request_limits import JsonParsedOffLoop
@@ -40,6 +43,9 @@ from isolab.studies.answers.product_comparison import compare_products
 from isolab.studies.answers.single_case import MAX_CASE_SECONDS, run_single_case, single_case_study
 from isolab.studies.answers.sizing import DEFAULT_LOAD_MARGIN, SizingAnswer, SizingRequest
 from isolab.studies.answers.sizing import size as run_size
+from isolab.studies.authoring.authoring import parse_text
+from isolab.studies.inputs.catalogues import Catalogue, read_catalogue_text
+from isolab.studies.inputs.definitions import DefinitionError, validation_details
 
 router = APIRouter(tags=["comparisons"], route_class=JsonParsedOffLoop)
 
@@ -270,3 +276,31 @@ async def sizing(
         max_cases=request.max_cases,
     )
     return SizingAnswer(**answer)
+
+
+@router.post(
+    "/catalogues/read",
+    response_model=CatalogueRead,
+    responses=INVALID,
+    summary="Read a catalogue file (YAML, JSON or CSV) into the catalogue a comparison takes",
+)
+def read_catalogue(request: CatalogueFile) -> CatalogueRead:
+    """Parse and check the text of a catalogue file, as the page reads a file the user uploads: answered
+    as the mapping ``POST /comparisons`` and ``POST /sizings`` take as their ``catalogue`` (every quantity
+    in SI), with the products' ids. Text that does not parse is a 422 naming ``body.text`` and the line; a
+    product that does not check, one naming its field (``body.text.products.2.rated_load.max``)."""
+    if request.format == "csv":
+        try:
+            data = read_catalogue_text(request.text, request.format, request.name)
+        except ValueError as err:
+            raise invalid(["body", "text"], str(err)) from None
+    else:
+        # YAML and JSON through the studies' bounded reader: aliases, depth and size checked before loading
+        data, _ = parse_text(request.text, ["body", "text"])
+    try:
+        catalogue = Catalogue.model_validate(data)
+    except ValidationError as err:
+        raise DefinitionError(validation_details(err, ["body", "text"])) from None
+    return CatalogueRead(
+        catalogue=catalogue.model_dump(mode="json", exclude_none=True), products=catalogue.ids
+    )
