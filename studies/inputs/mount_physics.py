@@ -16,6 +16,7 @@ import numpy as np
 
 from isolab.engine import mount_laws
 from isolab.engine.scene import SceneBatch, SceneError
+from isolab.studies.inputs.catalogues import AXIS_DAMPING
 from isolab.studies.inputs.schema.mounts import AirSpring, Elastomer, Isolators, Orientation
 from isolab.studies.inputs.schema.scene_paths import ISOLATORS, mount
 
@@ -26,6 +27,31 @@ def _own_or_group(iso: Isolators, j: int, key: str) -> tuple[AirSpring | Orienta
     if listed and getattr(listed[j], key) is not None:
         return getattr(listed[j], key), f"{mount(j)}.{key}"
     return getattr(iso, key), f"{ISOLATORS}.{key}"
+
+
+def axis_damping_ratios(groups: Sequence[Isolators], zeta: np.ndarray, varied: bool = False) -> np.ndarray:
+    """(C, n, 3) damping ratio per mount and own axis, 1: ``zeta`` (C, n) on every axis, but where a
+    listed mount, or the group below a listed mount's own ``zeta`` or preset, gives ``zeta_horizontal``
+    (x, y) or ``zeta_vertical`` (z), that. ``varied``: a study varies ``isolators.zeta``, which then sets
+    every axis of the group. ``groups``: each case's isolators (one per case)."""
+    out = np.repeat(zeta[..., None], 3, axis=-1)
+    if all(getattr(b, key) is None for iso in groups for b in (iso, *iso.listed) for key in AXIS_DAMPING):
+        return out  # no ratio per direction: zeta on every axis
+    for key, axes in (("zeta_horizontal", [0, 1]), ("zeta_vertical", [2])):
+        for j in range(zeta.shape[1]):
+            ratio = np.full(zeta.shape[0], np.nan)
+            for c, iso in enumerate(groups):
+                value = None if varied else getattr(iso, key)
+                if iso.listed:
+                    mt = iso.listed[j]
+                    if getattr(mt, key) is not None:
+                        value = getattr(mt, key)
+                    elif mt.zeta is not None or mt.preset is not None:
+                        value = None
+                ratio[c] = np.nan if value is None else float(value)
+            for a in axes:
+                out[:, j, a] = np.where(np.isnan(ratio), out[:, j, a], ratio)
+    return out
 
 
 def apply_mount_physics(

@@ -35,7 +35,7 @@ from isolab.studies.inputs.isolators import (
     load_share,
     stiffness_from_frequency,
 )
-from isolab.studies.inputs.mount_physics import apply_mount_physics, mount_states
+from isolab.studies.inputs.mount_physics import apply_mount_physics, axis_damping_ratios, mount_states
 from isolab.studies.inputs.parameters import check_leaf_values
 from isolab.studies.inputs.precision import flexible_base, point_signature, precision_inputs, servo_kind
 from isolab.studies.inputs.schema import (
@@ -501,11 +501,11 @@ def build_batch(
             "mounts or give explicit k" + (f" (case {case})" if c > 1 else ""),
         )
     safe_load = np.where(load > 0.0, load, 0.0)[..., None]
+    groups = cases.each(lambda s: s.isolators)
+    zeta_axes = axis_damping_ratios(groups, zeta, isolator_group("zeta") in cases.overrides)
     iso_k = _first_set(k_explicit, stiffness_from_frequency(safe_load, freq, g))
-    iso_c = _first_set(c_explicit, damping_from_ratio(iso_k, safe_load, zeta[..., None], g))
-    iso_k, iso_c, iso_frame = apply_mount_physics(
-        cases.each(lambda s: s.isolators), load, iso_k, iso_c, k_explicit, c_explicit, g
-    )
+    iso_c = _first_set(c_explicit, damping_from_ratio(iso_k, safe_load, zeta_axes, g))
+    iso_k, iso_c, iso_frame = apply_mount_physics(groups, load, iso_k, iso_c, k_explicit, c_explicit, g)
     _fail(
         ISOLATORS,
         "stiffness and damping must be finite and non-negative",

@@ -413,11 +413,11 @@ def _counts(arrays: dict[str, np.ndarray]) -> tuple[int, int]:
 
 def _design_extra(study: Study) -> dict[str, Any]:
     """What the design summary adds from the study's ``design:`` block (type, samples, seed; saltelli:
-    second_order, which the sensitivity analysis reads)."""
+    second_order and, when given, replicates, which the sensitivity analysis reads)."""
     dump = study.design_spec.model_dump(mode="json")
     if dump.get("type") == "saltelli":
         dump["second_order"] = bool(dump.get("second_order"))
-    keys = ("type", "seed", "samples", "second_order")
+    keys = ("type", "seed", "samples", "second_order", "replicates")
     return {k: v for k, v in dump.items() if k in keys and v is not None}
 
 

@@ -10,6 +10,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from isolab.studies.inputs.catalogues import (
+    AXIS_DAMPING,
     MAX_PER_CORNER,
     Catalogue,
     ProductId,
@@ -278,6 +279,8 @@ class Mount(InputModel):
     f_vertical: MountFrequency | None = None
     f_horizontal: MountFrequency | None = None
     zeta: DampingRatio | None = None
+    zeta_vertical: DampingRatio | None = Field(None, description="damping ratio along the own z (not zeta)")
+    zeta_horizontal: DampingRatio | None = Field(None, description="damping ratio along the own x, y")
     skyhook: bool | None = None
     feedforward: FeedforwardSpec | None = None
     k: tuple[NonNegativeStiffness, NonNegativeStiffness, NonNegativeStiffness] | None = Field(
@@ -306,7 +309,9 @@ class Isolators(InputModel):
 
     Stiffness and damping of a mount along each floor axis come, in order of precedence, from the mount's
     explicit ``k``/``c``, the group's ``k``/``c`` for that axis, or the preset frequency (X, Y from
-    ``f_horizontal``, Z from ``f_vertical``) and ``zeta`` applied to the static load the mount carries.
+    ``f_horizontal``, Z from ``f_vertical``) and ``zeta`` applied to the static load the mount carries;
+    ``zeta_vertical`` and ``zeta_horizontal`` (a product's damping per direction) take the place of ``zeta``
+    along the mount's own z and x, y, below a listed mount's own ``zeta`` or preset.
     ``tuning`` replaces a type's preset figures by those of the model this machine would use, whenever
     that type is chosen: a study that varies ``preset`` then compares those models, where the group's
     overrides would apply to every type alike. ``feedforward`` (active mounts: the stages' inertial wrench
@@ -333,6 +338,12 @@ class Isolators(InputModel):
     f_vertical: MountFrequency | None = None
     f_horizontal: MountFrequency | None = None
     zeta: DampingRatio | None = None
+    zeta_vertical: DampingRatio | None = Field(
+        None, description="damping ratio along every mount's own z, in place of zeta there"
+    )
+    zeta_horizontal: DampingRatio | None = Field(
+        None, description="damping ratio along every mount's own x and y, in place of zeta there"
+    )
     skyhook: bool | None = None
     feedforward: FeedforwardSpec | None = None
     k: AxisStiffness | None = None
@@ -375,6 +386,8 @@ class Isolators(InputModel):
             except UnknownProductError as err:
                 raise ValueError(str(err)) from None
             figures = product_figures(product)
+            if block.zeta is not None:  # the block's own damping ratio wins on every axis
+                figures = {k: v for k, v in figures.items() if k not in AXIS_DAMPING}
             if "preset" in block.model_fields_set and block.preset != product.type:
                 raise ValueError(
                     f"{where}.preset: product {product.id!r} is {product.type}; leave preset out or give "
