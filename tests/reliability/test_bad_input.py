@@ -647,6 +647,7 @@ NON_FINITE_BODIES: list[tuple[str, str, list]] = [
     ("/simulations", '{"scene": {"machine": {"mass": Infinity}}}', ["body", "scene", "machine", "mass"]),
     ("/scenes/check", '{"scene": {"machine": {"mass": -Infinity}}}', ["body", "scene", "machine", "mass"]),
     ("/sizings", '{"scene": {}, "margin": NaN}', ["body", "margin"]),
+    ("/catalogues/read", '{"text": NaN}', ["body", "text"]),
     ("/comparisons/floor", '{"scene": {}, "description": NaN}', ["body", "description"]),
 ]
 
