@@ -1,8 +1,8 @@
-"""``python -m benchmarks [pairs|kernels|accuracy|endtoend|million|first_study|startup] ...``: run the benchmarks and print their figures."""
+"""``python -m benchmarks [pairs|kernels|accuracy|endtoend|million|first_study|startup|mount_states] ...``: run the benchmarks and print their figures."""
 
 import sys
 
-from benchmarks import accuracy, endtoend, first_study, kernels, million, pairs, startup
+from benchmarks import accuracy, endtoend, first_study, kernels, million, mount_states, pairs, startup
 
 COMMANDS = {
     "pairs": pairs.main,
@@ -12,6 +12,7 @@ COMMANDS = {
     "million": million.main,
     "first_study": first_study.main,
     "startup": startup.main,
+    "mount_states": mount_states.main,
 }
 
 if __name__ == "__main__":

@@ -10,8 +10,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from isolab.engine.results import DOF_NAMES
+
 MECHANISM_RTOL = 1e-9
 """A mode whose ``w^2`` is below this fraction of the largest is a zero-stiffness (mechanism) mode."""
+MOTION_NAMES = {"x": "surge", "y": "sway", "z": "heave", "rx": "pitch", "ry": "roll", "rz": "yaw"}
+"""The motion of the base along or about each degree of freedom (rotation about X is pitch, about Y roll):
+the words a mode is named by."""
 
 
 @dataclass
@@ -64,6 +69,13 @@ def modes(M: np.ndarray, K: np.ndarray, C: np.ndarray) -> Modes:
         tipping=tipping,
         omega2=w2,
     )
+
+
+def motion_mode(energy: np.ndarray, dof: str) -> np.ndarray:
+    """(C,) index (0-based, ascending frequency) of the mode in which the degree of freedom ``dof`` (one of
+    ``DOF_NAMES``) holds its largest kinetic-energy share, from ``energy`` (C, 6, 6) as :func:`modes` gives
+    it: the mode that moves the base most along or about that axis (the lower one on a tie)."""
+    return np.argmax(np.asarray(energy)[:, :, DOF_NAMES.index(dof)], axis=1)
 
 
 def state_matrix(M: np.ndarray, K: np.ndarray, C: np.ndarray) -> np.ndarray:

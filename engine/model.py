@@ -15,6 +15,7 @@ from isolab.engine.kernels.structs import kernel_struct
 from isolab.engine.linear_states.block import SlotBlock
 from isolab.engine.linear_states.flexible_base import flexible_base_block
 from isolab.engine.linear_states.levelling import levelling_block
+from isolab.engine.linear_states.mount_branches import mount_relaxation_block
 from isolab.engine.linear_states.servo import servo_block
 from isolab.engine.scene import SceneBatch
 
@@ -360,7 +361,7 @@ def feedforward_distribution(b: SceneBatch) -> np.ndarray:
     return D.reshape(C, n, 3, 6)
 
 
-SLOT_MODELS = (flexible_base_block, servo_block, levelling_block)
+SLOT_MODELS = (flexible_base_block, servo_block, mount_relaxation_block, levelling_block)
 """The models of the extra linear states, in the order of their blocks in ``z``: each a function of the
 batch that returns its ``SlotBlock`` or None when the scene does not use it."""
 

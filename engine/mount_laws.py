@@ -10,6 +10,10 @@ One branch is the standard linear solid (Zener); an air spring whose reservoir i
 orifice is one. Its state-space form adds one internal state per branch, the dashpot's displacement
 ``z_b`` (``dz_b/dt = (delta - z_b) / tau_b``, force ``-k0 delta - sum k_b (delta - z_b)``).
 
+As extra linear states of the linear levels (``engine.linear_states.mount_branches``, joined through
+``engine.model.SLOT_MODELS``) the state of a branch is its series spring's deflection ``w_b = delta - z_b``:
+``dw_b/dt = delta' - w_b / tau_b``, the mount's force ``-k delta - c delta' - sum k_b w_b`` along its axis.
+
 Plain numpy, SI throughout; nothing here is compiled.
 """
 
@@ -17,6 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import ArrayLike
+
+from isolab.engine.scene import SceneBatch, SceneError
 
 ATMOSPHERE = 101325.0
 """Standard atmospheric pressure, Pa."""
@@ -156,3 +162,36 @@ def equivalent_viscous(
         w = np.sqrt(at(w).real / m)
     K = at(w)
     return K.real, K.imag / w, w
+
+
+def zener_peak(
+    k_static: ArrayLike, k_branch: ArrayLike, c_branch: ArrayLike
+) -> tuple[np.ndarray, np.ndarray]:
+    """The loss peak of a spring ``k_static`` (N/m) in parallel with a spring ``k_branch`` (N/m) in series
+    with a dashpot ``c_branch`` (N s/m): ``eta_max = k_branch / (2 sqrt(k_static (k_static + k_branch)))``
+    at ``w = (k_branch / c_branch) sqrt(k_static / (k_static + k_branch))`` (rad/s); the same as
+    :func:`zener_loss_peak` with ``tau = c_branch / k_branch``."""
+    kb = np.asarray(k_branch, dtype=float)
+    return zener_loss_peak(k_static, kb, np.asarray(c_branch, dtype=float) / kb)
+
+
+def branch_states(b: SceneBatch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The (mount, own axis, branch) indices of the relaxation branches that carry a state, in the order
+    of their states: those whose stiffness ``b.iso_branch_k`` is above 0 in some case."""
+    live = (np.asarray(b.iso_branch_k, dtype=float) > 0).any(axis=0)  # (n, 3, B)
+    j, a, k = np.nonzero(live)
+    return j, a, k
+
+
+def check_branches(b: SceneBatch) -> None:
+    """Refuse relaxation branches with a negative stiffness or a non-positive relaxation time."""
+    kb = np.asarray(b.iso_branch_k, dtype=float)
+    tau = np.asarray(b.iso_branch_tau, dtype=float)
+    if kb.shape != tau.shape or kb.shape[:3] != (b.n_cases, b.n_isolators, 3):
+        raise SceneError(
+            "iso_branch_k", f"shape {kb.shape} (iso_branch_tau {tau.shape}), expected (C, n, 3, B) for both"
+        )
+    if (kb < 0).any():
+        raise SceneError("iso_branch_k", "a relaxation branch's stiffness must be 0 (none) or above")
+    if ((kb > 0) & ~(tau > 0)).any():
+        raise SceneError("iso_branch_tau", "a relaxation branch's time must be above 0 s")

@@ -136,10 +136,10 @@ class SimulationResult:
     A case whose ``status`` is not OK has NaN in ``peak_displacement``, ``peak_rotation``,
     ``peak_point_displacement``, ``peak_isolator_force``, ``min_isolator_load``, ``rms_displacement``,
     ``final_displacement``, ``settling_time``, ``point_settling_time``, ``peak_isolator_deflection``,
-    ``max_isolator_load``, ``transmissibility`` and ``peak_following_error`` (``stage_following_error``),
-    and ``settled`` False. What does
-    not depend on integrating its motion stays filled: ``dt`` (the step it was or would have been run
-    with), ``static_isolator_load`` and the modal analysis (``natural_frequency``, ``damping_ratio``,
+    ``max_isolator_load``, ``transmissibility``, ``peak_following_error`` (``stage_following_error``),
+    ``ready_time`` and ``point_ready_time``, and ``settled`` False. What does not depend on integrating its
+    motion stays filled: ``dt`` (the step it was or would have been run with), ``move_time``,
+    ``static_isolator_load`` and the modal analysis (``natural_frequency``, ``damping_ratio``,
     ``mode_energy``, ``mechanism``), so an unstable or tipping case still shows its modes and preloads.
 
     Attributes (shapes; units):
@@ -185,6 +185,15 @@ class SimulationResult:
             (``engine.frequency``), m/s; 0 without a floor spectrum. Needs no time integration: filled
             for unstable and failed cases too, NaN only for a tipping case or one with a mechanism.
         floor_point_velocity_band: (C, p, 3) exact centre of that band, Hz (0 without a floor spectrum).
+        move_time: (C,) end of the last stage move, s: when every stage has come to rest for good
+            (``SceneBatch.last_move_end``, the instant ``settling_time`` counts from), a profile's input
+            shaper included (it lengthens the move by its duration). Filled for every case; 0 without
+            stage motion.
+        ready_time: (C,) ``move_time + settling_time``, s: when the stages are at rest and the c.g. and
+            every point have settled for good; a lower bound where ``settled`` is False.
+        point_ready_time: (C, p) ``move_time + point_settling_time``, s: when each point is ready after
+            the last move (exactly so when it settles after the last move no faster than after the
+            others, as after a single move; an upper bound otherwise).
         history: time histories of recorded cases, or None (see ``simulate(record=...)``).
 
     The per-case outputs (every field but ``status``, ``message`` and ``history``) are listed, in this
@@ -330,16 +339,44 @@ class SimulationResult:
     stage_following_error: np.ndarray | None = field(default=None)
     """(C, m) each stage's peak following error, m (0 for a stage that follows its profile exactly); the
     stored output is the worst of them, ``peak_following_error``."""
+    move_time: np.ndarray | None = field(
+        default=None,
+        metadata=_output(
+            unit="s",
+            long_name="end of the last stage move, its input shaper included (every stage at rest for good)",
+        ),
+    )
+    ready_time: np.ndarray | None = field(
+        default=None,
+        metadata=_output(
+            unit="s",
+            long_name="move_time plus settling_time: the stages at rest and the c.g. and every point settled "
+            "(lower bound if not settled)",
+        ),
+    )
+    point_ready_time: np.ndarray | None = field(
+        default=None,
+        metadata=_output(
+            POINT,
+            unit="s",
+            long_name="move_time plus the point's settling time (its worst over the moves): the point ready "
+            "after the last move",
+        ),
+    )
     history: dict[str, np.ndarray] | None = field(default=None)
 
     def __post_init__(self) -> None:
         if self.peak_following_error is None:
             self.peak_following_error = np.zeros(np.shape(self.status)[0])
         # a result assembled without the floor-spectrum outputs has none: zeros (no floor spectrum)
+        c, p = np.shape(self.peak_point_displacement)[:2]
         for name in ("floor_point_velocity", "floor_point_velocity_band"):
             if getattr(self, name) is None:
-                c, p = np.shape(self.peak_point_displacement)[:2]
                 setattr(self, name, np.zeros((c, p, len(AXES))))
+        # nor without the move times: not known
+        for name, shape in (("move_time", (c,)), ("ready_time", (c,)), ("point_ready_time", (c, p))):
+            if getattr(self, name) is None:
+                setattr(self, name, np.full(shape, np.nan))
 
     @property
     def n_cases(self) -> int:

@@ -109,6 +109,11 @@ class SceneBatch:
         point_tool_stage: (C, p) int64: the stage a relative point's tool rides on (-1: the base); for a
             following-error point, its stage.
         point_work_stage: (C, p) int64: the stage its work point rides on (-1: the base).
+        iso_branch_k: (C, n, 3, B) each mount's relaxation branches along its own axes, N/m: a spring
+            ``k_b`` in series with a dashpot, in parallel with ``iso_k`` (an air mount's orifice, an
+            elastomer's Maxwell ladder; docs/physics.md, "Mounts with internal states"). B = 0, the
+            default: none. A branch whose stiffness is 0 in every case carries no state.
+        iso_branch_tau: (C, n, 3, B) their relaxation times ``c_b / k_b``, s (positive where ``k_b > 0``).
         iso_valve: (C, n) int64: the levelling valve each mount is plumbed to (-1, the default: none;
             docs/isolators.md, "Levelling valves"); the same in every case. Mounts with the same index share
             one valve, at most three valves.
@@ -166,6 +171,8 @@ class SceneBatch:
     point_relative: np.ndarray | None = None
     point_tool_stage: np.ndarray | None = None
     point_work_stage: np.ndarray | None = None
+    iso_branch_k: np.ndarray | None = None
+    iso_branch_tau: np.ndarray | None = None
     iso_valve: np.ndarray | None = None
     iso_level_time: np.ndarray | None = None
     iso_level_band: np.ndarray | None = None
@@ -199,6 +206,9 @@ class SceneBatch:
             self.point_settle_tol = np.repeat(tol.reshape(-1, 1), p, axis=1)
         self._base_mode_defaults(c, n)
         self._servo_defaults(c)
+        for name in ("iso_branch_k", "iso_branch_tau"):  # no relaxation branch unless the scene gives one
+            if getattr(self, name) is None:
+                setattr(self, name, np.zeros((c, n, 3, 0)))
         if self.iso_valve is None:
             self.iso_valve = np.full((c, n), -1, dtype=np.int64)
         if self.iso_level_time is None:
@@ -252,6 +262,11 @@ class SceneBatch:
     def n_base_modes(self) -> int:
         """The number of the base's elastic modes (0: rigid)."""
         return int(np.asarray(self.base_mode_frequency).shape[1])
+
+    @property
+    def has_mount_branches(self) -> bool:
+        """True when some mount has a relaxation branch (``iso_branch_k`` > 0)."""
+        return bool(np.any(np.asarray(self.iso_branch_k) > 0))
 
     @property
     def has_floor_spectrum(self) -> bool:

@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from isolab.engine import frequency, modal, model, stability
+from isolab.engine import frequency, modal, model, mount_laws, stability
 from isolab.engine.integrators import INTEGRATORS
 from isolab.engine.kernels import peaks
 from isolab.engine.kernels.params import FIDELITIES
@@ -88,34 +88,49 @@ def _divergence_cause(integrator: str, step: float) -> str:
 
 
 SLOT_LEVELS = ("lti", "ltv")
-"""The levels that model the extra linear states (a flexible base)."""
+"""The levels that model the extra linear states (a flexible base, the mounts' relaxation branches)."""
 SLOT_INTEGRATORS = ("rk4", "exact")
 """The integrators that step them."""
 
 
 def check_slot(batch: SceneBatch, fidelity: str, integrator: str) -> None:
-    """Refuse a flexible base (``base_mode_*``) where it is not modelled, naming the input and the levels
-    and integrators that model it."""
-    if batch.n_base_modes == 0:
-        return
-    field = "base_mode_frequency"
-    if fidelity not in SLOT_LEVELS:
-        raise SceneError(
-            field,
-            f"a flexible base is modelled at the {' and '.join(SLOT_LEVELS)} levels, not {fidelity!r}; "
-            "choose one of them or a rigid base",
+    """Refuse extra linear states (a flexible base ``base_mode_*``, mount relaxation branches
+    ``iso_branch_*``) where they are not modelled, naming the input and the levels and integrators that
+    model them."""
+    used = [
+        (what, field, apart)
+        for what, field, apart, on in (
+            ("a flexible base", "base_mode_frequency", ("iso_frame",), batch.n_base_modes > 0),
+            (
+                "mounts with internal states (an air mount's orifice, an elastomer's ladder)",
+                "iso_branch_k",
+                ("base_mode_frequency",),
+                batch.has_mount_branches,
+            ),
         )
-    if integrator not in SLOT_INTEGRATORS:
-        raise SceneError(
-            field, f"a flexible base is integrated by {' or '.join(SLOT_INTEGRATORS)}, not {integrator!r}"
-        )
-    for name, used in (
-        ("floor", batch.has_floor_motion or batch.has_floor_spectrum),
-        ("iso_ff_gain", batch.has_feedforward),
-        ("iso_frame", batch.has_orientation),
-    ):
-        if used:
-            raise SceneError(field, f"a flexible base is not modelled together with {name} (not yet)")
+        if on
+    ]
+    if np.size(np.asarray(batch.iso_branch_k)):
+        mount_laws.check_branches(batch)
+    for what, field, apart in used:
+        if fidelity not in SLOT_LEVELS:
+            raise SceneError(
+                field,
+                f"{what} is modelled at the {' and '.join(SLOT_LEVELS)} levels, not {fidelity!r}; "
+                "choose one of them or leave it out",
+            )
+        if integrator not in SLOT_INTEGRATORS:
+            raise SceneError(
+                field, f"{what} is integrated by {' or '.join(SLOT_INTEGRATORS)}, not {integrator!r}"
+            )
+        for name, on in (
+            ("floor", batch.has_floor_motion or batch.has_floor_spectrum),
+            ("iso_ff_gain", batch.has_feedforward),
+            ("iso_frame", batch.has_orientation and "iso_frame" in apart),
+            ("base_mode_frequency", batch.n_base_modes > 0 and "base_mode_frequency" in apart),
+        ):
+            if on:
+                raise SceneError(field, f"{what} is not modelled together with {name} (not yet)")
 
 
 SERVO_LEVELS = ("lti",)
@@ -423,5 +438,8 @@ def simulate(
         floor_point_velocity_band=fpb,
         peak_following_error=per_case(errors.max(axis=1) if batch.n_stages else np.zeros(C)),
         stage_following_error=per_case(errors),
+        move_time=np.asarray(t_last, dtype=float),
+        ready_time=per_case(t_last + settling),
+        point_ready_time=per_case(t_last[:, None] + point_settling[:, :p_given]),
         history=history,
     )

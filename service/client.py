@@ -295,14 +295,9 @@ class Client:
         also ``tuning`` (type -> values found). With a ``tolerances:`` block in the scene, each type is also
         judged on ``samples`` machines drawn from it (seed ``seed``; the service's defaults when None):
         ``robustness`` gives the probability of meeting every criterion, and the recommendation is the
-        most probable type that reaches ``require`` (a probability, 0 to 1)."""
-        if not isinstance(scene, Mapping):
-            import yaml
-
-            path = Path(scene)
-            text = path.read_text(encoding="utf-8")
-            scene = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
-        body: dict[str, Any] = {"scene": dict(scene)}  # type: ignore[arg-type]  # a mapping by now
+        most probable type that reaches ``require`` (a probability, 0 to 1). The products of a catalogue
+        are compared by :meth:`compare_products`."""
+        body: dict[str, Any] = {"scene": scene_data(scene)}
         if types is not None:
             body["isolator_types"] = list(types)
         if simulation is not None:
@@ -317,6 +312,56 @@ class Client:
         from isolab.studies.answers.comparisons import comparison_frame
 
         return comparison_frame(self._request("POST", "/comparisons", json=body).json())
+
+    def compare_products(
+        self,
+        scene: Mapping[str, Any] | str | Path,
+        catalogue: Mapping[str, Any] | str | Path,
+        *,
+        types: builtins.list[str] | None = None,
+        simulation: Mapping[str, Any] | None = None,
+        margin: float | None = None,
+        per_corner: builtins.list[int] | None = None,
+        samples: int | None = None,
+        require: float | None = None,
+        seed: int | None = None,
+    ) -> dict[str, Any]:
+        """Run one scene (a dict, or a YAML/JSON scene file) on each product of ``catalogue`` that carries
+        its static loads (``POST /comparisons`` with a catalogue): the service's answer, a dict. Read it as
+        a table with :func:`product_frame`.
+
+        ``catalogue`` is a catalogue file (YAML, JSON or CSV: read here, sent inline), the catalogue as a
+        mapping (as in a catalogue file), or a shipped catalogue's name (``representative``). ``types``
+        picks the products' types (default all); ``margin`` (1) is how far each isolator's static load may
+        change either way and stay in its rated range (the service's default 0.10 when None);
+        ``per_corner`` the numbers of isolators side by side a mount position may take (default the
+        scene's, else 1). With a ``tolerances:`` block in the scene, ``samples``, ``require`` and ``seed``
+        as in :meth:`compare`.
+
+        The answer's ``recommendation.product`` is the cheapest priced product that meets every
+        criterion, ``catalogue.products`` every product's counts, load margins, pressures, cost, and the
+        reason a skipped one does not fit.
+
+        Raises:
+            FileNotFoundError: ``catalogue`` names a file (ends in .yaml, .yml, .json or .csv) that is not
+                there.
+            ValueError: a catalogue file that does not parse.
+            ClientError: the service refused the request (a 422 naming the field, such as
+                ``catalogue.products.2.rated_load.max``).
+        """
+        body: dict[str, Any] = {"scene": scene_data(scene), "catalogue": catalogue_data(catalogue)}
+        for key, value in (
+            ("isolator_types", None if types is None else list(types)),
+            ("simulation", None if simulation is None else dict(simulation)),
+            ("margin", None if margin is None else float(margin)),
+            ("per_corner", None if per_corner is None else [int(n) for n in per_corner]),
+            ("samples", samples),
+            ("require", require),
+            ("seed", seed),
+        ):
+            if value is not None:
+                body[key] = value
+        return self._request("POST", "/comparisons", json=body).json()
 
     def simulate(
         self,
@@ -444,6 +489,57 @@ class Client:
     def calibration_cancel(self, calibration_id: str) -> None:
         """Stop a calibration and remove it (``DELETE /calibrations/{id}``)."""
         self._request("DELETE", f"/calibrations/{calibration_id}")
+
+
+def scene_data(scene: Mapping[str, Any] | str | Path) -> dict[str, Any]:
+    """A scene to send: the mapping itself, or the contents of a YAML or JSON scene file.
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: a file that holds no mapping.
+    """
+    if isinstance(scene, Mapping):
+        return dict(scene)
+    import yaml
+
+    path = Path(scene)
+    text = path.read_text(encoding="utf-8")
+    data = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
+    if not isinstance(data, Mapping):
+        raise ValueError(f"{path}: expected a mapping at the top level, got {type(data).__name__}")
+    return dict(data)
+
+
+def catalogue_data(catalogue: Mapping[str, Any] | str | Path) -> dict[str, Any] | str:
+    """A catalogue to send: a mapping as it is, a catalogue file's contents (YAML, JSON or CSV, read on this
+    machine), or a shipped catalogue's name as it is.
+
+    Raises:
+        FileNotFoundError: a name ending in a catalogue file's suffix (.yaml, .yml, .json, .csv) that names
+            no file.
+        ValueError: a file that does not parse.
+    """
+    from isolab.studies.inputs.catalogues import CATALOGUE_SUFFIXES, read_catalogue_file
+
+    if isinstance(catalogue, Mapping):
+        return dict(catalogue)
+    path = Path(catalogue)
+    if path.is_file():
+        return read_catalogue_file(path)
+    if isinstance(catalogue, Path) or str(catalogue).lower().endswith(CATALOGUE_SUFFIXES):
+        raise FileNotFoundError(f"catalogue: no file {path}")
+    return str(catalogue)
+
+
+def product_frame(answer: Mapping[str, Any]) -> pd.DataFrame:
+    """A catalogue comparison's answer (:meth:`Client.compare_products`) as a DataFrame: one row per product
+    (index ``product``, cheapest first), with ``count``, ``unit_price`` and ``cost`` (``attrs["currency"]``),
+    ``feasible`` and ``why_not`` in words, ``pressure_min``/``pressure_max`` (Pa), ``load_margin`` (1),
+    ``peak_deflection`` and ``stroke`` (m), ``stroke_used`` (1), ``criteria_met`` and ``recommended``
+    (:func:`isolab.studies.answers.product_comparison.product_frame`; units in ``attrs["units"]``)."""
+    from isolab.studies.answers.product_comparison import product_frame as frame
+
+    return frame(dict(answer))
 
 
 def sensitivity_frame(answer: Mapping[str, Any]) -> pd.DataFrame:

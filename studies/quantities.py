@@ -6,7 +6,8 @@ labels that pick along its other dimensions, in any order: ``peak_point_displace
 isolators not named are reduced). Dimensions left unnamed are reduced to the worst value as the output
 catalogue judges it (:data:`isolab.engine.results.OUTPUTS`: the largest, but the smallest of the
 smallest isolator load), the criterion margins to the smallest margin. ``settling_time.<point>`` is that
-point's settling time (``point_settling_time``); the bare ``settling_time`` stays the whole base's.
+point's settling time (``point_settling_time``); the bare ``settling_time`` stays the whole base's, and
+likewise ``ready_time.<point>`` (``point_ready_time``: the end of the last move plus that point's settling).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ if TYPE_CHECKING:  # xarray loads where a dataset is read, not where a scene is
 _NOT_QUANTITIES = frozenset({"status", "message"})
 
 #: ``<alias>.<label>...`` -> the variable meant when labels follow the alias.
-_LABELLED_ALIASES = {"settling_time": "point_settling_time"}
+_LABELLED_ALIASES = {"settling_time": "point_settling_time", "ready_time": "point_ready_time"}
 
 
 def case_dims(ds: xr.Dataset) -> tuple[str, ...]:

@@ -22,7 +22,7 @@ from isolab.engine.kernels.cached_terms import (
     stages_and_floor,
 )
 from isolab.engine.kernels.dynamics import derivative, ltv_acc, nonlinear_acc, rates, slot_rates
-from isolab.engine.kernels.params import LTI, LTV, NONLINEAR
+from isolab.engine.kernels.params import LTI, LTV, NONLINEAR, borrowed
 
 NAME = "rk4"
 LEVELS = ("lti", "ltv", "nonlinear")
@@ -44,6 +44,8 @@ def step(P, c, level, t, h, x, S, idx, W):
     previous step's end), and the slopes read them through arrays bound once per step. The time-varying
     levels only: :func:`step_lti` steps the LTI level (the driver calls the one of its level, so numba
     compiles only that one)."""
+    if level == NONLINEAR and not (P.ffon or P.ft.shape[0] > 0):
+        return step_nonlinear(P, c, t, h, x, S, idx, W)
     nx = x.shape[0]
     xs = S[0]
     # The workspace's arrays bound once, and only functions that call no other (whose own references
@@ -81,6 +83,61 @@ def step(P, c, level, t, h, x, S, idx, W):
         return False
     _combine(level, h, x, S[1], S[2], S[3], S[4])
     return True
+
+
+@njit(cache=True, inline="always")
+def step_nonlinear(P, c, t, h, x, S, idx, W):
+    """:func:`step` at the nonlinear level for a case without recorded floor motion or feedforward
+    actuators: the same arithmetic with no array reference counted inside the step.
+
+    Numba counts a reference (an atomic add and subtract, dearer than the arithmetic here) for every array
+    bound, sliced or passed on; the per-case terms are packed first, then every array is bound once as a
+    view without owner (``engine.kernels.params.borrowed``), whose references are not counted."""
+    pack_case(P, c, W, W.cc)
+    g, pbase = P.g, P.pbase
+    key, tc, cc, cs, cm = borrowed(W.key), borrowed(W.tc), borrowed(W.cc), borrowed(W.cs), borrowed(W.cm)
+    sw, R, F, acc = borrowed(W.sw), borrowed(W.R), borrowed(W.F), borrowed(W.acc)
+    x, idx, S = borrowed(x), borrowed(idx), borrowed(S)
+    xs, k1, k2, k3, k4 = S[0], S[1], S[2], S[3], S[4]
+    nx = x.shape[0]
+    for i in range(nx):
+        xs[i] = x[i]
+    ok = _nonlinear_slope(c, t, True, xs, k1, idx, key, tc, cc, cs, cm, sw, R, F, acc, g, pbase)
+    tm = t + 0.5 * h
+    for i in range(nx):
+        xs[i] = x[i] + 0.5 * h * k1[i]
+    ok &= _nonlinear_slope(c, tm, True, xs, k2, idx, key, tc, cc, cs, cm, sw, R, F, acc, g, pbase)
+    for i in range(nx):
+        xs[i] = x[i] + 0.5 * h * k2[i]
+    ok &= _nonlinear_slope(c, tm, False, xs, k3, idx, key, tc, cc, cs, cm, sw, R, F, acc, g, pbase)
+    for i in range(nx):
+        xs[i] = x[i] + h * k3[i]
+    ok &= _nonlinear_slope(c, t + h, True, xs, k4, idx, key, tc, cc, cs, cm, sw, R, F, acc, g, pbase)
+    if not ok:
+        return False
+    _combine(NONLINEAR, h, x, k1, k2, k3, k4)
+    return True
+
+
+@njit(cache=True, inline="always")
+def _nonlinear_slope(c, ts, check, xs, k, idx, key, tc, cc, cs, cm, sw, R, F, acc, g, pbase):
+    """One slope ``k`` of the nonlinear level at ``ts`` (s) and the stage state ``xs``; the time-only terms
+    made those of ``ts`` first where ``check`` (the middle slopes share them). Returns whether the mass
+    matrix is positive definite."""
+    if check and not key_holds(c, NONLINEAR, ts, idx, key):
+        stages_and_floor(ts, idx, cc, cs, sw, tc)
+        set_key(c, NONLINEAR, ts, moving_terms(NONLINEAR, g, cc, cs, cm, sw, tc), idx, key)
+    nonlinear_acc(xs, tc, cc, cm, R, F, acc, g, pbase)
+    q0, q1, q2, q3 = xs[3], xs[4], xs[5], xs[6]
+    w0, w1, w2 = xs[10], xs[11], xs[12]
+    k[0], k[1], k[2] = xs[7], xs[8], xs[9]
+    k[3] = 0.5 * (-q1 * w0 - q2 * w1 - q3 * w2)
+    k[4] = 0.5 * (q0 * w0 + q2 * w2 - q3 * w1)
+    k[5] = 0.5 * (q0 * w1 - q1 * w2 + q3 * w0)
+    k[6] = 0.5 * (q0 * w2 + q1 * w1 - q2 * w0)
+    for i in range(6):
+        k[7 + i] = acc[i]
+    return key[3] != 0.0
 
 
 @njit(cache=True)

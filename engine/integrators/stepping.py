@@ -26,8 +26,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from isolab.engine.integrators import euler, exact, rk4
-from isolab.engine.kernels import output_map
+from isolab.engine.integrators import euler, exact, output_map, rk4
 from isolab.engine.kernels.excitation import advance_pieces, next_breakpoint
 from isolab.engine.kernels.params import FIDELITIES, LTI, NONLINEAR, Params, Work
 from isolab.engine.kernels.peaks import Peaks, observe
@@ -52,8 +51,8 @@ def pair_driver(method: int, level: int) -> Any:
         ``status[c]`` becomes UNSTABLE when the base runs away (``engine.kernels.peaks.observe``) and
         FAILED on a singular mass matrix; the case stops there. ``full``, ``ev``, ``sub_b``, ``sub_a``,
         ``deg``, ``osc`` are the exact method's prepared maps (empty for the others). ``outmap`` is the
-        linear output map ``(G, KF, target, rest_target, still, GZ)`` (``engine.kernels.output_map``; empty at
-        the nonlinear level), through which the linear levels observe every case whose floor stands still
+        linear output map ``(G, KF, target, rest_target, still, GZ)`` (``output_map``; empty at the
+        nonlinear level), through which the linear levels observe every case whose floor stands still
         and that is not recorded.
         """
         C = dt.shape[0]

@@ -4,7 +4,8 @@ Every function here is compiled by Numba (``cache=True``) or prepares arrays for
 the kernels work on (``params``; ``Peaks`` in ``peaks``) and the structs they take them as (``structs``),
 vectors and rotations (``rotations``), what shakes the base (``excitation``), the isolators (``mounts``) and
 the feedforward actuators (``feedforward``), the terms kept per case and per time (``cached_terms``), the
-accelerations of each level (``dynamics``), and what is observed of the motion (``peaks``, and
-``output_map`` for the linear levels). The integrators (``engine.integrators``) step them;
-``engine.simulate`` runs a batch.
+accelerations of each level (``dynamics``), and what is observed of the motion (``peaks``, its extrema
+between output times in ``between_steps``). The integrators (``engine.integrators``) step them and observe
+the linear levels through their output map (``engine.integrators.output_map``); ``engine.simulate`` runs a
+batch.
 """

@@ -7,9 +7,11 @@ running peaks ``engine.kernels.peaks.Peaks``; they take them as structs (``engin
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
+from numba.core import types
+from numba.extending import intrinsic
 
 LTI, LTV, NONLINEAR = 0, 1, 2
 """Codes of the fidelity levels inside the kernels."""
@@ -179,3 +181,29 @@ class Work(NamedTuple):
     """(12, 6) the LTV level's mount operator: the mounts' generalised force per unit state."""
     sw: np.ndarray
     """(m, 9) the stages' positions, velocities and accelerations relative to the c.g."""
+
+
+def _view_without_owner(typingctx: Any, array: types.Array) -> Any:
+    """``borrowed(array)``: a view of ``array`` (any numba array) whose references numba does not count,
+    for a kernel's hot loop: the same data, shape and strides, no owner. Numba counts a reference (an atomic
+    add and subtract, dearer than the arithmetic of a small kernel) at every binding of an array, every
+    slice and every call that passes one, and drops a pair only where no other release lies between; on a
+    view without owner it drops them all. The view must not outlive the call that made it (the caller's
+    array keeps the memory alive)."""
+    if not isinstance(array, types.Array):
+        return None
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        src = context.make_array(array)(context, builder, value=args[0])
+        out = context.make_array(array)(context, builder)
+        for name in ("nitems", "itemsize", "data", "shape", "strides"):
+            setattr(out, name, getattr(src, name))
+        out.meminfo = context.get_constant_null(types.MemInfoPointer(array.dtype))
+        out.parent = context.get_constant_null(types.pyobject)
+        return out._getvalue()
+
+    return array(array), codegen
+
+
+borrowed: Any = intrinsic(_view_without_owner)
+"""A view of a numba array whose references are not counted (:func:`_view_without_owner`); kernels only."""

@@ -5,7 +5,7 @@ No time history is kept unless a case is recorded: the integrators call ``observ
 Peaks (and the smallest and largest loads) are taken at their extremum between output times too: each
 peaked quantity follows the cubic Hermite interpolant of its values and time derivatives at the two output
 times (``last_*`` keep the previous ones), whose interior extremum has a closed form; the solve runs only
-where the cubic's Bernstein control points reach beyond the running peak.
+where the cubic's Bernstein control points reach beyond the running peak (``engine.kernels.between_steps``).
 
 Settling of the points of interest after each stage move: the rest intervals of a case (every stage at
 rest, from a move's end ``t_k`` to the next move's start ``s_k`` or the run's end) and the static
@@ -19,16 +19,23 @@ closes the interval a run ends in.
 
 from __future__ import annotations
 
-import math
 from collections import namedtuple
 
 import numpy as np
 from numba import njit
 
-from isolab.engine.kernels.excitation import floor_motion
+from isolab.engine.kernels.between_steps import (
+    ONE_THIRD,
+    cubic_beyond,
+    cubic_extremes,
+    hermite,
+    interval_peak,
+    peak_point,
+)
+from isolab.engine.kernels.excitation import floor_motion, recorded_floor
 from isolab.engine.kernels.mounts import isolator_forces, mount_offset
-from isolab.engine.kernels.params import NONLINEAR
-from isolab.engine.kernels.rotations import cross, quat_to_matrix, quat_to_rotvec
+from isolab.engine.kernels.params import NONLINEAR, borrowed
+from isolab.engine.kernels.rotations import cross
 
 Peaks = namedtuple(
     "Peaks",
@@ -73,8 +80,6 @@ Peaks = namedtuple(
         "rest_point_offset",
     ],
 )
-
-ONE_THIRD = 1.0 / 3.0
 
 DIVERGED_DISPLACEMENT = 1.0
 """A c.g. or point displacement beyond this (m) can only come from a diverging integration."""
@@ -206,10 +211,8 @@ def observe(P, c, level, t, x, W, O, step):
     physically possible range.
     """
     if level == NONLINEAR:
-        quat_to_matrix(x[3:7], W.R)
-        quat_to_rotvec(x[3:7], W.acc)
-    else:
-        W.acc[0], W.acc[1], W.acc[2] = x[3], x[4], x[5]
+        return observe_nonlinear(P, c, t, x, W, O, step)
+    W.acc[0], W.acc[1], W.acc[2] = x[3], x[4], x[5]
     u0, u1, u2 = x[0], x[1], x[2]
     ok = True
     for i in range(3):
@@ -260,7 +263,7 @@ def observe(P, c, level, t, x, W, O, step):
     for i in range(3):
         a = max(abs(x[i]), O.u[c, i])
         if between:
-            a = max(a, _between(O.last_u[c, i, 0], O.last_u[c, i, 1], x[i], x[off + i], h, a))
+            a = max(a, interval_peak(O.last_u[c, i, 0], O.last_u[c, i, 1], x[i], x[off + i], h, a))
         if a > O.u[c, i]:
             O.u[c, i] = a
         O.last_u[c, i, 0] = x[i]
@@ -268,7 +271,7 @@ def observe(P, c, level, t, x, W, O, step):
         wi = wf0 if i == 0 else (wf1 if i == 1 else wf2)
         a = max(abs(W.acc[i]), O.th[c, i])
         if between:
-            a = max(a, _between(O.last_th[c, i, 0], O.last_th[c, i, 1], W.acc[i], wi, h, a))
+            a = max(a, interval_peak(O.last_th[c, i, 0], O.last_th[c, i, 1], W.acc[i], wi, h, a))
         if a > O.th[c, i]:
             O.th[c, i] = a
         O.last_th[c, i, 0] = W.acc[i]
@@ -299,9 +302,9 @@ def observe(P, c, level, t, x, W, O, step):
             pv0, q0 = _slot_share(P.zO, c, 3 * p, x, pv0, q0)
             pv1, q1 = _slot_share(P.zO, c, 3 * p + 1, x, pv1, q1)
             pv2, q2 = _slot_share(P.zO, c, 3 * p + 2, x, pv2, q2)
-        _peak_point(O.poi, O.last_poi, c, p, 0, pv0, s0 + q0, h, between)
-        _peak_point(O.poi, O.last_poi, c, p, 1, pv1, s1 + q1, h, between)
-        _peak_point(O.poi, O.last_poi, c, p, 2, pv2, s2 + q2, h, between)
+        peak_point(O.poi, O.last_poi, c, p, 0, pv0, s0 + q0, h, between)
+        peak_point(O.poi, O.last_poi, c, p, 1, pv1, s1 + q1, h, between)
+        peak_point(O.poi, O.last_poi, c, p, 2, pv2, s2 + q2, h, between)
         if settle:
             # target point displacement from the static offset (linearised, plus the nonlinear rest)
             t0, t1, t2 = (O.target[c, 0], O.target[c, 1], O.target[c, 2]) if material else (0.0, 0.0, 0.0)
@@ -369,7 +372,7 @@ def observe(P, c, level, t, x, W, O, step):
                 # on them, shifted linearly to meet the computed forces at both ends
                 p0, m0 = O.last_defl[c, j, i, 0], O.last_defl[c, j, i, 1]
                 c0, c1, c2, c3 = hermite(p0, m0, dl, dd, h)
-                b = max(b, _beyond(c0, c1, c2, c3, b))  # the deflection's hull: p0, b1, b2, dl
+                b = max(b, cubic_beyond(c0, c1, c2, c3, b))  # the deflection's hull: p0, b1, b2, dl
                 f1 = f2 = f3 = 0.0
                 if sky != 0.0:
                     _, f1, f2, f3 = hermite(O.last_floor[c, i, 0], O.last_floor[c, i, 1], W.xf[i], W.vf[i], h)
@@ -382,7 +385,7 @@ def observe(P, c, level, t, x, W, O, step):
                 e1 = F1 - (g0 + g1 + g2 + g3)
                 g0 += e0
                 g1 += e1 - e0
-                a = max(a, _beyond(g0, g1, g2, g3, a))
+                a = max(a, cubic_beyond(g0, g1, g2, g3, a))
                 if i == 2:
                     # the Bernstein control points bound the cubic: solve only if a new extreme may lie inside
                     b1 = g0 + g1 * ONE_THIRD
@@ -415,94 +418,226 @@ def observe(P, c, level, t, x, W, O, step):
 
 
 @njit(cache=True, inline="always")
-def hermite(p0, m0, p1, m1, h):
-    """Coefficients ``(c0, c1, c2, c3)`` of the cubic Hermite interpolant ``c0 + c1 s + c2 s^2 + c3 s^3``,
-    ``s = (t - t0) / h`` in [0, 1], of a quantity with values ``p0``, ``p1`` and rates ``m0``, ``m1`` (per
-    s) at the ends of an interval of ``h`` s."""
-    c1 = h * m0
-    c2 = 3.0 * (p1 - p0) - h * (2.0 * m0 + m1)
-    c3 = 2.0 * (p0 - p1) + h * (m0 + m1)
-    return p0, c1, c2, c3
-
-
-@njit(cache=True, inline="always")
-def cubic_extremes(c0, c1, c2, c3):
-    """Smallest and largest value of ``c0 + c1 s + c2 s^2 + c3 s^3`` at its stationary points strictly
-    inside 0 < s < 1, in closed form; ``(inf, -inf)`` when it has none there."""
-    lo = np.inf
-    hi = -np.inf
-    a = 3.0 * c3
-    b = 2.0 * c2
-    s1 = -1.0
-    s2 = -1.0
-    if abs(a) <= 1e-12 * (abs(b) + abs(c1)):
-        if b != 0.0:
-            s1 = -c1 / b
-    else:
-        disc = b * b - 4.0 * a * c1
-        if disc >= 0.0:
-            q = -0.5 * (b + math.copysign(math.sqrt(disc), b))
-            s1 = q / a
-            if q != 0.0:
-                s2 = c1 / q
-    if 0.0 < s1 < 1.0:
-        y = c0 + s1 * (c1 + s1 * (c2 + s1 * c3))
-        lo = min(lo, y)
-        hi = max(hi, y)
-    if 0.0 < s2 < 1.0:
-        y = c0 + s2 * (c1 + s2 * (c2 + s2 * c3))
-        lo = min(lo, y)
-        hi = max(hi, y)
-    return lo, hi
-
-
-@njit(cache=True, inline="always")
-def _interior_abs(c0, c1, c2, c3):
-    """Largest |value| of the cubic at its stationary points inside (0, 1); 0 when it has none."""
-    lo, hi = cubic_extremes(c0, c1, c2, c3)
-    if hi < lo:
-        return 0.0
-    return max(abs(lo), abs(hi))
-
-
-@njit(cache=True, inline="always")
-def _beyond(c0, c1, c2, c3, peak):
-    """Largest |value| of the cubic at its stationary points inside (0, 1) when it may exceed ``peak``
-    there, else 0. Its Bernstein control points ``c0``, ``c0 + c1/3``, ``c0 + (2 c1 + c2)/3``, ``c0 + c1 + c2
-    + c3`` bound it (convex hull), so the closed-form solve runs only when an inner one exceeds ``peak``
-    (which holds the end values): rarely, once a running peak has been reached."""
-    b1 = c0 + c1 * ONE_THIRD
-    b2 = b1 + (c1 + c2) * ONE_THIRD
-    if abs(b1) <= peak and abs(b2) <= peak:
-        return 0.0
-    return _interior_abs(c0, c1, c2, c3)
-
-
-@njit(cache=True, inline="always")
-def _between(p0, m0, p1, m1, h, peak):
-    """Largest |value| inside an output interval of ``h`` s of a quantity with values ``p0``, ``p1`` and
-    rates ``m0``, ``m1`` at its ends (cubic Hermite interpolant) when it may exceed ``peak`` (which holds the
-    end values); 0 when it cannot or its extremes are at the ends."""
-    # the inner Bernstein control points first: the cubic stays inside the hull of p0, b1, b2, p1
-    b1 = p0 + h * m0 * ONE_THIRD
-    b2 = p1 - h * m1 * ONE_THIRD
-    if abs(b1) <= peak and abs(b2) <= peak:
-        return 0.0
-    c0, c1, c2, c3 = hermite(p0, m0, p1, m1, h)
-    return _interior_abs(c0, c1, c2, c3)
-
-
-@njit(cache=True, inline="always")
-def _peak_point(peak, last, c, p, i, value, rate, h, between):
-    """Fold a point's displacement ``value`` (m) and its rate (m/s) into its running peak, with the
-    extremum between the previous output time and this one."""
-    a = max(abs(value), peak[c, p, i])
-    if between:
-        a = max(a, _between(last[c, p, i, 0], last[c, p, i, 1], value, rate, h, a))
-    if a > peak[c, p, i]:
-        peak[c, p, i] = a
-    last[c, p, i, 0] = value
-    last[c, p, i, 1] = rate
+def observe_nonlinear(P, c, t, x, W, O, step):
+    """:func:`observe` at the nonlinear level, the same arithmetic on arrays bound once as views whose
+    references numba does not count (``engine.kernels.params.borrowed``)."""
+    b = borrowed
+    x, R, xf, vf, F = b(x), b(W.R), b(W.xf), b(W.vf), b(W.F)
+    famp, fomega, fphase = b(P.famp), b(P.fomega), b(P.fphase)
+    for dd in range(3):  # ``floor_motion``
+        amp = famp[c, dd]
+        if amp == 0.0:
+            xf[dd] = 0.0
+            vf[dd] = 0.0
+        else:
+            w = fomega[c, dd]
+            arg = w * t + fphase[c, dd]
+            xf[dd] = amp * np.sin(arg)
+            vf[dd] = amp * w * np.cos(arg)
+    if P.ft.shape[0] > 0:
+        recorded_floor(P, c, t, xf, vf)
+    pts, pr, D, sky, f0 = b(P.pts), b(P.pr), b(P.d), b(P.sky), b(P.f0)
+    kk, cd, orient = b(P.k), b(P.cd), P.orient
+    peak_u, peak_th, poi, force, defl = b(O.u), b(O.th), b(O.poi), b(O.force), b(O.defl)
+    min_load, max_load, last_u, last_th = b(O.min_load), b(O.max_load), b(O.last_u), b(O.last_th)
+    last_poi, last_defl, last_floor, last_force = (
+        b(O.last_poi),
+        b(O.last_defl),
+        b(O.last_floor),
+        b(O.last_force),
+    )
+    rest, rest_n, rest_k, rest_tprev = b(O.rest), b(O.rest_n), b(O.rest_k), b(O.rest_tprev)
+    rest_target, p_viol, p_settle, point_tol = b(O.rest_target), b(O.p_viol), b(O.p_settle), b(O.point_tol)
+    point_offset, rest_point_offset = b(O.point_offset), b(O.rest_point_offset)
+    target, sumsq, nobs, last_viol, last_t = b(O.target), b(O.sumsq), b(O.nobs), b(O.last_viol), b(O.last_t)
+    slot = O.slot[c]
+    qw, qx, qy, qz = x[3], x[4], x[5], x[6]
+    R[0, 0] = 1 - 2 * (qy * qy + qz * qz)
+    R[0, 1] = 2 * (qx * qy - qw * qz)
+    R[0, 2] = 2 * (qx * qz + qw * qy)
+    R[1, 0] = 2 * (qx * qy + qw * qz)
+    R[1, 1] = 1 - 2 * (qx * qx + qz * qz)
+    R[1, 2] = 2 * (qy * qz - qw * qx)
+    R[2, 0] = 2 * (qx * qz - qw * qy)
+    R[2, 1] = 2 * (qy * qz + qw * qx)
+    R[2, 2] = 1 - 2 * (
+        qx * qx + qy * qy
+    )  # R and the rotation vector th: ``quat_to_matrix``, ``quat_to_rotvec``
+    sn = np.sqrt(qx * qx + qy * qy + qz * qz)
+    sign = 1.0
+    if qw < 0.0:
+        qw = -qw
+        sign = -1.0
+    fr = 2.0 * sign if sn < 1e-12 else sign * 2.0 * np.arctan2(sn, qw) / sn
+    th = (fr * qx, fr * qy, fr * qz)
+    u0, u1, u2 = x[0], x[1], x[2]
+    for i in range(3):
+        if not (abs(x[i]) < DIVERGED_DISPLACEMENT and abs(th[i]) < DIVERGED_ROTATION):
+            O.diverged[c] = t
+            return False
+    settle = t >= O.t_last[c] - 1e-12
+    k = rest_k[c]
+    nk = rest_n[c]
+    while k < nk and t > rest[c, k, 1] + 1e-12:
+        t0 = rest[c, k, 0]
+        for p in range(p_viol.shape[1]):
+            v = p_viol[c, p]
+            if v > -np.inf:
+                if v == rest_tprev[c]:
+                    v = rest[c, k, 1]
+                if v - t0 > p_settle[c, p]:
+                    p_settle[c, p] = v - t0
+                p_viol[c, p] = -np.inf
+        k += 1
+        rest_k[c] = k
+    at_rest = k < nk and t >= rest[c, k, 0] - 1e-12
+    if at_rest:
+        rest_tprev[c] = t
+    h = t - last_t[c]
+    between = step > 0 and h > 0.0 and h <= O.h_interp[c]
+    inv_h = 1.0 / h if between else 0.0
+    wb0, wb1, wb2 = x[10], x[11], x[12]
+    wf0 = R[0, 0] * wb0 + R[0, 1] * wb1 + R[0, 2] * wb2
+    wf1 = R[1, 0] * wb0 + R[1, 1] * wb1 + R[1, 2] * wb2
+    wf2 = R[2, 0] * wb0 + R[2, 1] * wb1 + R[2, 2] * wb2
+    err = 0.0
+    for i in range(3):
+        a = max(abs(x[i]), peak_u[c, i])
+        if between:
+            a = max(a, interval_peak(last_u[c, i, 0], last_u[c, i, 1], x[i], x[7 + i], h, a))
+        if a > peak_u[c, i]:
+            peak_u[c, i] = a
+        last_u[c, i, 0] = x[i]
+        last_u[c, i, 1] = x[7 + i]
+        wi = wf0 if i == 0 else (wf1 if i == 1 else wf2)
+        a = max(abs(th[i]), peak_th[c, i])
+        if between:
+            a = max(a, interval_peak(last_th[c, i, 0], last_th[c, i, 1], th[i], wi, h, a))
+        if a > peak_th[c, i]:
+            peak_th[c, i] = a
+        last_th[c, i, 0] = th[i]
+        last_th[c, i, 1] = wi
+        sumsq[c, i] += x[i] * x[i]
+        if settle:
+            e = abs(x[i] - target[c, i])
+            if e > err:
+                err = e
+    nobs[c] += 1.0
+    if slot >= 0:
+        O.h_t[slot, step] = t
+        h_u, h_th = O.h_u, O.h_th
+        for i in range(3):
+            h_u[slot, step, i] = x[i]
+            h_th[slot, step, i] = th[i]
+    v0, v1, v2 = x[7], x[8], x[9]
+    for p in range(pts.shape[1]):
+        d0, d1, d2 = pts[c, p, 0], pts[c, p, 1], pts[c, p, 2]
+        r0, r1, r2 = mount_offset(NONLINEAR, x, R, d0, d1, d2)
+        q0, q1, q2 = _arm_rate(NONLINEAR, wf0, wf1, wf2, r0, r1, r2, d0, d1, d2)
+        # as :func:`observe`: a material point moves with the base, a relative point does not (``pts`` 0)
+        material = pr[c, p] != 0.0
+        b0, b1, b2 = (u0, u1, u2) if material else (0.0, 0.0, 0.0)
+        s0, s1, s2 = (v0, v1, v2) if material else (0.0, 0.0, 0.0)
+        pv0, pv1, pv2 = b0 + r0, b1 + r1, b2 + r2
+        peak_point(poi, last_poi, c, p, 0, pv0, s0 + q0, h, between)
+        peak_point(poi, last_poi, c, p, 1, pv1, s1 + q1, h, between)
+        peak_point(poi, last_poi, c, p, 2, pv2, s2 + q2, h, between)
+        if settle:
+            t0, t1, t2 = (target[c, 0], target[c, 1], target[c, 2]) if material else (0.0, 0.0, 0.0)
+            e0 = target[c, 4] * d2 - target[c, 5] * d1 + t0 + point_offset[c, p, 0]
+            e1 = target[c, 5] * d0 - target[c, 3] * d2 + t1 + point_offset[c, p, 1]
+            e2 = target[c, 3] * d1 - target[c, 4] * d0 + t2 + point_offset[c, p, 2]
+            e = max(abs(pv0 - e0), abs(pv1 - e1), abs(pv2 - e2))
+            if e > err:
+                err = e
+        if at_rest:
+            t0, t1, t2 = (
+                (rest_target[c, k, 0], rest_target[c, k, 1], rest_target[c, k, 2])
+                if material
+                else (0.0, 0.0, 0.0)
+            )
+            e0 = rest_target[c, k, 4] * d2 - rest_target[c, k, 5] * d1 + t0
+            e1 = rest_target[c, k, 5] * d0 - rest_target[c, k, 3] * d2 + t1
+            e2 = rest_target[c, k, 3] * d1 - rest_target[c, k, 4] * d0 + t2
+            e0 += rest_point_offset[c, k, p, 0]
+            e1 += rest_point_offset[c, k, p, 1]
+            e2 += rest_point_offset[c, k, p, 2]
+            if max(abs(pv0 - e0), abs(pv1 - e1), abs(pv2 - e2)) > point_tol[c, p]:
+                p_viol[c, p] = t
+        if slot >= 0:
+            O.h_poi[slot, step, p, 0] = pv0
+            O.h_poi[slot, step, p, 1] = pv1
+            O.h_poi[slot, step, p, 2] = pv2
+    if settle and err > O.tol[c]:
+        last_viol[c] = t
+    isolator_forces(P, c, NONLINEAR, x, R, xf, vf, F)
+    for j in range(D.shape[1]):
+        d0, d1, d2 = D[c, j, 0], D[c, j, 1], D[c, j, 2]
+        r0, r1, r2 = mount_offset(NONLINEAR, x, R, d0, d1, d2)
+        q0, q1, q2 = _arm_rate(NONLINEAR, wf0, wf1, wf2, r0, r1, r2, d0, d1, d2)
+        skj = sky[c, j]
+        f0j = f0[c, j]
+        load = f0j + F[j, 2]
+        lo = load
+        hi = load
+        for i in range(3):
+            if i == 0:
+                dl, dd = u0 + r0, v0 + q0
+            elif i == 1:
+                dl, dd = u1 + r1, v1 + q1
+            else:
+                dl, dd = u2 + r2, v2 + q2
+            dl -= xf[i]
+            dd -= vf[i]
+            F1 = F[j, i]
+            a = max(abs(F1), force[c, j, i])
+            b = max(abs(dl), defl[c, j, i])
+            if between and not orient:
+                # as :func:`observe`: the deflection's and the floor's cubics through the force law
+                p0, m0 = last_defl[c, j, i, 0], last_defl[c, j, i, 1]
+                c0, c1, c2, c3 = hermite(p0, m0, dl, dd, h)
+                b = max(b, cubic_beyond(c0, c1, c2, c3, b))
+                f1 = f2 = f3 = 0.0
+                if skj != 0.0:
+                    _, f1, f2, f3 = hermite(last_floor[c, i, 0], last_floor[c, i, 1], xf[i], vf[i], h)
+                kj, cj = kk[c, j, i], cd[c, j, i] * inv_h
+                g0 = -kj * c0 - cj * (c1 + skj * f1)
+                g1 = -kj * c1 - cj * (2.0 * (c2 + skj * f2))
+                g2 = -kj * c2 - cj * (3.0 * (c3 + skj * f3))
+                g3 = -kj * c3
+                e0 = last_force[c, j, i] - g0
+                e1 = F1 - (g0 + g1 + g2 + g3)
+                g0 += e0
+                g1 += e1 - e0
+                a = max(a, cubic_beyond(g0, g1, g2, g3, a))
+                if i == 2:
+                    b1 = g0 + g1 * ONE_THIRD
+                    b2 = b1 + (g1 + g2) * ONE_THIRD
+                    if f0j + min(b1, b2) < min(lo, min_load[c, j]) or f0j + max(b1, b2) > max(
+                        hi, max_load[c, j]
+                    ):
+                        glo, ghi = cubic_extremes(g0, g1, g2, g3)
+                        lo = min(lo, f0j + glo)
+                        hi = max(hi, f0j + ghi)
+            if a > force[c, j, i]:
+                force[c, j, i] = a
+            if b > defl[c, j, i]:
+                defl[c, j, i] = b
+            if slot >= 0:
+                h_force = O.h_force
+                h_force[slot, step, j, i] = F1
+            last_defl[c, j, i, 0] = dl
+            last_defl[c, j, i, 1] = dd
+            last_force[c, j, i] = F1
+        if lo < min_load[c, j]:
+            min_load[c, j] = lo
+        if hi > max_load[c, j]:
+            max_load[c, j] = hi
+    for i in range(3):
+        last_floor[c, i, 0] = xf[i]
+        last_floor[c, i, 1] = vf[i]
+    last_t[c] = t
+    return True
 
 
 @njit(cache=True, inline="always")

@@ -29,7 +29,8 @@ def valve_groups(b: SceneBatch) -> list[np.ndarray]:
 
 def check_levelling(b: SceneBatch, fidelity: str, integrator: str) -> None:
     """Refuse levelling valves (``iso_valve``) where they are not modelled, naming the input and the
-    levels and integrators that model them; and more than :data:`MAX_VALVES` valves."""
+    levels and integrators that model them; more than :data:`MAX_VALVES` valves; and valves together with
+    a floor motion or a flexible base."""
     groups = valve_groups(b)
     if not groups:
         return
@@ -59,6 +60,12 @@ def check_levelling(b: SceneBatch, fidelity: str, integrator: str) -> None:
         )
     if b.has_floor_motion:
         raise SceneError(field, "levelling valves are not modelled together with a floor motion (not yet)")
+    if b.n_base_modes > 0:
+        raise SceneError(
+            field,
+            "levelling valves are not modelled together with a flexible base (base_mode_frequency; not yet: "
+            "the valve would sense and push the base's modes at its mounts)",
+        )
 
 
 def levelling_block(b: SceneBatch) -> SlotBlock | None:

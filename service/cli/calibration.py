@@ -8,6 +8,8 @@ from typing import Annotated
 
 import typer
 
+from isolab.service.cli.input_errors import reported_input_errors
+
 
 def _number(value: float, unit: str) -> str:
     return f"{value:.6g} {unit}".rstrip()
@@ -73,10 +75,9 @@ def calibrate_command(
     """Fit scene parameters (and the time offset) to a measurement; print fitted values +- 1 sigma and
     the misfit per channel before and after."""
     from isolab.studies.answers.calibration import calibrate, parse_fit, read_measurement
-    from isolab.studies.inputs.definitions import DefinitionError, dotted
     from isolab.studies.inputs.study import load_scene
 
-    try:
+    with reported_input_errors():
         specs = [parse_fit(f) for f in fit]
         sc = load_scene(scene)
         meas = read_measurement(measurement)
@@ -106,14 +107,6 @@ def calibrate_command(
             starts=starts,
             scene_text=scene.read_text(encoding="utf-8"),
         )
-    except DefinitionError as err:
-        for d in err.details:
-            where = dotted([x for x in d["loc"] if x != "body"])
-            typer.echo(f"error: {where}: {d['msg']}" if where != "body" else f"error: {d['msg']}", err=True)
-        raise typer.Exit(code=2) from None
-    except (ValueError, OSError) as err:
-        typer.echo(f"error: {err}", err=True)
-        raise typer.Exit(code=2) from None
     answer = result.to_json()
     if out is not None:
         out.write_text(result.scene_yaml, encoding="utf-8")

@@ -8,6 +8,8 @@ from typing import Annotated
 
 import typer
 
+from isolab.service.cli.input_errors import reported_input_errors
+
 ISOLATOR_TYPES = ("active", "air", "elastomer")
 
 
@@ -39,12 +41,9 @@ def floor_command(
 ) -> None:
     """One-third-octave RMS velocity of a point per floor axis under the scene's floor.spectrum, one line
     per isolator type, against the VC-A .. VC-G curves; prints the worst band of each type."""
-    from pydantic import ValidationError
 
     from isolab.service.plots.studies import floor_velocity_png
     from isolab.studies.answers.floor_response import velocity_spectra
-    from isolab.studies.inputs.definitions import DefinitionError, dotted
-    from isolab.studies.inputs.schema import error_messages
     from isolab.studies.inputs.schema.floor_motion import FLOOR_COHERENCE
     from isolab.studies.inputs.study import load_scene, load_study, read_definition
 
@@ -60,7 +59,7 @@ def floor_command(
     if wrong:
         typer.echo(f"error: --coherence: unknown {wrong}; choose from {', '.join(FLOOR_COHERENCE)}")
         raise typer.Exit(code=2)
-    try:
+    with reported_input_errors():
         data, _ = read_definition(scene)
         if "scene" in data or "scene_file" in data:  # a study file: its scene on its own floor
             sc = load_study(scene).scene
@@ -77,18 +76,6 @@ def floor_command(
             floor = sc.floor.model_copy(update={"coherence": c, "wave": None})
             runs[c] = velocity_spectra(sc.model_copy(update={"floor": floor}), chosen, point)
         spectra = next(iter(runs.values()))
-    except ValidationError as err:
-        for line in error_messages(err):
-            typer.echo(f"error: {line}", err=True)
-        raise typer.Exit(code=2) from None
-    except DefinitionError as err:
-        for d in err.details:
-            where = dotted([x for x in d["loc"] if x != "body"])
-            typer.echo(f"error: {where}: {d['msg']}", err=True)
-        raise typer.Exit(code=2) from None
-    except (ValueError, OSError) as err:
-        typer.echo(f"error: {err}", err=True)
-        raise typer.Exit(code=2) from None
     out.write_bytes(floor_velocity_png(spectra, f"{scene.name}: {spectra['point']} under the floor spectrum"))
     for coh, run in runs.items():
         for t, (v, f, axis) in run["worst"].items():

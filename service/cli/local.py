@@ -54,6 +54,9 @@ UNITS_STATED = (
     "settling_time",
     "point_settling_time",
     "peak_following_error",
+    "move_time",
+    "ready_time",
+    "point_ready_time",
     "natural_frequency",
     "damping_ratio",
     "transmissibility",
@@ -75,6 +78,7 @@ def case_outputs(
         "status": STATUS_NAMES[int(r.status[case])],
         "message": r.message[case],
         "dt": float(r.dt[case]),
+        "move_time": float(r.move_time[case]),
         "natural_frequency": [float(f) for f in r.natural_frequency[case]],
         "damping_ratio": [float(z) for z in r.damping_ratio[case]],
         "mode_energy": [_labelled(e, DOF_NAMES) for e in r.mode_energy[case]],
@@ -111,6 +115,8 @@ def case_outputs(
         final_displacement=_labelled(r.final_displacement[case], AXES + ROTATIONS),
         settling_time=float(r.settling_time[case]),
         settled=bool(r.settled[case]),
+        ready_time=float(r.ready_time[case]),
+        point_ready_time=_labelled(r.point_ready_time[case], points),
         transmissibility=_labelled(r.transmissibility[case], AXES),
     )
     if getattr(r, "max_isolator_load", None) is not None:
@@ -244,22 +250,31 @@ def simulate(
         typer.echo(line)
 
 
+def label_width(out: dict) -> int:
+    """The width of the indented label column of :func:`simulate_text` and :func:`floor_text`: 24
+    characters, or more where a point's or a criterion's name needs it (one space to spare)."""
+    names = [f"peak displacement {p}" for p in out.get("peak_point_displacement", {})]
+    names += list(out.get("criterion_margin", {})) + list(out.get("floor_point_velocity", {}))
+    return max([24, *(len(n) + 1 for n in names)])
+
+
 def floor_text(out: dict) -> list[str]:
     """The lines on the floor-induced velocity (worst one-third-octave band per point and axis, the VC
     criterion it meets) and the criteria margins, where ``out`` (:func:`case_outputs`) has them."""
     lines = []
+    w = label_width(out)
     if "floor_point_velocity" in out:
         lines.append("  floor-induced velocity (worst one-third-octave band, RMS)")
         for point, values in out["floor_point_velocity"].items():
             band = out["floor_point_velocity_band"][point]
             axes = "  ".join(f"{a} {v * 1e6:.3g} um/s ({band[a]:.3g} Hz)" for a, v in values.items())
             vc = out["floor_vc_class"][point] or "none (above VC-A)"
-            lines.append(f"    {point:<24}{axes}  meets {vc}")
+            lines.append(f"    {point:<{w}}{axes}  meets {vc}")
     if "criterion_margin" in out:
         verdict = "all met" if out["meets_criteria"] else "NOT all met"
         lines.append(f"  criteria margins ({verdict}; fraction of the limit, positive: met)")
         for name, m in out["criterion_margin"].items():
-            lines.append(f"    {name:<24}{m:+.3f}" + ("" if m >= 0 else "  NOT met"))
+            lines.append(f"    {name:<{w}}{m:+.3f}" + ("" if m >= 0 else "  NOT met"))
     return lines
 
 
@@ -280,11 +295,13 @@ def simulate_text(out: dict) -> list[str]:
         return name, values[name]
 
     lines = []
+    w = label_width(out)
     pd, pr = out["peak_displacement"], out["peak_rotation"]
-    lines.append(f"  {'peak c.g. displacement':<26}" + per_axis(pd, mm))
-    lines.append(f"  {'peak rotation':<26}" + "  ".join(f"{a} {pr[a] * 1e3:.3f} mrad" for a in ROTATIONS))
+    lines.append(f"  {'peak c.g. displacement':<{w + 2}}" + per_axis(pd, mm))
+    rotations = "  ".join(f"{a} {pr[a] * 1e3:.3f} mrad" for a in ROTATIONS)
+    lines.append(f"  {'peak rotation':<{w + 2}}" + rotations)
     for point, values in out["peak_point_displacement"].items():
-        lines.append(f"  {'peak displacement ' + point:<26}" + per_axis(values, mm))
+        lines.append(f"  {'peak displacement ' + point:<{w + 2}}" + per_axis(values, mm))
     lines.append("  modes")
     heave = out["heave_mode"]
     for k, (f, name) in enumerate(zip(out["natural_frequency"], out["mode_name"], strict=True), start=1):
@@ -292,10 +309,10 @@ def simulate_text(out: dict) -> list[str]:
         mech = " (mechanism)" if out["mechanism"][k - 1] else ""
         lines.append(f"    {k}  {f:7.2f} Hz  {name}{mech}{mark}")
     f_heave = out["natural_frequency"][heave - 1]
-    lines.append(f"  {'heave mode':<26}mode {heave} at {f_heave:.2f} Hz")
+    lines.append(f"  {'heave mode':<{w + 2}}mode {heave} at {f_heave:.2f} Hz")
     lines.append("  peak isolator force (dynamic)")
     for iso, values in out["peak_isolator_force"].items():
-        lines.append(f"    {iso:<24}" + per_axis(values, lambda v: f"{v / 1e3:.2f} kN"))
+        lines.append(f"    {iso:<{w}}" + per_axis(values, lambda v: f"{v / 1e3:.2f} kN"))
     low_name, low = worst(out["min_isolator_load"], min)
     loads = f"min {low / 1e3:.2f} kN ({low_name})"
     if "max_isolator_load" in out:
@@ -303,25 +320,30 @@ def simulate_text(out: dict) -> list[str]:
         loads += f", max {high / 1e3:.2f} kN ({high_name})"
     static = out["static_isolator_load"]
     loads += f"; static {min(static.values()) / 1e3:.2f} .. {max(static.values()) / 1e3:.2f} kN"
-    lines.append(f"  {'isolator load (total)':<26}{loads}")
+    lines.append(f"  {'isolator load (total)':<{w + 2}}{loads}")
     if any(out["liftoff"].values()):
-        lines.append(f"  {'LIFTOFF':<26}" + ", ".join(i for i, v in out["liftoff"].items() if v))
+        lines.append(f"  {'LIFTOFF':<{w + 2}}" + ", ".join(i for i, v in out["liftoff"].items() if v))
     if "peak_isolator_deflection" in out:
         lines.append("  peak isolator deflection")
         for iso, values in out["peak_isolator_deflection"].items():
-            lines.append(f"    {iso:<24}" + per_axis(values, mm))
+            lines.append(f"    {iso:<{w}}" + per_axis(values, mm))
     st = "settled" if out["settled"] else "NOT settled (lower bound)"
-    lines.append(f"  {'settling time':<26}{out['settling_time']:.3f} s ({st})")
+    lines.append(f"  {'settling time':<{w + 2}}{out['settling_time']:.3f} s ({st})")
     if out.get("point_settling_time"):
         lines.append(
-            f"  {'point settling time':<26}"
+            f"  {'point settling time':<{w + 2}}"
             + ", ".join(f"{p} {t:.3f} s" for p, t in out["point_settling_time"].items())
         )
     if out.get("peak_following_error"):
         lines.append(
-            f"  {'peak following error':<26}"
+            f"  {'peak following error':<{w + 2}}"
             + ", ".join(f"{s} {e * 1e6:.1f} um" for s, e in out["peak_following_error"].items())
         )
+    ready = ", ".join(f"{p} {t:.3f} s" for p, t in out["point_ready_time"].items())
+    lines.append(
+        f"  {'move end, then ready':<{w + 2}}{out['move_time']:.3f} s, ready {out['ready_time']:.3f} s"
+        + (f" ({ready})" if ready else "")
+    )
     return lines
 
 

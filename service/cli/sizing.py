@@ -8,6 +8,8 @@ from typing import Annotated, Any
 
 import typer
 
+from isolab.service.cli.input_errors import reported_input_errors
+
 
 def _per_mount_line(row: dict[str, Any]) -> str:
     """One mount of a sizing in words (kN, bar, mm, %)."""
@@ -60,15 +62,12 @@ def size_command(
     """Choose SCENE's isolators from a catalogue: for each mount position the product and count whose
     static load sits inside its rated range with the margin, meeting the scene's criteria, at the lowest
     cost; with the pressure, the stroke used and why each cheaper product fails."""
-    from pydantic import ValidationError
 
     from isolab.studies.answers.sizing import size
     from isolab.studies.inputs.catalogues import inline_catalogue_file, load_catalogue
-    from isolab.studies.inputs.definitions import DefinitionError
-    from isolab.studies.inputs.schema import error_messages
     from isolab.studies.inputs.study import load_study, read_definition
 
-    try:
+    with reported_input_errors("catalogue: "):
         data, here = read_definition(scene)
         if "scene" in data or "scene_file" in data:  # a study file: its scene on its floor, with its criteria
             study_scene = load_study(scene).scene
@@ -85,18 +84,6 @@ def size_command(
             simulation={"duration": duration} if duration else None,
             max_cases=max_cases,
         )
-    except DefinitionError as err:
-        for d in err.details:
-            loc = ".".join(str(x) for x in d["loc"][1:])
-            typer.echo(f"error: {loc}: {d['msg']}" if loc else f"error: {d['msg']}", err=True)
-        raise typer.Exit(code=2) from None
-    except ValidationError as err:
-        for line in error_messages(err):
-            typer.echo(f"error: catalogue: {line}", err=True)
-        raise typer.Exit(code=2) from None
-    except (OSError, ValueError) as err:
-        typer.echo(f"error: {err}", err=True)
-        raise typer.Exit(code=2) from None
     if as_json:
         typer.echo(json.dumps(answer, indent=2))
         return

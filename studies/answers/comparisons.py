@@ -8,13 +8,17 @@ engine: three cases take well under a second. Its outputs are the columns of a s
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from isolab.engine.results import LARGER, OUTPUTS
 from isolab.studies.inputs.definitions import DefinitionError, check_definition, detail
+from isolab.studies.inputs.schema.scene_paths import ISOLATOR_PRESET
 from isolab.studies.inputs.study import Study
 from isolab.studies.results.cases import CaseColumns, case_table, json_values
 from isolab.studies.run.accuracy import resolved_study
+
+if TYPE_CHECKING:
+    from isolab.studies.questions.criteria import Criteria
 
 SHOWN_UNJUDGED = ("settled", "status")
 """Summary columns a comparison shows without judging them (whether the motion settled: its settling time
@@ -22,20 +26,25 @@ is judged)."""
 
 
 def comparison_study(
-    scene: Any, isolator_types: list[str], simulation: Any = None, prefix: list[str | int] | None = None
+    scene: Any,
+    isolator_types: list[str],
+    simulation: Any = None,
+    prefix: list[str | int] | None = None,
+    path: str = ISOLATOR_PRESET,
 ) -> Study:
     """The grid study behind a comparison of ``scene`` (a scene definition as data) on each of
-    ``isolator_types``.
+    ``isolator_types``: the values of ``path``, the isolator type (``isolators.preset``) or a product of
+    the scene's catalogue (``isolators.model``).
 
     Raises:
-        DefinitionError: naming the request's field (``scene``, ``simulation`` or ``isolator_types``)
-            under ``prefix`` (default ``["body"]``).
+        DefinitionError: naming the request's field (``scene``, ``simulation`` or ``isolator_types``; with
+            products ``catalogue``) under ``prefix`` (default ``["body"]``).
     """
     pre: list[str | int] = ["body"] if prefix is None else list(prefix)
     body: dict[str, Any] = {
         "name": "comparison",
         "scene": scene,
-        "parameters": [{"path": "isolators.preset", "values": list(dict.fromkeys(isolator_types))}],
+        "parameters": [{"path": path, "values": list(dict.fromkeys(isolator_types))}],
         "design": {"type": "grid"},
     }
     if simulation is not None:
@@ -45,7 +54,7 @@ def comparison_study(
     except DefinitionError as err:
         for d in err.details:  # the parameter is the request's isolator_types
             if d["loc"][len(pre) : len(pre) + 1] == ["parameters"]:
-                d["loc"] = [*pre, "isolator_types"]
+                d["loc"] = [*pre, "isolator_types" if path == ISOLATOR_PRESET else "catalogue"]
             elif d["loc"] == pre and "cannot be computed" in d["msg"]:
                 d["loc"] = [*pre, "scene"]
         raise
@@ -108,6 +117,19 @@ def best_of(values: dict[str, Any], rule: str, unit: str = "") -> str | None:
     return winners[0]
 
 
+def failed_criteria(row: dict[str, Any], criteria: list[str]) -> str:
+    """Why a comparison's ``row`` misses ``criteria`` in words: ``fails tool_displacement (-12%)``, or
+    that its case did not end ok."""
+    bad = [
+        f"{c} ({float(row[f'margin_{c}']):+.0%})"
+        for c in criteria
+        if row.get(f"margin_{c}") is not None and float(row[f"margin_{c}"]) < 0
+    ]
+    if not bad:
+        return f"its case did not end ok ({row.get('status')}: {row.get('message', '')})"
+    return "fails " + ", ".join(bad)
+
+
 COST_ORDER: tuple[str, ...] = ("elastomer", "air", "active")
 """Isolator types from the cheapest to the dearest: a passive elastomer pad costs least, an air spring
 needs air supply and levelling valves, an active system adds sensors, actuators and a controller."""
@@ -140,14 +162,7 @@ def recommend(
         return known[c], c
 
     def failing(t: str) -> str:
-        bad = [
-            f"{c} ({float(rows[t][f'margin_{c}']):+.0%})"
-            for c in criteria
-            if rows[t].get(f"margin_{c}") is not None and float(rows[t][f"margin_{c}"]) < 0
-        ]
-        if not bad:
-            return f"its case did not end ok ({rows[t].get('status')}: {rows[t].get('message', '')})"
-        return "fails " + ", ".join(bad)
+        return failed_criteria(rows[t], criteria)
 
     cost = " < ".join(order)
     meeting = [t for t in order if rows[t].get("meets_criteria") is True]
@@ -172,11 +187,15 @@ def recommend(
 
 
 def comparison_table(
-    table: CaseColumns, study: Study, cost_order: list[str] | tuple[str, ...] = COST_ORDER
+    table: CaseColumns,
+    study: Study,
+    cost_order: list[str] | tuple[str, ...] = COST_ORDER,
+    key: str = "isolator_type",
 ) -> dict[str, Any]:
-    """The side-by-side answer: one row per isolator type (outputs in SI), the units, the rule of each
-    criterion and the best type on each (``best``), and the simulation block the cases ran with."""
-    types = [str(t) for t in table.data["isolator_type"]]
+    """The side-by-side answer: one row per isolator type (per value of the parameter ``key``: with a
+    catalogue, per ``product``; outputs in SI), the units, the rule of each criterion and the best type on
+    each (``best``), and the simulation block the cases ran with."""
+    types = [str(t) for t in table.data[key]]
     columns = [c for c in table.default if criterion(table, c) is not None or c in SHOWN_UNJUDGED]
     rows: dict[str, dict[str, Any]] = {t: {} for t in types}
     for c in columns + ["message"]:
@@ -199,21 +218,21 @@ def comparison_table(
         "rows": rows,
         "best": best,
         "criteria": criteria,
-        "requirements": _requirements(study),
+        "requirements": requirements(study.criteria),
         "recommendation": recommend(rows, judged, cost_order),
         "simulation": study.simulation.model_dump(mode="json"),
     }
 
 
-def _requirements(study: Study) -> list[dict[str, Any]]:
+def requirements(criteria: Criteria | None) -> list[dict[str, Any]]:
     """The design criteria the types were judged by: name, limit (SI), unit and meaning."""
-    if study.criteria is None:
+    if criteria is None:
         return []
     from isolab.studies.questions.criteria import judged_criteria
 
     return [
         {"name": c.name, "limit": c.limit, "unit": c.unit, "description": c.description}
-        for c in judged_criteria(study.criteria)
+        for c in judged_criteria(criteria)
     ]
 
 
@@ -248,14 +267,7 @@ def compare(
     study = resolved_study(comparison_study(scene, isolator_types, simulation))
     robust = study.scene is not None and bool(study.scene.tolerances)
     if robust:
-        samples = robustness.DEFAULT_SAMPLES if samples is None else samples
-        require = robustness.DEFAULT_REQUIRE if require is None else require
-        if not 1 <= samples <= robustness.MAX_SAMPLES:
-            raise DefinitionError(
-                [detail(["body", "samples"], f"draw 1 to {robustness.MAX_SAMPLES} machines, got {samples}")]
-            )
-        if not (math.isfinite(require) and 0.0 < require <= 1.0):
-            raise DefinitionError([detail(["body", "require"], f"a probability in (0, 1], got {require}")])
+        samples, require = robustness.robust_request(samples, require)
         assert study.scene is not None
         nominal = study.scene.model_dump(mode="json", exclude_none=True)
         sim = study.simulation.model_dump(mode="json")

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from isolab.engine import STATUS_NAMES, simulate
+from isolab.engine.modal import MOTION_NAMES
 from isolab.engine.profiles import Pieces, evaluate
 from isolab.engine.results import AXES, DOF_NAMES, OUTPUTS, ROTATIONS, SimulationResult
 from isolab.engine.scene import SceneBatch
@@ -40,15 +41,6 @@ MAX_RETURNED_SAMPLES = 200_000
 """Most samples per series one answer holds (``every`` thins them)."""
 
 
-MOTION_NAMES = {
-    "x": "surge",
-    "y": "sway",
-    "z": "heave",
-    "rx": "pitch",
-    "ry": "roll",
-    "rz": "yaw",
-}
-"""The motion of the base along or about each degree of freedom (rotation about X is pitch, about Y roll)."""
 COUPLED_SHARE = 0.25
 """A second degree of freedom with at least this kinetic-energy share is named too (``pitch + sway``)."""
 

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from isolab.engine import simulate
-from isolab.studies.inputs.definitions import check_definition
+from isolab.studies.inputs.definitions import DefinitionError, check_definition, detail
 from isolab.studies.inputs.study import Study, study_labels
 from isolab.studies.questions.criteria import add_criteria
 from isolab.studies.questions.tolerances import CONFIDENCE, INTERVAL_METHOD, clopper_pearson, meets_counts
@@ -41,6 +41,24 @@ MAX_SAMPLES = 2000
 """Most machines a comparison draws per type and design."""
 SAMPLING = "random"
 """Independent draws: the Clopper-Pearson interval then holds as stated."""
+
+
+def robust_request(samples: int | None, require: float | None) -> tuple[int, float]:
+    """A request's number of machines to draw per design and its required probability of meeting every
+    criterion (1), defaults filled in.
+
+    Raises:
+        DefinitionError: naming ``samples`` (1 to :data:`MAX_SAMPLES`) or ``require`` (in (0, 1]).
+    """
+    samples = DEFAULT_SAMPLES if samples is None else samples
+    require = DEFAULT_REQUIRE if require is None else require
+    if not 1 <= samples <= MAX_SAMPLES:
+        raise DefinitionError(
+            [detail(["body", "samples"], f"draw 1 to {MAX_SAMPLES} machines, got {samples}")]
+        )
+    if not (math.isfinite(require) and 0.0 < require <= 1.0):
+        raise DefinitionError([detail(["body", "require"], f"a probability in (0, 1], got {require}")])
+    return samples, require
 
 
 @dataclass
@@ -75,6 +93,20 @@ class Reliability:
             "failure_probability": dict(self.failure_probability),
         }
 
+    @classmethod
+    def from_dict(cls, isolator_type: str, design: str, data: dict[str, Any]) -> Reliability:
+        """A reliability from its :meth:`to_dict`."""
+        lo, hi = data["interval"]
+        return cls(
+            isolator_type,
+            design,
+            int(data["meeting"]),
+            int(data["cases"]),
+            float(data["probability"]),
+            (float(lo), float(hi)),
+            dict(data["failure_probability"]),
+        )
+
     def text(self) -> str:
         """``98.0 % (95 % interval 96.1-99.1 %)``."""
         lo, hi = self.interval
@@ -93,16 +125,22 @@ def tolerance_study(
     samples: int = DEFAULT_SAMPLES,
     seed: int = 0,
     prefix: list[str | int] | None = None,
+    choice: str = "preset",
 ) -> Study:
     """The monte_carlo study of ``scene`` (as data, with its tolerances) on ``isolator_type``: ``samples``
     machines drawn independently about that type's figures (its preset with the scene's tuning of it).
+    With ``choice="model"``, ``isolator_type`` is a product of the scene's catalogue and the machines are
+    drawn about the product's figures.
 
     Raises:
         DefinitionError: naming the field under ``prefix`` (default ``["body"]``): a tolerance that cannot
             be drawn (an unknown path, a choice, a spread that is not positive...).
     """
     s = copy.deepcopy(scene)
-    s.setdefault("isolators", {})["preset"] = isolator_type
+    iso = s.setdefault("isolators", {})
+    if choice == "model":  # the product decides the type
+        iso.pop("preset", None)
+    iso[choice] = isolator_type
     body: dict[str, Any] = {
         "name": f"tolerances-{isolator_type}",
         "scene": s,
@@ -160,20 +198,23 @@ def type_reliabilities(
     design: str,
     samples: int = DEFAULT_SAMPLES,
     seed: int = 0,
+    choice: str = "preset",
 ) -> dict[str, Reliability]:
-    """:func:`reliability` of each type of ``isolator_types`` on ``scene`` (the same draws for each).
+    """:func:`reliability` of each type of ``isolator_types`` on ``scene`` (the same draws for each;
+    ``choice="model"``: each a product of the scene's catalogue).
 
     Raises:
         DefinitionError: as :func:`tolerance_study`.
         ValueError: as :func:`reliability`.
     """
     return {
-        t: reliability(tolerance_study(scene, t, simulation, samples, seed), t, design)
+        t: reliability(tolerance_study(scene, t, simulation, samples, seed, choice=choice), t, design)
         for t in isolator_types
     }
 
 
-def _smallest_margin(row: dict[str, Any], criteria: list[str]) -> float:
+def smallest_margin(row: dict[str, Any], criteria: list[str]) -> float:
+    """The smallest of a comparison row's ``margin_<criterion>`` (1); -inf when one is unknown."""
     values = [row.get(f"margin_{c}") for c in criteria]
     known = [float(v) for v in values if v is not None and math.isfinite(float(v))]
     return min(known) if len(known) == len(criteria) and known else -math.inf
@@ -208,7 +249,7 @@ def recommend_on_probability(
     where = f"of {n} machines drawn from the tolerances"
     ranked = sorted(
         judged,
-        key=lambda t: (judged[t].probability, _smallest_margin(rows.get(t, {}), criteria)),
+        key=lambda t: (judged[t].probability, smallest_margin(rows.get(t, {}), criteria)),
         reverse=True,
     )
     listing = "; ".join(f"{t} {judged[t].text()}" for t in ranked)
@@ -246,12 +287,13 @@ def robustness_answer(
     samples: int = DEFAULT_SAMPLES,
     require: float = DEFAULT_REQUIRE,
     seed: int = 0,
+    choice: str = "preset",
 ) -> dict[str, Any]:
     """A comparison's ``answer`` with each type's probability of meeting the criteria under the
     tolerances (``robustness``: per type its ``nominal`` design, and with ``tuned`` its ``tuned`` one)
     and the recommendation on it (:func:`recommend_on_probability`, on the tuned design when there is
     one). ``nominal`` and ``tuned`` are the scenes (as data) the types were compared on before and after
-    tuning.
+    tuning; with ``choice="model"`` the rows are products of the scene's catalogue.
 
     Raises:
         DefinitionError: as :func:`tolerance_study`.
@@ -259,11 +301,11 @@ def robustness_answer(
     """
     types = list(answer["isolator_types"])
     per_type: dict[str, dict[str, Any]] = {t: {} for t in types}
-    judged = type_reliabilities(nominal, types, simulation, "nominal", samples, seed)
+    judged = type_reliabilities(nominal, types, simulation, "nominal", samples, seed, choice)
     for t, r in judged.items():
         per_type[t]["nominal"] = r.to_dict()
     if tuned is not None:
-        judged = type_reliabilities(tuned, types, simulation, "tuned", samples, seed)
+        judged = type_reliabilities(tuned, types, simulation, "tuned", samples, seed, choice)
         for t, r in judged.items():
             per_type[t]["tuned"] = r.to_dict()
     out = dict(answer)

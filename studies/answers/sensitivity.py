@@ -6,7 +6,9 @@ attributes):
 * ``saltelli``: Sobol' variance-based indices, ``SALib.analyze.sobol`` (Saltelli 2010 / Jansen
   estimators): first order S1 (the share of the output's variance a parameter explains alone) and total
   order ST (its share with all its interactions), and with ``second_order`` the pairwise S2; 95 %
-  bootstrap confidence intervals.
+  confidence intervals from the spread of the design's independent replicates (``replicates`` in the
+  design summary: :func:`replicate_intervals`), or, for a design of one replicate, a bootstrap over its
+  base samples (:func:`sobol_estimates`).
 * ``lhs``, ``sobol``, ``random`` (any sample of independent inputs) and ``grid`` (a full factorial):
   ``SALib.analyze.delta`` from the given data (Plischke, Borgonovo and Smith 2013): Borgonovo's
   moment-independent delta (how far the output's distribution moves, on average, when a parameter is
@@ -66,6 +68,19 @@ SOBOL_INTERVAL = (
     "upper end; conf is the half-width of the smallest interval about the estimate that holds it"
 )
 """How the Sobol' indices' 95 % intervals are formed (:func:`sobol_estimates`)."""
+REPLICATE_INTERVAL = (
+    "t interval over {r} independent replicates of the design: the estimate (from all of them) +- the "
+    "t quantile with {dof} degrees of freedom times the standard error read from the replicates' spread "
+    "(each index linearised per base sample and summed per replicate)"
+)
+"""How the Sobol' indices' 95 % intervals are formed from a design of independent replicates
+(:func:`replicate_intervals`); ``{r}`` and ``{dof}`` are filled in."""
+ONE_REPLICATE_NOTE = (
+    "intervals from one design: a bootstrap over its base samples, which can be too narrow for indices "
+    "near zero (outputs with jumps, the Sobol' sequence's own error); give design.replicates (8, say) for "
+    "intervals from independent replicates"
+)
+"""Note of a Sobol' answer whose design has a single replicate."""
 DELTA_INTERVAL = "normal approximation: the estimate +-1.96 standard deviations of the bootstrap resamples"
 """How the delta estimator's 95 % intervals are formed (SALib's own)."""
 DELTA_NUM_RESAMPLES = 50
@@ -79,7 +94,7 @@ cost about the square of it; at 2,000 a 10,000-case study of 4 parameters is ana
 minutes, and the confidence intervals are those of 2,000-case estimates."""
 MIN_SALTELLI_BLOCKS = 2
 """Fewest complete Saltelli blocks the Sobol' estimator is run on."""
-CACHE_VERSION = 2
+CACHE_VERSION = 3
 """Part of the cache key: a change of the analysis invalidates what is cached."""
 
 _SALIB_LOCK = threading.Lock()
@@ -115,6 +130,8 @@ class SensitivityResult:
         intervals: Sobol' indices: index name -> (lower, upper) of its 95 % interval per parameter, as
             :data:`SOBOL_INTERVAL` says; None for the delta estimator.
         interval_method: how the intervals are formed, in words.
+        replicates: independent replicates of a saltelli design the intervals were read from (1: one
+            design, bootstrap intervals).
         second_order: ``{"pairs": [[a, b]...], "S2": [...], "S2_conf": [...]}`` for a saltelli design with
             second order, else None.
         n_cases: cases the indices were estimated from.
@@ -144,6 +161,7 @@ class SensitivityResult:
     conf_level: float = CONF_LEVEL
     intervals: dict[str, list[list[float | None]]] | None = None
     interval_method: str = ""
+    replicates: int = 1
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able dict (missing values as None, never NaN), with ``index_meanings``."""
@@ -261,7 +279,8 @@ def sensitivity(ds: xr.Dataset, output: str) -> SensitivityResult:
         n_total=int(y.size),
     )
     if design == "saltelli":
-        return _sobol(y, bad, names, bool(info.get("second_order", False)), output, notes, common)
+        replicates = int(info.get("replicates") or 1)  # a study stored before replicates existed: one
+        return _sobol(y, bad, names, bool(info.get("second_order", False)), replicates, output, notes, common)
     return _delta(ds, dims, y, bad, names, kind, output, notes, common)
 
 
@@ -338,8 +357,66 @@ def studentized_intervals(
     return out
 
 
+def replicate_intervals(
+    y: np.ndarray, d: int, replicate: np.ndarray, second_order: bool = False
+) -> dict[str, np.ndarray]:
+    """S1 (Saltelli 2010) and ST (Jansen) of the outputs ``y`` of a Saltelli design over ``d`` parameters
+    made of independent replicates (blocks of ``d + 2`` cases, ``2d + 2`` with ``second_order``;
+    ``replicate`` gives each block's replicate), with their 95 % t intervals.
+
+    Each index is estimated from every block together, as ``SALib.analyze.sobol`` would from the joined
+    outputs: a ratio of block means, mean(num) / var. Linearised, its error is the mean over blocks of
+    the influence z = (num - index * share) / var (share: the block's part of the variance). The R
+    replicates are independent draws of the design (independently scrambled Sobol' sequences), so the sums
+    T_r of z over each replicate are independent whatever the sequence's own error and however rare the
+    output's jumps; the standard error is sqrt(R / (R - 1) sum T_r^2) / N_blocks (the random-group
+    estimator; sum T_r = 0) and the interval the index +- t_(R-1, 97.5 %) se.
+
+    Returns:
+        ``S1``, ``ST`` (d,), ``S1_conf``, ``ST_conf`` (d,): the half-widths, and ``S1_interval``,
+        ``ST_interval`` ((d, 2): lower, upper), all of the standardised output (indices are ratios: no
+        unit); ``replicates``: the number of replicates with a block.
+
+    Raises:
+        ValueError: fewer than 2 replicates, or ``replicate`` not one label per block.
+    """
+    from scipy.stats import t as student
+
+    y = np.asarray(y, dtype=np.float64).reshape(-1)
+    block = (2 * d + 2) if second_order else (d + 2)
+    n = y.size // block
+    replicate = np.asarray(replicate).reshape(-1)
+    if replicate.size != n:
+        raise ValueError(f"replicate: one label per block expected ({n}), got {replicate.size}")
+    labels, group = np.unique(replicate, return_inverse=True)
+    r = labels.size
+    if r < 2:
+        raise ValueError(f"replicate intervals need at least 2 replicates, got {r}")
+    table = ((y - y.mean()) / (y.std() or 1.0)).reshape(n, block)
+    a, ab, b = table[:, 0], table[:, 1 : d + 1], table[:, -1]
+    mu = 0.5 * (a.mean() + b.mean())
+    share = 0.5 * ((a - mu) ** 2 + (b - mu) ** 2)
+    var = share.mean()
+    q = float(student.ppf(0.5 + CONF_LEVEL / 2, r - 1))
+    out: dict[str, np.ndarray] = {"replicates": np.asarray(r)}
+    for k, num in (("S1", b[:, None] * (ab - a[:, None])), ("ST", 0.5 * (a[:, None] - ab) ** 2)):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            index = num.mean(axis=0) / var
+            z = (num - index * share[:, None]) / var
+        sums = np.zeros((r, d))
+        np.add.at(sums, group, z)
+        conf = q * np.sqrt(r / (r - 1) * np.sum(sums**2, axis=0)) / n
+        out[k], out[f"{k}_conf"] = index, conf
+        out[f"{k}_interval"] = np.column_stack([index - conf, index + conf])
+    return out
+
+
 def sobol_estimates(
-    y: np.ndarray, d: int, second_order: bool = False, resamples: int | None = None
+    y: np.ndarray,
+    d: int,
+    second_order: bool = False,
+    resamples: int | None = None,
+    replicate: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
     """Sobol' indices of ``y``, the outputs of a Saltelli design over ``d`` parameters in its order
     (blocks of ``d + 2`` cases, ``2d + 2`` with ``second_order``), by ``SALib.analyze.sobol``: S1
@@ -348,6 +425,10 @@ def sobol_estimates(
     lower, upper) the intervals themselves; with ``second_order``, S2 and S2_conf as SALib gives them
     (normal approximation). The bootstrap (``resamples``, default :func:`sobol_resamples`) is seeded by
     :data:`SEED`; the indices do not depend on it.
+
+    With ``replicate`` (each block's replicate, at least 2 of them) the S1 and ST intervals are
+    :func:`replicate_intervals`' t intervals instead, and ``replicates`` their count; the bootstrap then
+    serves S2 alone (``resamples`` default :data:`MIN_RESAMPLES`).
     """
     from SALib.analyze import sobol as salib_sobol
     from scipy.stats import norm
@@ -355,7 +436,11 @@ def sobol_estimates(
     y = np.asarray(y, dtype=np.float64).reshape(-1)
     n_base = y.size // ((2 * d + 2) if second_order else (d + 2))
     problem = {"num_vars": d, "names": [f"x{i}" for i in range(d)], "bounds": [[0.0, 1.0]] * d}
-    count = sobol_resamples(n_base) if resamples is None else int(resamples)
+    by_replicate = replicate is not None and np.unique(replicate).size >= 2
+    if resamples is not None:
+        count = int(resamples)
+    else:
+        count = MIN_RESAMPLES if by_replicate else sobol_resamples(n_base)
     with _quiet_salib(SEED):
         si = salib_sobol.analyze(
             problem,
@@ -366,10 +451,21 @@ def sobol_estimates(
             seed=SEED,
             keep_resamples=True,
         )
+    out: dict[str, np.ndarray] = {}
+    if second_order:
+        out["S2"] = np.asarray(si["S2"], dtype=np.float64)
+        out["S2_conf"] = np.asarray(si["S2_conf"], dtype=np.float64)
+    if by_replicate and replicate is not None:
+        spread = replicate_intervals(y, d, replicate, second_order)
+        for k in ("S1", "ST"):  # SALib's estimates: the same ratios (to rounding) as the intervals'
+            est = np.asarray(si[k], dtype=np.float64)
+            out[k], out[f"{k}_conf"] = est, spread[f"{k}_conf"]
+            out[f"{k}_interval"] = est[:, None] + np.column_stack([-spread[f"{k}_conf"], spread[f"{k}_conf"]])
+        out["replicates"] = spread["replicates"]
+        return out
     z = float(norm.ppf(0.5 + CONF_LEVEL / 2))
     tail = 100.0 * (1.0 - CONF_LEVEL) / 2
     studentized = studentized_intervals(y, d, count, second_order)
-    out: dict[str, np.ndarray] = {}
     for k in ("S1", "ST"):
         est = np.asarray(si[k], dtype=np.float64)
         boot = np.asarray(si[f"{k}_conf_all"], dtype=np.float64).reshape(-1, d)
@@ -383,9 +479,6 @@ def sobol_estimates(
         out[k] = est
         out[f"{k}_conf"] = np.maximum(est - lower, upper - est)
         out[f"{k}_interval"] = np.column_stack([lower, upper])
-    if second_order:
-        out["S2"] = np.asarray(si["S2"], dtype=np.float64)
-        out["S2_conf"] = np.asarray(si["S2_conf"], dtype=np.float64)
     return out
 
 
@@ -394,16 +487,17 @@ def _sobol(
     bad: np.ndarray,
     names: list[str],
     second_order: bool,
+    replicates: int,
     output: str,
     notes: list[str],
     common: dict,
 ) -> SensitivityResult:
     d = len(names)
     block = (2 * d + 2) if second_order else (d + 2)
-    if y.size % block:
+    if y.size % (block * replicates):
         raise ValueError(
             f"the dataset has {y.size} cases, not a whole number of Saltelli blocks of {block} "
-            f"({d} parameters{', second order' if second_order else ''}): "
+            f"({d} parameters{', second order' if second_order else ''}) in {replicates} equal replicates: "
             "it is not a complete saltelli design"
         )
     n_blocks = y.size // block
@@ -423,7 +517,14 @@ def _sobol(
         )
     yk = y.reshape(n_blocks, block)[keep].reshape(-1)
     _check_varies(yk, output)
-    si = sobol_estimates(yk, d, second_order)
+    replicate = np.repeat(np.arange(replicates), n_blocks // replicates)[keep]
+    used = int(np.unique(replicate).size)
+    if replicates > 1 and used < 2:
+        notes.append(
+            f"only {used} of {replicates} replicates have a complete block: intervals by the bootstrap over "
+            "its base samples"
+        )
+    si = sobol_estimates(yk, d, second_order, replicate=replicate if used >= 2 else None)
     s2 = None
     if second_order:
         pairs = [(j, k) for j in range(d) for k in range(j + 1, d)]
@@ -434,13 +535,21 @@ def _sobol(
         }
     if n_keep < 64:
         notes.append(f"only {n_keep} base samples: the confidence intervals are wide; raise design.samples")
+    if "replicates" in si:
+        n_rep = int(si["replicates"])
+        method = REPLICATE_INTERVAL.format(r=n_rep, dof=n_rep - 1)
+    else:
+        n_rep, method = 1, SOBOL_INTERVAL
+        if replicates == 1:
+            notes.append(ONE_REPLICATE_NOTE)
     return SensitivityResult(
         method="sobol",
         method_name=METHODS["sobol"],
         indices={"S1": _plain(si["S1"]), "ST": _plain(si["ST"])},
         conf={"S1": _plain(si["S1_conf"]), "ST": _plain(si["ST_conf"])},
         intervals={k: [_plain(row) for row in si[f"{k}_interval"]] for k in ("S1", "ST")},
-        interval_method=SOBOL_INTERVAL,
+        interval_method=method,
+        replicates=n_rep,
         n_cases=int(yk.size),
         n_excluded=n_excluded,
         n_dropped=int(n_dropped),

@@ -34,6 +34,7 @@ from isolab.studies.inputs.catalogues import (
 from isolab.studies.inputs.definitions import DefinitionError, check_definition, detail, validation_details
 from isolab.studies.inputs.isolators import mount_labels
 from isolab.studies.inputs.scenes import isolator_loads
+from isolab.studies.inputs.schema.scene_paths import ISOLATOR_MODEL
 from isolab.studies.inputs.study import Study, study_labels, validate_scene
 from isolab.studies.questions.criteria import add_criteria
 from isolab.studies.results.dataset import to_dataset
@@ -187,7 +188,7 @@ class Candidate:
         return self.product.price * sum(f.count or 1 for f in self.fits)
 
 
-def _strip_isolator_choice(scene: dict[str, Any]) -> dict[str, Any]:
+def strip_isolator_choice(scene: dict[str, Any]) -> dict[str, Any]:
     """``scene`` with what the product decides removed from its isolators (group and listed mounts)."""
     s = copy.deepcopy(scene)
     iso = s.get("isolators")
@@ -207,20 +208,14 @@ def _cost(product: Product, count: int) -> float | None:
 
 
 def _candidate_study(base: dict[str, Any], batch: list[Candidate], simulation: Any) -> Study:
-    """The list study of ``batch``: one case per candidate, its product's type and figures on the group."""
-    keys = [("isolator_type", "preset"), ("f_vertical", "f_vertical"), ("f_horizontal", "f_horizontal")]
-    keys.append(("zeta", "zeta"))
-    cases = [
-        {name: getattr(c.product, "type" if attr == "preset" else attr) for name, attr in keys} for c in batch
-    ]
+    """The list study of ``batch``: one case per candidate, standing on its product (``isolators.model``,
+    the catalogue inline in ``base``)."""
+    ids = [c.product.id for c in batch]
     body: dict[str, Any] = {
         "name": "sizing",
         "scene": base,
-        "parameters": [
-            {"name": name, "path": f"isolators.{attr}", "values": list(dict.fromkeys(c[name] for c in cases))}
-            for name, attr in keys
-        ],
-        "design": {"type": "list", "cases": cases},
+        "parameters": [{"path": ISOLATOR_MODEL, "values": ids}],
+        "design": {"type": "list", "cases": [{"product": pid} for pid in ids]},
     }
     if simulation is not None:
         body["simulation"] = simulation
@@ -278,6 +273,68 @@ def _scene_error(err: ValidationError | ValueError) -> DefinitionError:
     return DefinitionError([detail(["body", "scene"], str(err))])
 
 
+def requested_catalogue(catalogue: Catalogue | str | dict[str, Any] | None) -> Catalogue:
+    """The catalogue a request names: inline data, a :class:`Catalogue`, a shipped one by name, or (None)
+    the default. A name is a shipped catalogue's, never a file: the caller reads files (the CLI does).
+
+    Raises:
+        DefinitionError: naming the field under ``body.catalogue`` (``products.2.rated_load.max``).
+    """
+    try:
+        if isinstance(catalogue, Catalogue | dict):
+            return load_catalogue(catalogue)
+        return scene_catalogue(catalogue, "catalogue")
+    except ValidationError as err:
+        raise DefinitionError(validation_details(err, ["body", "catalogue"])) from None
+    except ValueError as err:
+        raise DefinitionError([detail(["body", "catalogue"], str(err))]) from None
+
+
+def scene_loads(
+    scene: dict[str, Any], per_corner: list[int] | None = None
+) -> tuple[dict[str, Any], list[int], np.ndarray]:
+    """What a catalogue is judged against: the scene (as data) with the isolator choice taken out
+    (:func:`strip_isolator_choice`), the counts a mount position may take (``per_corner``, else the
+    scene's ``isolators.per_corner``, else [1]) and the static load of each mount position, N.
+
+    Raises:
+        DefinitionError: naming ``body.scene...`` or ``body.per_corner``.
+    """
+    if not isinstance(scene, dict):
+        raise DefinitionError([detail(["body", "scene"], "expected the scene as a mapping")])
+    given = scene.get("isolators")
+    counts = sorted(set(per_corner or (given.get("per_corner") if isinstance(given, dict) else None) or [1]))
+    if any(not 1 <= n <= MAX_PER_CORNER for n in counts):
+        raise DefinitionError(
+            [detail(["body", "per_corner"], f"each count must lie between 1 and {MAX_PER_CORNER}: {counts}")]
+        )
+    base = strip_isolator_choice(scene)
+    try:
+        loads = isolator_loads(validate_scene(base))
+    except (ValidationError, ValueError) as err:
+        raise _scene_error(err) from None
+    return base, counts, loads
+
+
+def product_candidates(
+    catalogue: Catalogue, loads: np.ndarray, margin: float, counts: list[int]
+) -> list[Candidate]:
+    """Each product of ``catalogue`` at every mount position (static ``loads``, N): the fewest isolators of
+    ``counts`` carrying each load inside the rated range with ``margin`` (:func:`fit`), the cost, and for a
+    product whose loads do not fit, the verdict ``fails`` with the reason per mount. In catalogue order."""
+    labels = mount_labels(len(loads))
+    candidates = []
+    for p in catalogue.products:
+        fits = [fit(p, float(w), margin, counts) for w in loads]
+        c = Candidate(p, fits)
+        c.cost = _cost(p, c.count) if c.feasible else None
+        if not c.feasible:
+            c.verdict = "fails"
+            c.reason = "; ".join(f"{labels[j]}: {f.reason}" for j, f in enumerate(fits) if f.reason)
+        candidates.append(c)
+    return candidates
+
+
 def size(
     scene: dict[str, Any],
     catalogue: Catalogue | str | dict[str, Any] | None = None,
@@ -298,44 +355,15 @@ def size(
     Raises:
         DefinitionError: bad input, naming the field (``body.scene...``, ``body.catalogue...``).
     """
-    try:  # a name is a shipped catalogue's, never a file: the caller reads files (isolab size does)
-        cat = (
-            load_catalogue(catalogue)
-            if isinstance(catalogue, Catalogue | dict)
-            else scene_catalogue(catalogue, "catalogue")
-        )
-    except ValidationError as err:
-        raise DefinitionError(validation_details(err, ["body", "catalogue"])) from None
-    except ValueError as err:
-        raise DefinitionError([detail(["body", "catalogue"], str(err))]) from None
-    if not isinstance(scene, dict):
-        raise DefinitionError([detail(["body", "scene"], "expected the scene as a mapping")])
-    given = scene.get("isolators")
-    counts = sorted(set(per_corner or (given.get("per_corner") if isinstance(given, dict) else None) or [1]))
-    if any(not 1 <= n <= MAX_PER_CORNER for n in counts):
-        raise DefinitionError(
-            [detail(["body", "per_corner"], f"each count must lie between 1 and {MAX_PER_CORNER}: {counts}")]
-        )
-    base = _strip_isolator_choice(scene)
-    try:
-        loads = isolator_loads(validate_scene(base))
-    except (ValidationError, ValueError) as err:
-        raise _scene_error(err) from None
+    cat = requested_catalogue(catalogue)
+    base, counts, loads = scene_loads(scene, per_corner)
     labels = mount_labels(len(loads))
-    candidates = []
-    for p in cat.products:
-        fits = [fit(p, float(w), margin, counts) for w in loads]
-        c = Candidate(p, fits)
-        c.cost = _cost(p, c.count) if c.feasible else None
-        if not c.feasible:
-            c.verdict = "fails"
-            c.reason = "; ".join(f"{labels[j]}: {f.reason}" for j, f in enumerate(fits) if f.reason)
-        candidates.append(c)
     order = sorted(
-        candidates,
+        product_candidates(cat, loads, margin, counts),
         key=lambda c: (not c.feasible, math.inf if c.cost is None else c.cost, c.product.id),
     )
     runnable = [c for c in order if c.feasible]
+    base.setdefault("isolators", {})["catalogue"] = cat.model_dump(mode="json", exclude_none=True)
     chosen: Candidate | None = None
     criteria: list[str] = []
     run = 0
@@ -468,7 +496,7 @@ def _answer(
 
 def sized_scene(scene: dict[str, Any], product: Product, catalogue: Catalogue) -> dict[str, Any]:
     """``scene`` standing on ``product`` (``isolators.model``), the catalogue carrying that product inline."""
-    s = _strip_isolator_choice(scene)
+    s = strip_isolator_choice(scene)
     iso = s.setdefault("isolators", {})
     iso["model"] = product.id
     iso["catalogue"] = {

@@ -74,8 +74,9 @@ design:
     ),
     "saltelli": (
         "Saltelli's scheme for Sobol' sensitivity indices (`isolab sensitivity`): `samples` is the base "
-        "sample N, the study runs N (D + 2) cases for D parameters (N (2D + 2) with `second_order: true`). "
-        "Ranges only: no categorical parameter.",
+        "sample N, the study runs N (D + 2) cases for D parameters (N (2D + 2) with `second_order: true`), "
+        "times `replicates`: R independent copies of the design, whose spread gives the indices' 95 % "
+        "intervals. Ranges only: no categorical parameter.",
         """\
 parameters:
   - path: isolators.f_vertical
@@ -86,7 +87,8 @@ parameters:
     range: {start: 500 kg, stop: 1500 kg}
 design:
   type: saltelli
-  samples: 64                  # 64 x (3 + 2) = 320 cases
+  samples: 16                  # per replicate: 16 x (3 + 2) = 80 cases
+  replicates: 8                # 8 x 80 = 640 cases
 """,
     ),
     "list": (

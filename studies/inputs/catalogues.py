@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import difflib
 import json
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -39,8 +40,13 @@ MAX_PRODUCTS = 1000
 """Most products of one catalogue."""
 MAX_PER_CORNER = 8
 """Most isolators one mount position may take side by side."""
-CATALOGUE_SUFFIXES = (".yaml", ".yml", ".json")
+CATALOGUE_SUFFIXES = (".yaml", ".yml", ".json", ".csv")
 """Endings of a catalogue file name (a ``catalogue:`` naming no shipped catalogue but a file)."""
+CatalogueFormat = Literal["yaml", "json", "csv"]
+"""How a catalogue file is written (JSON is also read as YAML)."""
+
+AXIS_DAMPING = ("zeta_vertical", "zeta_horizontal")
+"""Damping ratios per direction a product (and a mount) may give besides ``zeta``."""
 
 ProductId = Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$", max_length=64)]
 """A product's id: letters, digits and ``_ . + -``, starting with a letter or digit."""
@@ -89,7 +95,9 @@ class Product(CatalogueModel):
     """One isolator product: what it carries, the figures it gives its load, and what it costs.
 
     ``f_vertical``, ``f_horizontal`` and ``zeta`` are the natural frequencies and the damping ratio the
-    maker quotes at rated load; a mount naming the product uses them at whatever load it carries within
+    maker quotes at rated load (``zeta_vertical`` and ``zeta_horizontal`` where the datasheet gives the
+    damping of each direction: either replaces ``zeta`` along its axes, and with both ``zeta`` may be left
+    out); a mount naming the product uses them at whatever load it carries within
     the rated range (a levelled air spring keeps its frequency as its pressure follows the load).
     ``effective_area`` (air springs) gives the gauge pressure ``p = F / A`` at a load ``F``.
     """
@@ -103,7 +111,15 @@ class Product(CatalogueModel):
     rated_load: RatedLoad
     f_vertical: Annotated[Frequency, Field(gt=0)] = Field(description="vertical natural frequency, Hz")
     f_horizontal: Annotated[Frequency, Field(gt=0)] = Field(description="horizontal natural frequency, Hz")
-    zeta: Annotated[Dimensionless, Field(ge=0, le=2)] = Field(description="damping ratio, 1")
+    zeta: Annotated[Dimensionless, Field(ge=0, le=2)] | None = Field(
+        None, description="damping ratio of every axis, 1 (unless zeta_vertical and zeta_horizontal give it)"
+    )
+    zeta_vertical: Annotated[Dimensionless, Field(ge=0, le=2)] | None = Field(
+        None, description="damping ratio along the vertical (the mount's own z), 1"
+    )
+    zeta_horizontal: Annotated[Dimensionless, Field(ge=0, le=2)] | None = Field(
+        None, description="damping ratio along the horizontal (the mount's own x and y), 1"
+    )
     stroke: Annotated[Length, Field(gt=0)] | None = Field(
         None, description="usable travel each way from the working height, m"
     )
@@ -133,6 +149,16 @@ class Product(CatalogueModel):
                 f"engine is tested over), got {value:.6g} Hz"
             )
         return value
+
+    @model_validator(mode="after")
+    def _damping(self) -> Product:
+        if self.zeta is None and (self.zeta_vertical is None or self.zeta_horizontal is None):
+            missing = "zeta_horizontal" if self.zeta_vertical is not None else "zeta_vertical"
+            field = "zeta" if self.zeta_vertical is None and self.zeta_horizontal is None else missing
+            raise ValueError(
+                f"{field}: give the damping ratio, zeta (every axis) or zeta_vertical and zeta_horizontal"
+            )
+        return self
 
     @model_validator(mode="after")
     def _max_load(self) -> Product:
@@ -195,20 +221,124 @@ class UnknownProductError(ValueError):
 
 
 def read_catalogue_file(path: str | Path) -> dict[str, Any]:
-    """The mapping in a catalogue file (YAML or JSON).
+    """The mapping in a catalogue file (YAML, JSON, or CSV as :func:`catalogue_from_csv` reads it, named by
+    the file's stem).
 
     Raises:
         FileNotFoundError: no such file.
-        ValueError: not a mapping at the top level.
+        ValueError: not a mapping at the top level, or a CSV file that is not a table of products.
     """
+    p = Path(path)
+    suffix = p.suffix.lower()
+    kind: CatalogueFormat = "csv" if suffix == ".csv" else "json" if suffix == ".json" else "yaml"
+    try:
+        return read_catalogue_text(p.read_text(encoding="utf-8"), kind, p.stem)
+    except ValueError as err:
+        raise ValueError(f"{p}: {err}") from None
+
+
+def read_catalogue_text(text: str, kind: CatalogueFormat = "yaml", name: str = "catalogue") -> dict[str, Any]:
+    """The mapping a catalogue file's ``text`` holds, written as ``kind``; ``name`` names a CSV catalogue.
+
+    Raises:
+        ValueError: text that does not parse (with the line), or no mapping at the top level.
+    """
+    if kind == "csv":
+        return catalogue_from_csv(text, name)
     import yaml
 
-    p = Path(path)
-    text = p.read_text(encoding="utf-8")
-    data = json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
+    try:
+        data = json.loads(text) if kind == "json" else yaml.safe_load(text)
+    except (ValueError, yaml.YAMLError) as err:
+        raise ValueError(f"not {kind.upper()}: {' '.join(str(err).split())}") from None
     if not isinstance(data, Mapping):
-        raise ValueError(f"{p}: expected a mapping at the top level, got {type(data).__name__}")
+        raise ValueError(f"expected a mapping at the top level, got {type(data).__name__}")
     return dict(data)
+
+
+CSV_NESTED = {"rated_load": ("min", "max"), "footprint": ("x", "y")}
+"""The two-part fields of a product and the column suffixes that give them in a CSV catalogue."""
+_HEADER = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_.]*)\s*(?:\[\s*([^\]]*?)\s*\])?\s*$")
+_BARE_NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
+
+
+def _csv_columns(header: list[str], line: int = 1) -> list[tuple[str, str | None]]:
+    """Each header cell as (field, unit or None): ``rated_load.max [kN]`` -> (``rated_load.max``, ``kN``).
+
+    Raises:
+        ValueError: a cell that names no product field.
+    """
+    known = set(Product.model_fields) - set(CSV_NESTED)
+    known |= {f"{k}.{part}" for k, parts in CSV_NESTED.items() for part in parts}
+    columns = []
+    for i, cell in enumerate(header, start=1):
+        m = _HEADER.match(cell)
+        if m is None or m.group(1) not in known:
+            raise ValueError(
+                f"line {line}, column {i}: {cell.strip()!r} is no product field (columns: id, type, maker, "
+                "series, rated_load.min, rated_load.max, f_vertical, f_horizontal, zeta, ..., a unit in "
+                "brackets after the name)"
+            )
+        columns.append((m.group(1), m.group(2) or None))
+    if len({c for c, _ in columns}) != len(columns):
+        raise ValueError(f"line {line}: a column is named twice")
+    return columns
+
+
+def catalogue_from_csv(text: str, name: str = "catalogue") -> dict[str, Any]:
+    """A catalogue (as the mapping a YAML catalogue file holds) from a CSV table: a header row of product
+    fields, each with an optional unit in brackets (``rated_load.max [kN]``, ``f_vertical [Hz]``), then
+    one product per row. A bare number takes its column's unit; a cell may carry its own (``12 kN``); an
+    empty cell leaves the field out. The two-part fields are two columns (``rated_load.min`` and
+    ``rated_load.max``, ``footprint.x`` and ``footprint.y``). The unit of ``price`` is the currency
+    (``price [EUR]``). Lines starting with ``#`` are comments.
+
+    Raises:
+        ValueError: no header or no product, an unknown column, or a row with more cells than the header,
+            each naming its line.
+    """
+    import csv
+    import io
+
+    kept = [
+        (n, line) for n, line in enumerate(text.splitlines(), start=1) if not line.lstrip().startswith("#")
+    ]
+    reader = csv.reader(io.StringIO("\n".join(line for _, line in kept)))
+    numbered = []  # (line of the file, cells), blank rows left out
+    try:
+        for row in reader:
+            if any(c.strip() for c in row):
+                numbered.append((kept[reader.line_num - 1][0], row))
+    except csv.Error as err:
+        raise ValueError(f"not CSV: {err}") from None
+    if not numbered:
+        raise ValueError("no header row: the first line names the columns (id, type, maker, series, ...)")
+    columns = _csv_columns(numbered[0][1], numbered[0][0])
+    products: list[dict[str, Any]] = []
+    for line, row in numbered[1:]:
+        if len(row) > len(columns):
+            raise ValueError(f"line {line}: {len(row)} cells under a header of {len(columns)}")
+        product: dict[str, Any] = {}
+        for (field, unit), raw in zip(columns, row, strict=False):
+            cell = raw.strip()
+            if not cell:
+                continue
+            value = f"{cell} {unit}" if unit and field != "price" and _BARE_NUMBER.match(cell) else cell
+            head, _, part = field.partition(".")
+            if part:
+                product.setdefault(head, {})[part] = value
+            else:
+                product[field] = value
+        if "footprint" in product:
+            product["footprint"] = [product["footprint"].get("x"), product["footprint"].get("y")]
+        products.append(product)
+    if not products:
+        raise ValueError("no product: one product a row under the header")
+    catalogue: dict[str, Any] = {"name": name, "products": products}
+    currency = dict(columns).get("price")
+    if currency:
+        catalogue["currency"] = currency
+    return catalogue
 
 
 def shipped_catalogue(name: str = DEFAULT_CATALOGUE) -> Catalogue:
@@ -262,14 +392,19 @@ def scene_catalogue(reference: str | Catalogue | None, field: str = "isolators.c
 
 
 def product_figures(product: Product) -> dict[str, Any]:
-    """What a mount naming ``product`` takes: its type as ``preset`` and its ``f_vertical``,
-    ``f_horizontal`` (Hz) and ``zeta`` (1)."""
-    return {
+    """What a mount naming ``product`` takes: its type as ``preset``, its ``f_vertical``, ``f_horizontal``
+    (Hz) and ``zeta`` (1; without one, the vertical ratio), and ``zeta_vertical`` and ``zeta_horizontal``
+    (1) where the product gives them."""
+    figures: dict[str, Any] = {
         "preset": product.type,
         "f_vertical": product.f_vertical,
         "f_horizontal": product.f_horizontal,
-        "zeta": product.zeta,
+        "zeta": product.zeta if product.zeta is not None else product.zeta_vertical,
     }
+    for key in AXIS_DAMPING:
+        if getattr(product, key) is not None:
+            figures[key] = getattr(product, key)
+    return figures
 
 
 def inline_catalogue_file(scene: Any, here: str | Path) -> Any:

@@ -130,8 +130,8 @@ def case_count_bound(body: Any, prefix: Loc | None = None) -> tuple[int, Loc] | 
     tell what is missing).
 
     Sampled designs have ``design.samples`` cases (saltelli: ``samples`` times D + 2, or 2D + 2 with
-    ``second_order``, D the number of parameters), a list design ``len(design.cases)``, a grid the
-    product of each parameter's ``values`` count or ``range.num``."""
+    ``second_order``, D the number of parameters, times ``replicates``), a list design
+    ``len(design.cases)``, a grid the product of each parameter's ``values`` count or ``range.num``."""
     pre: Loc = ["body"] if prefix is None else list(prefix)
     if not isinstance(body, dict):
         return None
@@ -143,7 +143,8 @@ def case_count_bound(body: Any, prefix: Loc | None = None) -> tuple[int, Loc] | 
         if n is not None and kind == "saltelli":  # N base samples run N (D + 2) or N (2D + 2) cases
             parameters = body.get("parameters")
             d = len(parameters) if isinstance(parameters, list) else 0
-            n = saltelli_cases(n, max(d, 1), design.get("second_order") is True)
+            replicates = _count(design.get("replicates"))
+            n = saltelli_cases(n, max(d, 1), design.get("second_order") is True, max(replicates or 1, 1))
         return None if n is None else (n, [*pre, "design", "samples"])
     if kind == "list":
         cases = design.get("cases")

@@ -2,33 +2,63 @@
 relaxation) and mounts on their own axes, applied to a batch's stiffness and damping arrays; air mounts'
 levelling valves, applied to a batch's valve arrays.
 
-A scene that gives no ``air``, no ``orientation`` and no ``levelling`` block keeps its arrays untouched.
+A scene that gives no ``air``, no ``orientation`` and no ``levelling`` block keeps its arrays untouched;
+one without an orifice of ``model: zener`` and without ``elastomer`` has no mount with internal states
+(:func:`mount_states`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from isolab.engine import mount_laws
 from isolab.engine.linear_states.levelling import MAX_VALVES
 from isolab.engine.scene import SceneBatch, SceneError
-from isolab.studies.inputs.schema.mounts import AirSpring, Isolators, Levelling, Orientation
-
-if TYPE_CHECKING:
-    from isolab.studies.inputs.base_flexibility import CaseValues
+from isolab.studies.inputs.catalogues import AXIS_DAMPING
+from isolab.studies.inputs.schema.mounts import AirSpring, Elastomer, Isolators, Levelling, Orientation
 from isolab.studies.inputs.schema.scene_paths import ISOLATORS, LEVELLING, mount
 
+if TYPE_CHECKING:
+    from isolab.studies.inputs.precision.base_flexibility import CaseValues
 
-def _own_or_group(iso: Isolators, j: int, key: str) -> tuple[AirSpring | Orientation | Levelling | None, str]:
+
+def _own_or_group(
+    iso: Isolators, j: int, key: str
+) -> tuple[AirSpring | Orientation | Elastomer | Levelling | None, str]:
     """A listed mount's own ``key`` block, else the group's, with the path it was given at."""
     listed = iso.listed
     if listed and getattr(listed[j], key) is not None:
         return getattr(listed[j], key), f"{mount(j)}.{key}"
     return getattr(iso, key), f"{ISOLATORS}.{key}"
+
+
+def axis_damping_ratios(groups: Sequence[Isolators], zeta: np.ndarray, varied: bool = False) -> np.ndarray:
+    """(C, n, 3) damping ratio per mount and own axis, 1: ``zeta`` (C, n) on every axis, but where a
+    listed mount, or the group below a listed mount's own ``zeta`` or preset, gives ``zeta_horizontal``
+    (x, y) or ``zeta_vertical`` (z), that. ``varied``: a study varies ``isolators.zeta``, which then sets
+    every axis of the group. ``groups``: each case's isolators (one per case)."""
+    out = np.repeat(zeta[..., None], 3, axis=-1)
+    if all(getattr(b, key) is None for iso in groups for b in (iso, *iso.listed) for key in AXIS_DAMPING):
+        return out  # no ratio per direction: zeta on every axis
+    for key, axes in (("zeta_horizontal", [0, 1]), ("zeta_vertical", [2])):
+        for j in range(zeta.shape[1]):
+            ratio = np.full(zeta.shape[0], np.nan)
+            for c, iso in enumerate(groups):
+                value = None if varied else getattr(iso, key)
+                if iso.listed:
+                    mt = iso.listed[j]
+                    if getattr(mt, key) is not None:
+                        value = getattr(mt, key)
+                    elif mt.zeta is not None or mt.preset is not None:
+                        value = None
+                ratio[c] = np.nan if value is None else float(value)
+            for a in axes:
+                out[:, j, a] = np.where(np.isnan(ratio), out[:, j, a], ratio)
+    return out
 
 
 def apply_mount_physics(
@@ -115,6 +145,96 @@ def apply_mount_physics(
                 if np.isnan(c_explicit[c, j, 2]):
                     iso_c[c, j, 2] = cz_set
     return iso_k, iso_c, frame if turned else None
+
+
+class IsolatorGroups(Protocol):
+    """How the batch builder reads the isolator block of every case."""
+
+    def each(self, read: Callable[[Any], object]) -> list: ...
+
+
+def elastomer_ladder(spec: Elastomer) -> tuple[np.ndarray, np.ndarray]:
+    """An elastomer's branches: stiffness over the static stiffness (B,) and relaxation times (B,) s, from
+    its ``ladder`` or fitted (``engine.mount_laws.fit_ladder``; branches of zero stiffness left out)."""
+    if spec.ladder is not None:
+        return (
+            np.array([b.stiffness_ratio for b in spec.ladder], dtype=float),
+            np.array([b.relaxation_time for b in spec.ladder], dtype=float),
+        )
+    _, kb, tau = mount_laws.fit_ladder(
+        float(spec.loss_factor or 0.0), float(spec.stiffening or 1.0), spec.f_low, spec.f_high, spec.branches
+    )
+    return kb[kb > 0], tau[kb > 0]
+
+
+def mount_states(
+    batch: SceneBatch,
+    cases: IsolatorGroups,
+    load: np.ndarray,
+    k_explicit: np.ndarray,
+    c_explicit: np.ndarray,
+) -> SceneBatch:
+    """``batch`` with the mounts' relaxation branches (``iso_branch_k``, ``iso_branch_tau``) where the scene
+    asks for them; else ``batch`` itself.
+
+    An air spring whose orifice has ``model: zener`` (and no explicit z stiffness) becomes the standard
+    linear solid: its z stiffness the slow one ``n p A^2 / (V + V_r)``, one branch ``n p A^2 / V - k`` with
+    the orifice's relaxation time (``engine.mount_laws.air_zener``), no viscous damping (explicit ``c``
+    stays). An ``elastomer`` block puts its ladder on each of the mount's own axes, each branch's stiffness
+    its ratio times that axis's static stiffness, in place of its viscous damping (explicit ``c`` stays).
+    ``load`` (C, n) N is each mount's static load; ``k_explicit``, ``c_explicit`` (C, n, 3) NaN where not
+    given.
+
+    Raises:
+        SceneError: naming the mount's block when it is both an air spring with states and an elastomer.
+    """
+    groups = cases.each(lambda s: s.isolators)
+    C, n = load.shape
+    rows: list[tuple[int, int, int, np.ndarray, np.ndarray]] = []  # (case, mount, axis, k_b, tau_b)
+    iso_k = np.array(batch.iso_k, dtype=float)
+    iso_c = np.array(batch.iso_c, dtype=float)
+    for c, iso in enumerate(groups):
+        for j in range(n):
+            spring, _ = _own_or_group(iso, j, "air")
+            rubber, where = _own_or_group(iso, j, "elastomer")
+            zener = (
+                isinstance(spring, AirSpring)
+                and spring.orifice is not None
+                and spring.orifice.model == "zener"
+                and np.isnan(k_explicit[c, j, 2])
+            )
+            if zener and isinstance(rubber, Elastomer):
+                raise SceneError(where, f"mount {j} is an air spring with an orifice state, not an elastomer")
+            if zener:
+                assert isinstance(spring, AirSpring) and spring.orifice is not None
+                o = spring.orifice
+                k0, k1, tau = mount_laws.air_zener(
+                    mount_laws.air_pressure(float(load[c, j]), spring.effective_area),
+                    spring.effective_area,
+                    spring.volume,
+                    spring.reservoir_volume,
+                    mount_laws.orifice_resistance(o.area, o.length, o.viscosity),
+                    spring.polytropic_exponent,
+                )
+                iso_k[c, j, 2] = float(k0)
+                if np.isnan(c_explicit[c, j, 2]):
+                    iso_c[c, j, 2] = 0.0
+                rows.append((c, j, 2, np.array([float(k1)]), np.array([float(tau)])))
+            elif isinstance(rubber, Elastomer):
+                ratio, tau = elastomer_ladder(rubber)
+                for a in range(3):
+                    rows.append((c, j, a, ratio * iso_k[c, j, a], tau))
+                    if np.isnan(c_explicit[c, j, a]):
+                        iso_c[c, j, a] = 0.0
+    if not rows:
+        return batch
+    B = max(r[3].size for r in rows)
+    kb = np.zeros((C, n, 3, B))
+    tb = np.zeros((C, n, 3, B))
+    for c, j, a, k, t in rows:
+        kb[c, j, a, : k.size] = k
+        tb[c, j, a, : t.size] = t
+    return replace(batch, iso_k=iso_k, iso_c=iso_c, iso_branch_k=kb, iso_branch_tau=tb)
 
 
 def valve_names(iso: Isolators) -> list[str | None]:

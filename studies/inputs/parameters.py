@@ -31,6 +31,7 @@ import numpy as np
 
 from isolab.engine.profiles import SHAPERS
 from isolab.engine.results import AXES
+from isolab.studies.inputs.catalogues import scene_catalogue
 from isolab.studies.inputs.isolators import PRESETS
 from isolab.studies.inputs.schema import (
     MoveSegment,
@@ -48,6 +49,7 @@ from isolab.studies.inputs.schema.scene_paths import (
     FLEXIBLE_DAMPING,
     FLEXIBLE_YOUNG_MODULUS,
     FLOOR_SINE_KEYS,
+    ISOLATOR_MODEL,
     ISOLATOR_PRESET,
     ISOLATORS,
     LAYOUT_HEIGHT,
@@ -230,8 +232,9 @@ def available_paths(scene: Scene) -> list[str]:
         p = stage(s.name)
         out += [f"{p}.mass"] + components(f"{p}.home")
         prof = s.profile
-        if prof.shaper is not None:
-            out += [f"{profile_shaper(s.name)}.{key}" for key in ("type", *SHAPER_KEYS)]
+        if prof.shaper is not None:  # a shaper tuned to a mode takes the mode's frequency and damping
+            tuning = ("type",) if prof.shaper.mode is not None else ("type", *SHAPER_KEYS)
+            out += [f"{profile_shaper(s.name)}.{key}" for key in tuning]
         if isinstance(prof, SequenceProfile):
             for k, seg in enumerate(prof.segments):
                 segment_keys = (
@@ -330,6 +333,9 @@ def resolve(path: str, scene: Scene) -> Target:
     Raises:
         ValueError: the path does not exist in this scene; the message lists what exists.
     """
+    if path.strip() == ISOLATOR_MODEL:  # a product of the scene's catalogue (its ids are the levels)
+        ids = tuple(scene_catalogue(scene.isolators.catalogue).ids)
+        return Target(ISOLATOR_MODEL, "product", CATEGORICAL, "", ids, (ISOLATOR_MODEL,), None)
     paths = available_paths(scene)
     known = set(paths)
     canon = _canonical(path, known)
@@ -425,6 +431,8 @@ def apply(scene_data: dict[str, Any], targets: list[Target], values: list[Any]) 
         v = value.item() if isinstance(value, np.generic) else value
         for leaf in target.writes:
             _set(d, leaf, v)
+        if target.path == ISOLATOR_MODEL:  # the product decides the type
+            d[ISOLATORS].pop("preset", None)
     return d
 
 

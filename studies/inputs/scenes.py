@@ -18,15 +18,15 @@ What the builder works out:
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 from typing import cast
 
 import numpy as np
 
 from isolab.engine import profiles
+from isolab.engine.modal import Modes
 from isolab.engine.results import AXES
 from isolab.engine.scene import GRAVITY, SceneBatch, SceneError
-from isolab.studies.inputs import mount_physics
-from isolab.studies.inputs.base_flexibility import flexible_base
 from isolab.studies.inputs.block import MAX_TRAVEL, beyond_travel, block_properties, travel_bound
 from isolab.studies.inputs.isolators import (
     CollinearIsolatorsError,
@@ -35,8 +35,16 @@ from isolab.studies.inputs.isolators import (
     load_share,
     stiffness_from_frequency,
 )
+from isolab.studies.inputs.mount_physics import (
+    apply_mount_physics,
+    axis_damping_ratios,
+    levelling_valves,
+    mount_states,
+    valve_signature,
+    valve_time,
+)
 from isolab.studies.inputs.parameters import check_leaf_values
-from isolab.studies.inputs.precision import point_signature, precision_inputs, servo_kind
+from isolab.studies.inputs.precision import flexible_base, point_signature, precision_inputs, servo_kind
 from isolab.studies.inputs.schema import (
     AUTO_DURATION_CAP,
     AUTO_DURATION_DECAYS,
@@ -66,7 +74,6 @@ from isolab.studies.inputs.schema.scene_paths import (
     MACHINE_INERTIA_DIAGONAL,
     MACHINE_MASS,
     MOUNT_FIGURES,
-    SHAPER_KEYS,
     SIMULATION_DURATION,
     SIMULATION_SETTLE_TOLERANCE,
     floor_sine,
@@ -75,12 +82,11 @@ from isolab.studies.inputs.schema.scene_paths import (
     mount,
     point,
     profile_segment,
-    profile_shaper,
     stage,
     stage_entry,
     stage_profile,
 )
-from isolab.studies.inputs.schema.stages import ShaperSpec
+from isolab.studies.inputs.shaping import scene_modes, shaped_profile, tuned_to_modes
 from isolab.studies.questions.floor import spectrum_fields
 
 _LAYOUT_SX = np.array([-1.0, 1.0, 1.0, -1.0])
@@ -122,7 +128,7 @@ def shape_signature(scene: Scene) -> tuple:
     elif scene.floor is not None and scene.floor.recorded is not None:
         rec = scene.floor.recorded
         floor = ("recorded", rec.dt, len(rec.displacement.samples()[0]))
-    return machine, mounts + mount_physics.valve_signature(iso), tuple(stages), point_signature(scene), floor
+    return machine, mounts + valve_signature(iso), tuple(stages), point_signature(scene), floor
 
 
 class _Cases:
@@ -291,24 +297,8 @@ def _mount_feedforward(cases: _Cases, n: int) -> tuple[np.ndarray, np.ndarray, n
     return out["gain"], out["bandwidth"], out["force_limit"], weight
 
 
-def _shaped(pc: profiles.Pieces, cases: _Cases, i: int) -> profiles.Pieces:
-    """Stage ``i``'s profile ``pc`` through its input shaper, tuned per case (engine.profiles.shape)."""
-    q = profile_shaper(cases.scenes[0].stages[i].name)
-    kinds = cases.each(lambda s: cast(ShaperSpec, s.stages[i].profile.shaper).type)
-
-    def figure(key: str) -> np.ndarray:
-        return cases.get(f"{q}.{key}", lambda s: getattr(s.stages[i].profile.shaper, key))
-
-    figs = [figure(k) for k in SHAPER_KEYS]
-    f, z = (np.broadcast_to(x, (cases.c,)) for x in figs)
-    t, a = np.zeros((cases.c, profiles.SHAPER_IMPULSES)), np.zeros((cases.c, profiles.SHAPER_IMPULSES))
-    for kind in set(kinds):
-        on = np.array([k == kind for k in kinds]) if len(kinds) == cases.c else np.ones(cases.c, dtype=bool)
-        t[on], a[on] = profiles.shaper_impulses(kind, f[on], z[on])
-    return profiles.shape(profiles.Pieces(*(np.broadcast_to(x, (cases.c, x.shape[1])) for x in pc)), t, a)
-
-
-def _profiles(cases: _Cases) -> profiles.Pieces:
+def _profiles(cases: _Cases, modes: Modes | None = None) -> profiles.Pieces:
+    """Every stage's profile (C, m, K); a shaper tuned to a mode waits for ``modes`` (scene_modes)."""
     c = cases.c
     stages = cases.scenes[0].stages
     pieces = []
@@ -360,7 +350,7 @@ def _profiles(cases: _Cases) -> profiles.Pieces:
                         segs.append({"dwell": sget("dwell")})
                 pc = profiles.sequence(segs, start=get("start"))
             if prof.shaper is not None:
-                pc = _shaped(pc, cases, i)
+                pc = shaped_profile(pc, i, c, cases.get, cases.each, modes)
         except SceneError as err:
             names = {"v_max": "velocity", "a_max": "acceleration", "j_max": "jerk", "distance": "travel"}
             field = err.field
@@ -490,10 +480,10 @@ def build_batch(
     for a, axis in enumerate(AXES):
 
         def group_k(s: Scene, axis: str = axis) -> float | None:
-            return _axis(s.isolators.k, axis)
+            return getattr(s.isolators.k, axis, None)  # None: no explicit stiffness
 
         def group_c(s: Scene, axis: str = axis) -> float | None:
-            return _axis(s.isolators.c, axis)
+            return getattr(s.isolators.c, axis, None)
 
         k_explicit[:, :, a] = cases.get(group_axis("k", axis), group_k)[:, None]
         c_explicit[:, :, a] = cases.get(group_axis("c", axis), group_c)[:, None]
@@ -518,11 +508,11 @@ def build_batch(
             "mounts or give explicit k" + (f" (case {case})" if c > 1 else ""),
         )
     safe_load = np.where(load > 0.0, load, 0.0)[..., None]
+    groups = cases.each(lambda s: s.isolators)
+    zeta_axes = axis_damping_ratios(groups, zeta, isolator_group("zeta") in cases.overrides)
     iso_k = _first_set(k_explicit, stiffness_from_frequency(safe_load, freq, g))
-    iso_c = _first_set(c_explicit, damping_from_ratio(iso_k, safe_load, zeta[..., None], g))
-    iso_k, iso_c, iso_frame = mount_physics.apply_mount_physics(
-        cases.each(lambda s: s.isolators), load, iso_k, iso_c, k_explicit, c_explicit, g
-    )
+    iso_c = _first_set(c_explicit, damping_from_ratio(iso_k, safe_load, zeta_axes, g))
+    iso_k, iso_c, iso_frame = apply_mount_physics(groups, load, iso_k, iso_c, k_explicit, c_explicit, g)
     _fail(
         ISOLATORS,
         "stiffness and damping must be finite and non-negative",
@@ -530,7 +520,7 @@ def build_batch(
         c,
     )
 
-    # motion
+    # motion (a shaper tuned to a mode is applied below, once the modes are known: it only delays motion)
     pieces = _profiles(cases)
     if m:
         reach = np.abs(pieces.s).max(axis=-1)  # (C, m): farthest from home (moves are monotonic in a piece)
@@ -598,7 +588,6 @@ def build_batch(
         return None if duration == "auto" else duration
 
     duration = cases.get(SIMULATION_DURATION, fixed_duration)
-    last_move = profiles.end_time(pieces).max(axis=-1) if m else np.zeros(c)
     settle = cases.get(SIMULATION_SETTLE_TOLERANCE, lambda s: sim(s).settle_tolerance)
     # each point settles to its own criterion's ``within`` (studies.questions.criteria), else to
     # settle_tolerance
@@ -646,7 +635,14 @@ def build_batch(
         preload_with_base="base" in preload,
         preload_balanced="balanced" in preload,
     )
-    batch = mount_physics.levelling_valves(flexible_base(precision_inputs(batch, cases), cases), cases)
+    batch = flexible_base(precision_inputs(batch, cases), cases)  # servos, relative points, elastic modes
+    batch = mount_states(batch, cases, load, k_explicit, c_explicit)  # air orifices', elastomers' states
+    batch = levelling_valves(batch, cases)  # air mounts' levelling valves
+    if any(tuned_to_modes(s) for s in scenes):  # tuned to the modes of the scene as assembled
+        pieces = _profiles(cases, scene_modes(batch))
+        at = profiles.Pieces(*(np.ascontiguousarray(x) for x in pieces))
+        batch = replace(batch, prof_t=at.t, prof_s=at.s, prof_v=at.v, prof_a=at.a, prof_j=at.j)
+    last_move = profiles.end_time(pieces).max(axis=-1) if m else np.zeros(c)
     auto = np.isnan(duration)
     if auto.any():
         decay = slowest_decay_time(batch.take(np.flatnonzero(auto)))
@@ -685,11 +681,7 @@ def slowest_decay_time(batch: SceneBatch) -> np.ndarray:
     w = 2 * np.pi * md.frequency
     rate = md.damping_ratio * w
     tau = np.where((w > 0) & (rate > 0), 1.0 / np.where(rate > 0, rate, 1.0), 0.0)
-    return np.maximum(tau.max(axis=1), mount_physics.valve_time(batch))
-
-
-def _axis(values: object, axis: str) -> float | None:
-    return None if values is None else getattr(values, axis)
+    return np.maximum(tau.max(axis=1), valve_time(batch))
 
 
 def isolator_loads(scene: Scene, g: float = GRAVITY) -> np.ndarray:

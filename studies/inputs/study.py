@@ -498,7 +498,9 @@ def _make_design(spec: DesignSpec, factors: list[Factor], targets: list[Target])
                             + "; a saltelli design varies ranges only: give it a range (start, stop), or "
                             "use an lhs, sobol or grid design"
                         )
-                return designs.saltelli(factors, spec.samples, spec.seed, bool(spec.second_order))
+                return designs.saltelli(
+                    factors, spec.samples, spec.seed, bool(spec.second_order), spec.replicates or 1
+                )
             make = {"lhs": designs.latin_hypercube, "sobol": designs.sobol, "random": designs.random}[
                 spec.type
             ]

@@ -54,6 +54,8 @@ class Design:
 
 GRID_LIMIT = 10_000_000
 """Most cases a design may hold."""
+MAX_REPLICATES = 1000
+"""Most independent replicates of a saltelli design."""
 
 
 @dataclass(frozen=True)
@@ -218,13 +220,15 @@ def sobol(factors: list[Factor], n: int, seed: int = 0) -> Design:
     return _sampled(factors, u)
 
 
-def saltelli_cases(n: int, d: int, second_order: bool = False) -> int:
+def saltelli_cases(n: int, d: int, second_order: bool = False, replicates: int = 1) -> int:
     """Cases of a Saltelli design of base sample ``n`` over ``d`` parameters: ``n (d + 2)``, or
-    ``n (2d + 2)`` with second-order indices."""
-    return int(n) * ((2 * int(d) + 2) if second_order else (int(d) + 2))
+    ``n (2d + 2)`` with second-order indices, per replicate; ``replicates`` times that in all."""
+    return int(replicates) * int(n) * ((2 * int(d) + 2) if second_order else (int(d) + 2))
 
 
-def saltelli(factors: list[Factor], n: int, seed: int = 0, second_order: bool = False) -> Design:
+def saltelli(
+    factors: list[Factor], n: int, seed: int = 0, second_order: bool = False, replicates: int = 1
+) -> Design:
     """Saltelli's scheme on a scrambled Sobol' sequence (``SALib.sample.sobol``), for Sobol' indices.
 
     ``n`` is the base sample N (best a power of 2); the design has :func:`saltelli_cases` cases, laid out
@@ -233,6 +237,12 @@ def saltelli(factors: list[Factor], n: int, seed: int = 0, second_order: bool = 
     row of B. :func:`SALib.analyze.sobol.analyze` reads the outputs in that order. Every factor must be a
     range (``low`` .. ``high``; a log scale is sampled uniformly in log space, as :meth:`Factor.from_unit`
     does). Same ``seed``, same cases.
+
+    With ``replicates`` R > 1 the design is R such designs of N base samples one after the other (R N
+    blocks in all), each on its own independently scrambled Sobol' sequence (seeds spawned from ``seed``):
+    independent estimates whose spread gives the indices' intervals
+    (:func:`isolab.studies.answers.sensitivity.replicate_intervals`). R = 1 is the single design above,
+    case for case.
     """
     from SALib.sample import sobol as salib_sobol
 
@@ -246,10 +256,16 @@ def saltelli(factors: list[Factor], n: int, seed: int = 0, second_order: bool = 
                 f"{f.name}: a saltelli design varies ranges only and this parameter is {kind}; "
                 "give it a range (start, stop)"
             )
-    total = saltelli_cases(n, len(factors), second_order)
-    if total > GRID_LIMIT:
+    if isinstance(replicates, bool) or int(replicates) != replicates or not 1 <= replicates <= MAX_REPLICATES:
         raise ValueError(
-            f"design.samples: {n} base samples over {len(factors)} parameters make {total} cases, "
+            f"design.replicates: must be an integer from 1 to {MAX_REPLICATES}, got {replicates!r}"
+        )
+    replicates = int(replicates)
+    total = saltelli_cases(n, len(factors), second_order, replicates)
+    if total > GRID_LIMIT:
+        times = f" in {replicates} replicates" if replicates > 1 else ""
+        raise ValueError(
+            f"design.samples: {n} base samples over {len(factors)} parameters{times} make {total} cases, "
             f"more than {GRID_LIMIT}"
         )
     problem = {
@@ -257,12 +273,19 @@ def saltelli(factors: list[Factor], n: int, seed: int = 0, second_order: bool = 
         "names": [f.name for f in factors],
         "bounds": [[0.0, 1.0]] * len(factors),
     }
+    if replicates == 1:
+        rngs = [np.random.default_rng(seed)]
+    else:
+        rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(replicates)]
+    parts = []
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*balance properties of Sobol.*", category=UserWarning)
         warnings.filterwarnings("ignore", category=DeprecationWarning)
-        u = salib_sobol.sample(
-            problem, n, calc_second_order=bool(second_order), scramble=True, seed=np.random.default_rng(seed)
-        )
+        for rng in rngs:
+            parts.append(
+                salib_sobol.sample(problem, n, calc_second_order=bool(second_order), scramble=True, seed=rng)
+            )
+    u = parts[0] if replicates == 1 else np.concatenate(parts)
     return _sampled(factors, np.clip(u, 0.0, np.nextafter(1.0, 0.0)))
 
 

@@ -107,6 +107,8 @@ SUMMARY: tuple[tuple[str, str], ...] = (
     ("natural_frequency", EACH),
     ("peak_point_displacement", EACH),
     ("point_settling_time", EACH),
+    ("move_time", EACH),
+    ("point_ready_time", EACH),
     ("floor_point_velocity", "axis"),
 )
 """The outputs the case table shows by default, in order, and how: each component (:data:`EACH`), or the

@@ -1,24 +1,24 @@
 """Speed against accuracy: pick the cheapest model for an accuracy request, and the study as it runs.
 
-**Choosing.** A simulation block may ask for an accuracy instead of naming the model
-(``accuracy: fast | balanced | reference`` or ``tolerance: "10 um" | "1 %"``, see
-:class:`studies.inputs.schema.Simulation`). :func:`choose` then measures: it runs a few pilot cases of the
-study
-(:func:`pilot_cases`: the hardest case of each isolator type and the stiffest case, found by a cheap
-screening run) at the reference level (nonlinear model, adaptive reference integrator, at the finest
-candidate step: the "truth"), then tries the candidate fidelity/integrator/step triples in order of their
-estimated cost (:data:`studies.run.costs.STEP_COST`, stability sub-steps included) and takes the first whose
-largest error on the pilot cases stays inside the tolerance. A relative tolerance applies to every sizing
-output (:data:`~isolab.studies.run.error_estimate.SIZING_OUTPUTS`: peak c.g. and point displacement, peak
-rotation, peak isolator force, relative to the reference's largest of each; the smallest isolator load
-relative to the largest preload); an absolute one (metres) to the peak displacements. A per-output
-tolerance (``tolerance: {settling_time: 5 ms, peak_point_displacement: 1 %}``) bounds instead the worst
-component of each named output
-(:func:`~isolab.studies.run.error_estimate.component_errors`). A candidate the stability guard would
-sub-step on a pilot case is never chosen, nor, for a relative tolerance, RK4 at a step whose damping of the
-pilot cases' fastest mode per cycle exceeds the tolerance (:func:`rk4_step_too_long`). ``fast`` allows
-5 %, ``balanced`` 0.5 %; ``reference`` runs the nonlinear level with the reference integrator at the
-requested step (default 1 ms). When no candidate meets the tolerance the reference itself is chosen.
+**Choosing.** A simulation block may ask for an accuracy instead of naming the model (``accuracy: fast |
+balanced | reference`` or ``tolerance: "10 um" | "1 %"``, see :class:`studies.inputs.schema.Simulation`).
+:func:`choose` then measures: it runs a few pilot cases of the study (:func:`pilot_cases`: the hardest case of
+each isolator type and the stiffest case, found by a cheap screening run) at the reference level (nonlinear
+model, adaptive reference integrator, at the finest candidate step: the "truth"; with extra linear states,
+which that level does not model, the pair :func:`~isolab.studies.run.error_estimate.reference_pair` names:
+ltv/rk4, ``error_estimate.STATES_REFERENCE_PAIR``, or lti/exact with a stage on a servo), then tries the
+candidate fidelity/integrator/step triples in order of their estimated cost
+(:data:`studies.run.costs.STEP_COST`, stability sub-steps included) and takes the first whose largest error on
+the pilot cases stays inside the tolerance. A relative tolerance applies to every sizing output
+(:data:`~isolab.studies.run.error_estimate.SIZING_OUTPUTS`: peak c.g. and point displacement, peak rotation,
+peak isolator force, relative to the reference's largest of each; the smallest isolator load relative to the
+largest preload); an absolute one (metres) to the peak displacements. A per-output tolerance (``tolerance:
+{settling_time: 5 ms, peak_point_displacement: 1 %}``) bounds instead the worst component of each named output
+(:func:`~isolab.studies.run.error_estimate.component_errors`). A candidate the stability guard would sub-step
+on a pilot case is never chosen, nor, for a relative tolerance, RK4 at a step whose damping of the pilot
+cases' fastest mode per cycle exceeds the tolerance (:func:`rk4_step_too_long`). ``fast`` allows 5 %,
+``balanced`` 0.5 %; ``reference`` runs the nonlinear level with the reference integrator at the requested step
+(default 1 ms). When no candidate meets the tolerance the reference itself is chosen.
 Choices are cached per study definition.
 
 How an error is measured, and the error estimate every stored study carries, are
@@ -40,6 +40,7 @@ from isolab.engine import modal, model, simulate, stability
 from isolab.engine.integrators import INTEGRATORS
 from isolab.engine.results import OK, STATUS_NAMES, SimulationResult
 from isolab.engine.scene import SceneBatch
+from isolab.engine.simulate import SERVO_LEVELS, SLOT_INTEGRATORS, SLOT_LEVELS
 from isolab.studies.inputs.schema import (
     ACCURACY_LEVELS,
     DEFAULT_DT,
@@ -57,6 +58,7 @@ from isolab.studies.run.error_estimate import (
     case_groups,
     component_errors,
     output_errors,
+    reference_pair,
     sizing_error,
 )
 
@@ -204,7 +206,13 @@ def choose_for_batch(
     shown = ", ".join(f"{k} {v}" for k, v in texts.items()) if per_output else _fmt_error(tolerance, relative)
     cases = tuple(int(c) for c in (case_numbers if case_numbers is not None else range(batch.n_cases)))
     fine = steps[0]
-    truth: SimulationResult | SimpleNamespace = simulate(batch, *REFERENCE_PAIR, dt=fine, auto_step=auto_step)
+    states = model.linear_slot(batch).A.shape[1]  # extra linear states: only some pairs model them
+    truth_pair = reference_pair(batch)
+    if states:
+        levels = SERVO_LEVELS if len(batch.servo_stages) else SLOT_LEVELS  # a servo stage: lti only
+        pairs = [p for p in pairs if p[0] in levels and p[1] in SLOT_INTEGRATORS]
+    truth_name = "/".join(truth_pair)
+    truth: SimulationResult | SimpleNamespace = simulate(batch, *truth_pair, dt=fine, auto_step=auto_step)
     usable = np.flatnonzero(truth.status == OK)
     if usable.size == 0:
         why = "; ".join(
@@ -228,8 +236,12 @@ def choose_for_batch(
         truth = _take_result(truth, usable)
         cases = tuple(cases[i] for i in usable)
     duration = np.asarray(batch.duration, dtype=float)
-    A = modal.state_matrix(
-        model.mass_matrix(batch), model.stiffness_matrix(batch), model.damping_matrix(batch)
+    A = (
+        model.slot_state_matrix(model.params(batch))
+        if states
+        else modal.state_matrix(
+            model.mass_matrix(batch), model.stiffness_matrix(batch), model.damping_matrix(batch)
+        )
     )
     omega_max = 2.0 * np.pi * np.max(modal.modes(*_home_matrices(batch)).frequency)
     candidates = []
@@ -241,7 +253,7 @@ def choose_for_batch(
             if integ == "rk4" and not per_output and relative and rk4_step_too_long(omega_max, dt, bound):
                 continue  # RK4's numerical damping of the fastest mode alone would exceed the tolerance
             n_steps = np.rint(duration / (dt / n_div))
-            cost = float(np.sum(n_steps) * step_cost(fid, integ))
+            cost = float(np.sum(n_steps) * step_cost(fid, integ, states))
             candidates.append((cost, rank, -dt, fid, integ, dt, float(dt / n_div.max())))
     candidates.sort()
     rows: list[dict[str, Any]] = []
@@ -285,7 +297,7 @@ def choose_for_batch(
                 )
             reason = (
                 f"{fid}/{integ} at {dt * 1e3:g} ms is the cheapest candidate whose largest error on "
-                f"pilot cases {list(cases)} ({_fmt_error(worst, fmt)} against nonlinear/reference "
+                f"pilot cases {list(cases)} ({_fmt_error(worst, fmt)} against {truth_name} "
                 f"at {fine * 1e3:g} ms) stays within {margin:g} of the tolerance "
                 f"{shown}" + also
             )
@@ -306,9 +318,9 @@ def choose_for_batch(
     reason = (
         f"no candidate meets {margin:g} of {shown} on pilot cases "
         f"{list(cases)}{near}: the "
-        f"reference itself (nonlinear/reference at {fine * 1e3:g} ms)"
+        f"reference itself ({truth_name} at {fine * 1e3:g} ms)"
     )
-    return Choice(None, *REFERENCE_PAIR, fine, tolerance, relative, reason, cases, tuple(rows), texts or None)
+    return Choice(None, *truth_pair, fine, tolerance, relative, reason, cases, tuple(rows), texts or None)
 
 
 def _home_matrices(batch: SceneBatch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

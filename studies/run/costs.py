@@ -39,6 +39,17 @@ maps instead of its lean whole step, the slot's rates in every RK4 slope), measu
 ``studies/examples/scriber-levelling.yaml`` against the same scene without valves (64 cases, 5 s at 1 ms:
 643 / 259, 1777 / 1657 and 1407 / 695 ns per step and case). The levels and integrators that refuse valves
 are not in it."""
+STATE_STEP_COST: dict[tuple[str, str], tuple[float, float]] = {
+    ("lti", "exact"): (0.47e-6, 28.5e-9),
+    ("lti", "rk4"): (98e-9, 3.9e-9),
+    ("ltv", "rk4"): (145e-9, 6.3e-9),
+}
+"""What ``nz`` extra linear states (a flexible base's modes, the mounts' relaxation branches, one per branch
+and axis) add to the time per step of one case: ``a nz + b nz^2`` s, ``(a, b)`` fitted to the article
+scene with 4 states (air mounts' orifices) and 36 (elastomer ladders of 3 branches on 3 axes), 16 cases a
+batch (``python -m benchmarks mount_states``: lti/exact 429 -> 2,747 -> 54,240 ns, lti/rk4 2,221 -> 2,674
+-> 11,502 ns, ltv/rk4 1,017 -> 1,699 -> 14,764 ns; the exact integrator's dense maps grow as nz^2). Only
+these pairs model the states; the others refuse them."""
 UNKNOWN_STEP_COST = 30e-6
 """Time per step assumed for a pair the table lacks, s (the dearest)."""
 CASE_OVERHEAD = 1e-3
@@ -47,12 +58,14 @@ UNKNOWN_DURATION = 10.0
 """Simulated time assumed for a study whose first case cannot be built, s."""
 
 
-def step_cost(fidelity: str | None, integrator: str | None) -> float:
-    """Engine time per step of one case, s (:data:`STEP_COST`; a pair not chosen yet costs
-    :data:`UNKNOWN_STEP_COST`)."""
+def step_cost(fidelity: str | None, integrator: str | None, states: int = 0) -> float:
+    """Engine time per step of one case, s (:data:`STEP_COST`, plus :data:`STATE_STEP_COST` per extra
+    linear state; a pair not chosen yet costs :data:`UNKNOWN_STEP_COST`)."""
     if fidelity is None or integrator is None:
         return UNKNOWN_STEP_COST
-    return STEP_COST.get((fidelity, integrator), UNKNOWN_STEP_COST)
+    a, b = STATE_STEP_COST.get((fidelity, integrator), (UNKNOWN_STEP_COST, 0.0))
+    extra = a * states + b * states * states
+    return STEP_COST.get((fidelity, integrator), UNKNOWN_STEP_COST) + extra
 
 
 def estimate_seconds_per_case(study: Study) -> float:

@@ -2,8 +2,9 @@
 stored study carries.
 
 **Errors.** :func:`output_errors` compares each output of a run with the same cases at the reference level
-(:data:`REFERENCE_PAIR`: nonlinear, adaptive reference integrator): relative to the reference's largest
-peak for the :data:`SIZING_OUTPUTS`, the settling time as an absolute difference in s;
+(:data:`REFERENCE_PAIR`: nonlinear, adaptive reference integrator; for a scene with extra linear states,
+which that level does not model, the best pair that does: :func:`reference_pair`): relative to the
+reference's largest peak for the :data:`SIZING_OUTPUTS`, the settling time as an absolute difference in s;
 :func:`sizing_error` reduces them to what a tolerance is checked against and :func:`component_errors`
 measures each component of an output against a per-output tolerance.
 
@@ -23,14 +24,23 @@ from typing import Any
 
 import numpy as np
 
-from isolab.engine import simulate, stability
+from isolab.engine import model, simulate, stability
 from isolab.engine.results import OK, OUTPUTS, STATUS_NAMES
+from isolab.engine.scene import SceneBatch
 from isolab.engine.simulate import SUB_STEPPED
 from isolab.studies.inputs.study import Study, study_from_json
 from isolab.studies.results.dataset import result_arrays
 
 REFERENCE_PAIR = ("nonlinear", "reference")
 """The fidelity and integrator every error is measured against (the reference level)."""
+STATES_REFERENCE_PAIR = ("ltv", "rk4")
+"""The reference of a scene with extra linear states (a flexible base, mounts' internal states, levelling
+valves), which the nonlinear level and the reference integrator do not model: the ltv level by RK4."""
+SERVO_REFERENCE_PAIR = ("lti", "exact")
+"""The reference of a scene with a stage on a servo, which only the lti level models: its exact integrator."""
+SERVO_DEAD_BAND_REFERENCE_PAIR = ("lti", "rk4")
+"""The reference of a scene with a stage on a servo and a levelling valve's dead band (a nonlinearity the
+exact integrator's linear maps do not step): the lti level by RK4."""
 ERROR_SAMPLE = 4
 """Cases of a study rerun at the reference level for its error estimate (more when it has more isolator
 types, at most :data:`ERROR_SAMPLE_LIMIT`)."""
@@ -155,6 +165,33 @@ def component_errors(
     return out
 
 
+def reference_pair(batch: SceneBatch) -> tuple[str, str]:
+    """The fidelity and integrator ``batch``'s errors are measured against: :data:`REFERENCE_PAIR`, or the
+    best pair that models the scene's extra linear states where it has some (:data:`SERVO_REFERENCE_PAIR`
+    with a stage on a servo, :data:`SERVO_DEAD_BAND_REFERENCE_PAIR` when a levelling valve also has a dead
+    band, else :data:`STATES_REFERENCE_PAIR`)."""
+    if len(batch.servo_stages):
+        banded = np.any((np.asarray(batch.iso_valve) >= 0) & (np.asarray(batch.iso_level_band) > 0))
+        return SERVO_DEAD_BAND_REFERENCE_PAIR if banded else SERVO_REFERENCE_PAIR
+    if model.linear_slot(batch).A.shape[1]:
+        return STATES_REFERENCE_PAIR
+    return REFERENCE_PAIR
+
+
+def reference_method(pair: tuple[str, str]) -> str:
+    """How the reference reruns of an error estimate ran (``pair``, from :func:`reference_pair`), in words."""
+    if tuple(pair) == REFERENCE_PAIR:
+        return (
+            "nonlinear level, reference integrator (DOP853, rtol 1e-10), sampled at the step each case used"
+        )
+    return (
+        f"{pair[0]} level, {pair[1]} integrator at the step each case used: the scene has extra linear "
+        "states (a flexible base, mounts' internal states, levelling valves or a stage on a servo) that the "
+        f"nonlinear level and the reference integrator do not model, so {pair[0]}/{pair[1]} is the reference "
+        "(its own step error is not in the estimate)"
+    )
+
+
 def case_groups(study: Study) -> dict[tuple, list[int]]:
     """Cases of a study by their categorical values (isolator types ...), in case order."""
     design = study.design()
@@ -181,17 +218,21 @@ def error_sample(
     return sorted(picked)
 
 
-def sample_arrays(definition_json: str, case: int) -> dict[str, dict[str, np.ndarray]]:
+def sample_arrays(
+    definition_json: str, case: int, pair: tuple[str, str] | None = None
+) -> dict[str, dict[str, np.ndarray]]:
     """One sampled case of a study (JSON definition) run twice (a Dask task): with the study's own model
     (``"ours"``, the numbers its chunk gives: a case's result does not depend on the batch it runs in)
-    and at the reference level sampled at the step that run used (``"reference"``)."""
+    and at the reference level sampled at the step that run used (``"reference"``): ``pair``, or the
+    case's own :func:`reference_pair` when None."""
     study = study_from_json(definition_json)
     sim = study.simulation
     batch = study.batch(np.array([int(case)]))
     fidelity, integrator, step = sim.engine_choice()  # resolved, as for the chunks that run this definition
     ours = result_arrays(simulate(batch, fidelity, integrator, dt=step, auto_step=sim.auto_step))
     dt = float(ours["dt"][0]) if np.isfinite(ours["dt"][0]) else step
-    reference = result_arrays(simulate(batch, *REFERENCE_PAIR, dt=dt, auto_step=sim.auto_step))
+    pair = reference_pair(batch) if pair is None else pair
+    reference = result_arrays(simulate(batch, *pair, dt=dt, auto_step=sim.auto_step))
     return {"ours": ours, "reference": reference}
 
 
@@ -290,12 +331,11 @@ def rk4_damping_note(frequency: np.ndarray, dt: np.ndarray) -> str:
     )
 
 
-def exact_estimate(cases: Sequence[int], outputs: Sequence[str] = ESTIMATED_OUTPUTS) -> ErrorEstimate:
-    """The estimate of a study that ran at the reference level itself: zero by definition."""
-    return ErrorEstimate(
-        {k: 0.0 for k in outputs},
-        {k: None for k in outputs},
-        tuple(cases),
-        {},
-        "the study ran at the reference level (nonlinear, reference integrator)",
-    )
+def exact_estimate(
+    cases: Sequence[int], outputs: Sequence[str] = ESTIMATED_OUTPUTS, pair: tuple[str, str] = REFERENCE_PAIR
+) -> ErrorEstimate:
+    """The estimate of a study that ran at its reference level (``pair``) itself: zero by definition."""
+    method = "the study ran at the reference level (nonlinear, reference integrator)"
+    if tuple(pair) != REFERENCE_PAIR:
+        method = f"the study ran at the reference level of its extra linear states ({pair[0]}, {pair[1]})"
+    return ErrorEstimate({k: 0.0 for k in outputs}, {k: None for k in outputs}, tuple(cases), {}, method)

@@ -31,6 +31,11 @@ def non_dominated(F: np.ndarray) -> np.ndarray:
     """(n,) bool: the rows of ``F`` (n, objectives; lower is better) that no other row dominates (no worse
     in every objective and better in one). Equal rows do not dominate each other."""
     F = np.asarray(F, dtype=np.float64)
+    if F.ndim == 2 and F.shape[1] == 1 and len(F):
+        # one objective: a row is dominated exactly when another is lower (a NaN row by none, none by it)
+        f = F[:, 0]
+        finite = ~np.isnan(f)
+        return ~(f > f[finite].min()) if finite.any() else np.ones(len(F), dtype=bool)
     keep = np.ones(len(F), dtype=bool)
     for i in range(len(F)):
         no_worse = (F <= F[i]).all(axis=1)

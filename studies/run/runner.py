@@ -61,6 +61,8 @@ from isolab.studies.run.error_estimate import (
     error_sample,
     estimate_errors,
     exact_estimate,
+    reference_method,
+    reference_pair,
     sample_arrays,
 )
 from isolab.studies.run.fanout import TASK_RETRIES, choose_chunk_size, plan_chunks, run_chunks, worker_threads
@@ -344,32 +346,43 @@ def _choice(
     return choice
 
 
-def _submit_samples(client: Any, study: Study, run_json: str, key_prefix: str) -> tuple[list[int], list[Any]]:
-    """The error estimate's seeded sample of cases and the Dask futures of their
-    :func:`studies.run.accuracy.sample_arrays` (none for a study that runs at the reference level itself)."""
+def _submit_samples(
+    client: Any, study: Study, run_json: str, key_prefix: str
+) -> tuple[list[int], list[Any], tuple[str, str]]:
+    """The error estimate's seeded sample of cases, the Dask futures of their
+    :func:`studies.run.error_estimate.sample_arrays` (none for a study that runs at its reference level
+    itself) and the reference they rerun at (:func:`studies.run.error_estimate.reference_pair` of the
+    sampled cases: the nonlinear level does not model a scene's extra linear states)."""
     cases = error_sample(study)
-    if (study.simulation.fidelity, study.simulation.integrator) == REFERENCE_PAIR:
-        return cases, []
+    try:
+        pair = reference_pair(study.batch(np.array(cases)))
+    except ValueError:  # a scene the engine refuses: its chunks and reruns report why
+        pair = REFERENCE_PAIR
+    if (study.simulation.fidelity, study.simulation.integrator) == pair:
+        return cases, [], pair
     token = uuid.uuid4().hex[:8]
     futures = [
         client.submit(
-            sample_arrays, run_json, c, pure=False, priority=1, key=f"{key_prefix}-sample-{c}-{token}"
+            sample_arrays, run_json, c, pair, pure=False, priority=1, key=f"{key_prefix}-sample-{c}-{token}"
         )
         for c in cases
     ]
-    return cases, futures
+    return cases, futures, pair
 
 
 def _error_estimate(
-    client: Any, study: Study, samples: tuple[list[int], list[Any]], cancel: threading.Event | None
+    client: Any,
+    study: Study,
+    samples: tuple[list[int], list[Any], tuple[str, str]],
+    cancel: threading.Event | None,
 ) -> ErrorEstimate | None:
     """The largest error per output over the sampled cases (see :func:`_submit_samples`); None when
     ``cancel`` is set while waiting for them."""
-    cases, futures = samples
+    cases, futures, pair = samples
     _, points = study_labels(study)
     outputs = [o for o in ESTIMATED_OUTPUTS if o != "peak_point_displacement" or len(points) > 0]
     if not futures:
-        return exact_estimate(cases, outputs)
+        return exact_estimate(cases, outputs, pair)
     try:
         parts = [_wait(client, f, cancel) for f in futures]
     except Exception as err:  # the study's own results stand; the estimate says why it is missing
@@ -388,9 +401,8 @@ def _error_estimate(
     reference = {
         k: np.concatenate([np.asarray(p["reference"][k]) for p in parts]) for k in parts[0]["reference"]
     }
-    method = "nonlinear level, reference integrator (DOP853, rtol 1e-10), sampled at the step each case used"
     return estimate_errors(
-        ours, reference, cases, outputs, method=method, integrator=study.simulation.integrator
+        ours, reference, cases, outputs, method=reference_method(pair), integrator=study.simulation.integrator
     )
 
 
@@ -401,11 +413,11 @@ def _counts(arrays: dict[str, np.ndarray]) -> tuple[int, int]:
 
 def _design_extra(study: Study) -> dict[str, Any]:
     """What the design summary adds from the study's ``design:`` block (type, samples, seed; saltelli:
-    second_order, which the sensitivity analysis reads)."""
+    second_order and, when given, replicates, which the sensitivity analysis reads)."""
     dump = study.design_spec.model_dump(mode="json")
     if dump.get("type") == "saltelli":
         dump["second_order"] = bool(dump.get("second_order"))
-    keys = ("type", "seed", "samples", "second_order")
+    keys = ("type", "seed", "samples", "second_order", "replicates")
     return {k: v for k, v in dump.items() if k in keys and v is not None}
 
 

@@ -100,6 +100,43 @@ def test_the_scriber_comparison_reads_as_an_answer(page, base: str) -> None:
     assert page.errors == []
 
 
+def test_the_example_catalogue_s_products_are_compared_and_one_recommended(page, base: str) -> None:
+    page.goto(f"{base}/ui/compare")
+    page.wait_for_selector("#source option[value='example:scriber-criteria']", state="attached")
+    page.select_option("#source", "example:scriber-criteria")
+    page.select_option("#catalogue", "shipped:representative")
+    assert page.is_visible("#per-corner") and page.is_disabled("#tune")
+    page.fill("#per-corner", "1,2")
+    page.click("#run")
+    page.wait_for_selector("#products-table", timeout=90_000)
+    # the service's own answer to the same request
+    text = httpx.get(f"{base}/examples/scriber-criteria", timeout=30).json()["text"]
+    definition = httpx.post(f"{base}/studies/validate", json={"text": text}, timeout=30).json()["definition"]
+    scene = {**definition["scene"], **{k: definition[k] for k in ("floor", "criteria") if definition.get(k)}}
+    body = {"scene": scene, "simulation": definition.get("simulation"), "catalogue": "representative"}
+    answer = httpx.post(f"{base}/comparisons", json={**body, "per_corner": [1, 2]}, timeout=90).json()
+    pick = answer["recommendation"]["product"]
+    assert pick  # the shipped catalogue holds a product that meets the scriber's criteria
+    marked = page.locator("#products-table tr.recommended")
+    assert marked.count() == 1 and marked.get_attribute("data-product") == pick
+    assert "recommended" in marked.inner_text()
+    assert f"Recommended: {pick}" in page.inner_text("#recommendation")
+    rows = page.locator("#products-table tbody tr")
+    assert rows.count() == len(answer["catalogue"]["products"])
+    # every product cheaper than the recommended one is listed with why not, in words
+    order = answer["recommendation"]["cost_order"]
+    cheaper = order[: order.index(pick)]
+    listed = page.locator("#rejected li")
+    assert cheaper and set(listed.evaluate_all("items => items.map((i) => i.dataset.product)")) >= set(
+        cheaper
+    )
+    for i in range(listed.count()):
+        words = listed.nth(i).inner_text()
+        assert "fails" in words or "does not carry the loads" in words, words
+        assert "tool_settle" not in words  # each criterion by its description
+    assert page.errors == []
+
+
 def test_an_optimisation_shows_its_progress_best_design_and_report(
     page, base: str, optimisation: str
 ) -> None:

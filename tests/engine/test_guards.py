@@ -282,6 +282,8 @@ NAN_WHEN_NOT_OK = {
     "max_isolator_load",
     "transmissibility",
     "peak_following_error",
+    "ready_time",
+    "point_ready_time",
 }
 """The outputs SimulationResult's docstring says are NaN for a case that is not OK."""
 
@@ -297,7 +299,7 @@ def test_a_case_that_is_not_ok_is_nan_exactly_where_the_result_says(status: int)
         value = np.asarray(getattr(r, name)[0], dtype=float)
         if name in NAN_WHEN_NOT_OK:
             assert np.isnan(value).all(), name
-        else:  # dt, the preloads, the modal analysis; settled is False
+        else:  # dt, the move time, the preloads, the modal analysis; settled is False
             assert np.isfinite(value).all(), name
     assert not r.settled[0]
     assert set(r.to_dict(0)) == {"status", "message", *OUTPUT_FIELDS}

@@ -619,6 +619,12 @@ NON_FINITE_BODIES: list[tuple[str, str, list]] = [
         '{"scene": {}, "isolator_types": ["air"], "simulation": {"dt": -Infinity}}',
         ["body", "simulation", "dt"],
     ),
+    ("/comparisons", '{"scene": {}, "catalogue": "representative", "margin": NaN}', ["body", "margin"]),
+    (
+        "/comparisons",
+        '{"scene": {}, "catalogue": {"products": [{"price": Infinity}]}}',
+        ["body", "catalogue", "products", 0, "price"],
+    ),
     ("/comparisons/floor.png", '{"scene": {}, "point": NaN}', ["body", "point"]),
     ("/studies", "NaN", ["body"]),
     ("/studies", "[NaN]", ["body", 0]),
@@ -641,6 +647,7 @@ NON_FINITE_BODIES: list[tuple[str, str, list]] = [
     ("/simulations", '{"scene": {"machine": {"mass": Infinity}}}', ["body", "scene", "machine", "mass"]),
     ("/scenes/check", '{"scene": {"machine": {"mass": -Infinity}}}', ["body", "scene", "machine", "mass"]),
     ("/sizings", '{"scene": {}, "margin": NaN}', ["body", "margin"]),
+    ("/catalogues/read", '{"text": NaN}', ["body", "text"]),
     ("/comparisons/floor", '{"scene": {}, "description": NaN}', ["body", "description"]),
 ]
 

@@ -33,6 +33,8 @@ STUDY = {
     "design": {"type": "grid"},
 }
 
+CATALOGUE_TEXT = (Path(__file__).resolve().parents[2] / "studies/catalogues/representative.yaml").read_text()
+
 # Every route of the app: (method, path template) -> how to call it with the right token, and the answer.
 ROUTES: dict[tuple[str, str], dict[str, Any]] = {
     ("GET", "/health"): {"status": 200, "open": True},
@@ -90,6 +92,7 @@ ROUTES: dict[tuple[str, str], dict[str, Any]] = {
         "json": {"scene": EXAMPLE_COMPARISON["scene"], "max_points": 50},
     },
     ("POST", "/scenes/check"): {"status": 200, "json": {"scene": EXAMPLE_COMPARISON["scene"]}},
+    ("POST", "/catalogues/read"): {"status": 200, "json": {"text": CATALOGUE_TEXT}},
     ("GET", "/scenes/examples"): {"status": 200},
     ("GET", "/scenes/examples/{name}"): {"status": 200},
 }

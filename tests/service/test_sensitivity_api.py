@@ -76,6 +76,8 @@ def test_sobol_indices_of_a_real_study(http: TestClient, study_id: str) -> None:
     # density (its mass) moves it by a fraction of that: the least total effect, near zero
     assert st[2] < 0.05 and st[2] < min(st[0], st[1])
     assert np.all(st_conf >= 0) and set(a["conf"]) == {"S1", "ST"}
+    # one design: its intervals are a bootstrap over the base samples, and the answer says so
+    assert a["replicates"] == 1 and a["interval_method"].startswith("bootstrap over the base samples")
     assert a["parameter_units"][0] == "Hz"
 
 

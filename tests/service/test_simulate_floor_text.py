@@ -4,6 +4,7 @@ worst band, the VC criterion it meets) and the criteria margins, in the JSON and
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -67,7 +68,11 @@ def test_text_prints_the_floor_and_the_margins(outputs) -> None:
     assert f"z {z:.3g} um/s" in text
     assert f"meets {out['floor_vc_class']['tool']}" in text
     assert "criteria margins (NOT all met" in text
-    assert f"camera_velocity         {out['criterion_margin']['camera_velocity']:+.3f}  NOT met" in text
+    margin = f"{out['criterion_margin']['camera_velocity']:+.3f}"
+    assert re.search(rf"\n    camera_velocity +{re.escape(margin)}  NOT met\n", text), text
+    # the label column is as wide as the longest label, here "peak displacement camera" and a space
+    width = len("peak displacement camera") + 1
+    assert "\n    " + "camera_velocity".ljust(width) + margin in text
 
 
 def test_no_floor_no_floor_lines() -> None:

@@ -8,8 +8,8 @@ import pytest
 import yaml
 
 from isolab.engine import simulate
-from isolab.studies.inputs.base_flexibility import beam_shape, block_modes
 from isolab.studies.inputs.parameters import available_paths, resolve
+from isolab.studies.inputs.precision.base_flexibility import beam_shape, block_modes
 from isolab.studies.inputs.scenes import build_batch
 from isolab.studies.inputs.study import load_scene, scene_batch
 

@@ -170,7 +170,7 @@ EXPECTED_CASES = {
     "lhs": 200,
     "sobol": 256,
     "random": 100,
-    "saltelli": 64 * (3 + 2),
+    "saltelli": 8 * 16 * (3 + 2),  # replicates x samples x (D + 2)
     "list": 3,
     "monte_carlo": 256,
 }

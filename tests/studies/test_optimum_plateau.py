@@ -12,7 +12,7 @@ import xarray as xr
 
 from isolab.studies.questions.designs import Factor
 from isolab.studies.questions.goals import Constraint, Goals, Objective
-from isolab.studies.run.optimisation import describe_optimum, mark_optimum, optimise, stalled
+from isolab.studies.run.optimisation import describe_optimum, mark_optimum, non_dominated, optimise, stalled
 
 
 def goals(x_low: float = -2.0, plateau: float = 0.1, stall: int | None = None, budget: int = 1200) -> Goals:
@@ -75,6 +75,19 @@ def test_a_best_value_at_an_end_of_its_range_is_flagged() -> None:
     lines = describe_optimum(ds)
     assert any("x is at the low end of its range" in line for line in lines)
     assert any(line.startswith("plateau: ") for line in lines)
+
+
+def test_one_objective_keeps_exactly_the_rows_no_other_row_beats() -> None:
+    def by_pairs(F: np.ndarray) -> np.ndarray:  # the definition: no row no worse everywhere, better once
+        return np.array([not ((F <= row).all(axis=1) & (F < row).any(axis=1)).any() for row in F])
+
+    rng = np.random.default_rng(3)
+    f = rng.integers(0, 6, 300).astype(float)  # many ties, the lowest among them
+    f[[4, 50]] = np.nan  # a case without a value dominates none and none dominates it
+    f[9] = np.inf
+    for F in (f[:, None], np.full((5, 1), np.nan), np.array([[2.0]]), np.zeros((0, 1))):
+        np.testing.assert_array_equal(non_dominated(F), by_pairs(F))
+    assert non_dominated(f[:, None]).sum() == np.count_nonzero(f == 0) + 2
 
 
 def test_stalled_counts_generations_that_do_not_improve_the_best() -> None:

@@ -274,6 +274,7 @@ def assembly_growth(tmp_path: Path, n_chunks: int, whole: bool) -> int:
     return int(done.stdout.split()[-1])
 
 
+@pytest.mark.slow  # four processes of their own write 41,000- and 164,000-case studies (~25 s)
 def test_the_memory_a_streamed_write_takes_does_not_grow_with_the_chunks(tmp_path: Path) -> None:
     # 10 and 40 chunks of 4,096 cases (~0.8 kB a case in memory): built whole, the larger study takes
     # ~100 MB more than the smaller one (several times that while it is written: ~560 MB measured);

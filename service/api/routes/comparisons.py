@@ -15,14 +15,21 @@ from __future__ import annotations
 import anyio
 from anyio import to_thread
 from fastapi import APIRouter, Body, HTTPException, Request, Response
+from pydantic import ValidationError
 
+from isolab.service.api.catalogue_schemas import (
+    EXAMPLE_CATALOGUE_COMPARISON,
+    CatalogueComparisonRequest,
+    CatalogueFile,
+    CatalogueRead,
+    ProductComparison,
+)
 from isolab.service.api.request_limits import JsonParsedOffLoop
 from isolab.service.api.routes import INVALID, PNG, invalid, run_heavy
 from isolab.service.api.schemas import (
     EXAMPLE_COMPARISON,
     EXAMPLE_FLOOR_PLOT,
     EXAMPLE_SCENE,
-    Comparison,
     ComparisonRequest,
     FloorPlotRequest,
     MessageBody,
@@ -32,9 +39,13 @@ from isolab.service.api.schemas import (
 from isolab.service.plots.studies import floor_velocity_png
 from isolab.studies.answers.comparisons import compare as run_compare
 from isolab.studies.answers.floor_response import FloorSpectra, point_spectra, velocity_spectra
+from isolab.studies.answers.product_comparison import compare_products
 from isolab.studies.answers.single_case import MAX_CASE_SECONDS, run_single_case, single_case_study
-from isolab.studies.answers.sizing import SizingAnswer, SizingRequest
+from isolab.studies.answers.sizing import DEFAULT_LOAD_MARGIN, SizingAnswer, SizingRequest
 from isolab.studies.answers.sizing import size as run_size
+from isolab.studies.authoring.authoring import parse_text
+from isolab.studies.inputs.catalogues import Catalogue, read_catalogue_text
+from isolab.studies.inputs.definitions import DefinitionError, validation_details
 
 router = APIRouter(tags=["comparisons"], route_class=JsonParsedOffLoop)
 
@@ -87,21 +98,25 @@ async def simulate_scene(
 
 @router.post(
     "/comparisons",
-    response_model=Comparison,
+    response_model=ProductComparison,
     responses=INVALID,
-    summary="Compare isolator types on one scene",
+    summary="Compare isolator types, or the products of a catalogue, on one scene",
 )
 async def compare(
     http: Request,
-    request: ComparisonRequest = Body(
+    request: CatalogueComparisonRequest = Body(
         openapi_examples={
             "three types": {
                 "summary": "the article's scriber on active, air and elastomer isolators",
                 "value": EXAMPLE_COMPARISON,
             },
+            "catalogue": {
+                "summary": "the article's scriber on the products of the shipped catalogue",
+                "value": EXAMPLE_CATALOGUE_COMPARISON,
+            },
         }
     ),
-) -> Comparison:
+) -> ProductComparison:
     """Run the same machine and stages on each isolator type and answer a side-by-side table: peak
     displacement and rotation per axis, peak isolator force, smallest isolator load and lift-off,
     settling time and natural frequencies, with the best type per column in ``best``; with design criteria
@@ -109,7 +124,36 @@ async def compare(
     cheapest type (``cost_order``) that meets them all. With a ``tolerances:`` block in the scene, each
     type is also judged on ``samples`` machines drawn from it (``robustness``: the probability of meeting
     every criterion with its interval, as drawn and, with ``tune``, as tuned), and the recommendation is
-    the most probable type that reaches ``require``."""
+    the most probable type that reaches ``require``.
+
+    With a ``catalogue`` the rows are its products (of ``isolator_types``) instead: each at the fewest
+    isolators per mount (of ``per_corner``) that carry the scene's static loads inside its rated range with
+    ``margin``, a product they do not fit skipped with the reason (``catalogue.products``); the
+    recommendation is the cheapest priced product that meets every criterion (with tolerances: reaches
+    ``require``), else the unpriced one with the largest smallest margin. A catalogue none of whose products
+    fits is answered with no rows and the reasons."""
+    if request.catalogue is not None:
+        if request.tune:
+            raise invalid(["body", "tune"], "a product's figures are its datasheet's: tune the generic types")
+        if request.cost_order is not None:
+            raise invalid(["body", "cost_order"], "with a catalogue the products' prices order them")
+        answer = await run_heavy(
+            http,
+            compare_products,
+            request.scene,
+            request.catalogue,
+            request.simulation,
+            isolator_types=list(request.isolator_types),
+            margin=request.margin,
+            per_corner=request.per_corner,
+            samples=request.samples,
+            require=request.require,
+            seed=request.seed,
+        )
+        return ProductComparison(**answer)
+    if request.margin != DEFAULT_LOAD_MARGIN or request.per_corner is not None:
+        field = "margin" if request.margin != DEFAULT_LOAD_MARGIN else "per_corner"
+        raise invalid(["body", field], "applies to a comparison of a catalogue's products: give catalogue")
     answer = await run_heavy(
         http,
         run_compare,
@@ -124,7 +168,7 @@ async def compare(
     )
     if len(answer["isolator_types"]) != len(set(request.isolator_types)):
         raise invalid(["body", "isolator_types"], "the comparison did not produce one case per isolator type")
-    return Comparison(**answer)
+    return ProductComparison(**answer)
 
 
 @router.post(
@@ -232,3 +276,31 @@ async def sizing(
         max_cases=request.max_cases,
     )
     return SizingAnswer(**answer)
+
+
+@router.post(
+    "/catalogues/read",
+    response_model=CatalogueRead,
+    responses=INVALID,
+    summary="Read a catalogue file (YAML, JSON or CSV) into the catalogue a comparison takes",
+)
+def read_catalogue(request: CatalogueFile) -> CatalogueRead:
+    """Parse and check the text of a catalogue file, as the page reads a file the user uploads: answered
+    as the mapping ``POST /comparisons`` and ``POST /sizings`` take as their ``catalogue`` (every quantity
+    in SI), with the products' ids. Text that does not parse is a 422 naming ``body.text`` and the line; a
+    product that does not check, one naming its field (``body.text.products.2.rated_load.max``)."""
+    if request.format == "csv":
+        try:
+            data = read_catalogue_text(request.text, request.format, request.name)
+        except ValueError as err:
+            raise invalid(["body", "text"], str(err)) from None
+    else:
+        # YAML and JSON through the studies' bounded reader: aliases, depth and size checked before loading
+        data, _ = parse_text(request.text, ["body", "text"])
+    try:
+        catalogue = Catalogue.model_validate(data)
+    except ValidationError as err:
+        raise DefinitionError(validation_details(err, ["body", "text"])) from None
+    return CatalogueRead(
+        catalogue=catalogue.model_dump(mode="json", exclude_none=True), products=catalogue.ids
+    )

@@ -68,6 +68,10 @@ class Sensitivity(BaseModel):
         description="index name -> half-width of its confidence interval, per parameter"
     )
     conf_level: float
+    interval_method: str = Field(default="", description="how the confidence intervals are formed, in words")
+    replicates: int = Field(
+        default=1, description="independent replicates of a saltelli design the intervals were read from"
+    )
     n_cases: int = Field(description="cases the indices were estimated from")
     n_total: int = Field(description="cases of the study")
     n_excluded: int = Field(description="cases left out: status not ok, or no value of the output")

@@ -53,17 +53,21 @@ function criterionLimit(req) {
 // The recommendation in words: green only when a type meets every criterion.
 function recommendationNode(answer) {
   const rec = answer.recommendation || {};
+  if (rec.product) {
+    return el("div", { class: "answer ok", id: "recommendation", "data-product": rec.product }, el("strong", {}, `Recommended: ${rec.product} (${rec.isolator_type}). `), reasonInWords(rec.reason || "", answer.requirements || []));
+  }
   if (rec.isolator_type) {
     return el("div", { class: "answer ok", id: "recommendation" }, el("strong", {}, `Recommended: ${rec.isolator_type} isolators. `), reasonInWords(rec.reason || "", answer.requirements || []));
   }
-  const none = (answer.requirements || []).length ? "No type meets every criterion. " : "No recommendation. ";
+  const what = answer.catalogue ? "product" : "type";
+  const none = (answer.requirements || []).length ? `No ${what} meets every criterion. ` : "No recommendation. ";
   return el("div", { class: "answer warn", id: "recommendation" }, el("strong", {}, none), reasonInWords(rec.reason || "", answer.requirements || []));
 }
 
 // The service's reason with each criterion named by its description (``tool_settle`` -> ``tool back
 // within 10 um of rest after each move``) and without the opening the heading already says.
 function reasonInWords(reason, requirements) {
-  let text = reason.replace(/^no type meets every criterion: /, "");
+  let text = reason.replace(/^no (type|product of the catalogue) meets every criterion: /, "");
   const names = [...requirements].sort((a, b) => b.name.length - a.name.length);
   for (const r of names) {
     if (r.description) text = text.replace(new RegExp(`\\b${r.name}\\b`, "g"), r.description);

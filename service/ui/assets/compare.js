@@ -101,7 +101,7 @@ function renderBars(answer) {
         name: t,
         legendgroup: t,
         showlegend: i === 0,
-        marker: { color: TYPE_COLOURS[t] || "#888" },
+        marker: { color: TYPE_COLOURS[t] || PALETTE[types.indexOf(t) % PALETTE.length] },
         x: columns.map((c) => c.replace(/^(peak_displacement|peak_rotation|peak_isolator_force|peak_point_displacement|natural_frequency)_/, "")),
         y: columns.map((c) => (typeof answer.rows[t][c] === "number" ? answer.rows[t][c] * factor : null)),
         xaxis: `x${ax}`,
@@ -151,6 +151,125 @@ async function downloadFloorPng(scene, types, simulation, point) {
   setTimeout(() => URL.revokeObjectURL(url), 10000);
 }
 
+// ------------------------------------------------------------------------------- catalogue products
+// The catalogue the user chose: null (the generic types), a shipped one's name, or an uploaded file read
+// and checked by the service (POST /catalogues/read), which answers the catalogue as a comparison takes it.
+async function catalogueChoice() {
+  const choice = $("#catalogue").value;
+  if (!choice) return null;
+  if (choice.startsWith("shipped:")) return choice.slice("shipped:".length);
+  const file = $("#catalogue-file").files[0];
+  if (!file) throw new Error("Choose a catalogue file (YAML or CSV) first.");
+  const ending = file.name.toLowerCase().split(".").pop();
+  const format = ending === "csv" ? "csv" : ending === "json" ? "json" : "yaml";
+  const name = file.name.replace(/\.[^.]*$/, "") || "catalogue";
+  const read = await postJson("/catalogues/read", { text: await file.text(), format, name });
+  $("#catalogue-state").textContent = `${file.name}: ${read.products.length} products.`;
+  return read.catalogue;
+}
+
+function perCorner() {
+  const text = $("#per-corner").value.trim();
+  if (!text) return null;
+  const counts = text.split(/[\s,]+/).filter(Boolean).map(Number);
+  if (counts.some((n) => !Number.isInteger(n) || n < 1)) throw new Error(`Isolators a mount may take: whole numbers from 1, comma-separated (got "${text}").`);
+  return counts;
+}
+
+function showCatalogueControls() {
+  const choice = $("#catalogue").value;
+  $("#catalogue-file").hidden = choice !== "file";
+  $("#per-corner-field").hidden = !choice;
+  $("#tune").disabled = Boolean(choice); // a product's figures are its datasheet's
+  $("#catalogue-state").textContent = "";
+}
+
+// Why a compared product misses the criteria, each criterion in words with its margin.
+function failedInWords(answer, row) {
+  const missed = (answer.requirements || []).filter((r) => typeof row[`margin_${r.name}`] === "number" && row[`margin_${r.name}`] < 0);
+  if (!missed.length) return row.status && row.status !== "ok" ? `its case did not end ok (${row.status})` : "misses the criteria";
+  return "fails " + missed.map((r) => `${r.description || r.name} (${percentText(row[`margin_${r.name}`])})`).join(", ");
+}
+
+// Each product of the catalogue, cheapest first: count, cost, load margin, pressure, stroke used, criteria
+// met, and the verdict in words; the recommended one marked, and every cheaper one with why it is not.
+function productLines(answer) {
+  const block = answer.catalogue;
+  const reqs = answer.requirements || [];
+  const pick = (answer.recommendation || {}).product || null;
+  const lines = block.products.map((p) => {
+    const row = answer.rows[p.product] || null;
+    const margins = p.load_margin.filter((m) => typeof m === "number");
+    const pressures = row ? p.pressure.filter((x) => typeof x === "number") : [];
+    const deflection = row ? row.peak_isolator_deflection_z : null;
+    const met = row ? reqs.filter((r) => row[`margin_${r.name}`] >= 0).length : null;
+    const feasible = Boolean(row) && (reqs.length ? Boolean(row.meets_criteria) : row.status === "ok");
+    let why = null;
+    if (!row) why = `does not carry the loads: ${p.reason}`;
+    else if (!feasible) why = failedInWords(answer, row);
+    return { p, row, margins, pressures, deflection, met, feasible, why, picked: p.product === pick };
+  });
+  const rank = (l) => [l.row ? 0 : 1, l.p.cost === null || l.p.cost === undefined ? 1 : 0, l.p.cost || 0];
+  lines.sort((a, b) => {
+    const [x, y] = [rank(a), rank(b)];
+    return x[0] - y[0] || x[1] - y[1] || x[2] - y[2];
+  });
+  return lines;
+}
+
+function renderProducts(answer) {
+  const card = $("#products-card");
+  if (!answer.catalogue) {
+    card.hidden = true;
+    return;
+  }
+  card.hidden = false;
+  const block = answer.catalogue;
+  const reqs = answer.requirements || [];
+  const lines = productLines(answer);
+  const range = (xs, f, digits) => (xs.length ? (Math.min(...xs) === Math.max(...xs) ? fmt(Math.min(...xs) * f, digits) : `${fmt(Math.min(...xs) * f, digits)}–${fmt(Math.max(...xs) * f, digits)}`) : "–");
+  const head = el(
+    "tr",
+    {},
+    ["product", "type", "isolators", `cost [${block.currency}]`, "smallest load margin [%]", "pressure [bar]", "stroke used [%]", "criteria met", "verdict"].map((h, i) =>
+      el("th", { class: i >= 2 && i <= 7 ? "num" : null }, h)
+    )
+  );
+  const body = lines.map((l) => {
+    const verdictText = l.picked ? "recommended" : l.feasible ? (reqs.length ? "meets every criterion" : "carries the loads") : l.why;
+    const strokeUsed = l.deflection !== null && l.deflection !== undefined && l.p.stroke ? fmt((100 * l.deflection) / l.p.stroke, 3) : "–";
+    return el(
+      "tr",
+      { "data-product": l.p.product, class: l.picked ? "recommended best" : l.feasible ? null : "rejected" },
+      el("td", { title: l.p.label }, l.picked ? el("strong", {}, `★ ${l.p.product}`) : l.p.product),
+      el("td", {}, l.p.type),
+      el("td", { class: "num" }, l.row ? `${l.p.counts.reduce((a, b) => a + b, 0)} (${l.p.counts.join("/")})` : "–"),
+      el("td", { class: "num" }, l.p.cost === null || l.p.cost === undefined ? (l.p.unit_price == null ? "no price" : `${fmt(l.p.unit_price)} each`) : l.p.cost.toLocaleString("en")),
+      el("td", { class: "num" }, range(l.margins, 100, 3)),
+      el("td", { class: "num" }, range(l.pressures, 1e-5, 3)),
+      el("td", { class: "num" }, strokeUsed),
+      el("td", { class: "num" }, l.met === null || !reqs.length ? "–" : `${l.met} of ${reqs.length}`),
+      el("td", { class: l.picked || l.feasible ? "pass" : "fail" }, verdictText)
+    );
+  });
+  const at = lines.findIndex((l) => l.picked);
+  const cheaper = (at >= 0 ? lines.slice(0, at) : lines).filter((l) => !l.feasible);
+  const why = cheaper.length
+    ? el(
+        "div",
+        { id: "rejected" },
+        el("h3", {}, at >= 0 ? "Cheaper products, and why not" : "Why no product is recommended"),
+        el("ul", {}, cheaper.map((l) => el("li", { "data-product": l.p.product }, el("strong", {}, `${l.p.product}: `), l.why)))
+      )
+    : null;
+  fill(
+    $("#products"),
+    el("div", { class: "table-wrap" }, el("table", { id: "products-table" }, el("thead", {}, head), el("tbody", {}, body))),
+    why,
+    el("p", { class: "muted" }, `Catalogue ${block.name}; each product at the fewest isolators per mount (of ${block.per_corner.join(" or ")}) that carry the static loads within a ${Math.round(100 * block.margin)} % load margin; prices in ${block.currency}.`)
+  );
+}
+
 async function run() {
   const types = [...document.querySelectorAll("input[name=type]:checked")].map((c) => c.value);
   if (!types.length) {
@@ -161,14 +280,18 @@ async function run() {
   $("#state").textContent = "Running…";
   try {
     const { scene, simulation } = await sceneOf($("#source").value);
-    const tune = $("#tune").checked;
-    $("#state").textContent = tune ? "Tuning each type, then running… (about a minute)" : "Running…";
-    const answer = await postJson("/comparisons", { scene, isolator_types: types, simulation, tune });
+    const catalogue = await catalogueChoice();
+    const tune = !catalogue && $("#tune").checked;
+    $("#state").textContent = tune ? "Tuning each type, then running… (about a minute)" : catalogue ? "Running each product that carries the loads…" : "Running…";
+    const request = catalogue ? { scene, isolator_types: types, simulation, catalogue, per_corner: perCorner() } : { scene, isolator_types: types, simulation, tune };
+    const answer = await postJson("/comparisons", request);
     renderComparisonAnswer($("#answer"), answer);
+    renderProducts(answer);
     renderBars(answer);
     renderTable(answer);
     $("#state").textContent = "";
-    drawFloor(scene, types, simulation).catch((err) => showError("#floor", err));
+    if (catalogue) $("#floor-card").hidden = true; // the floor view draws the generic types
+    else drawFloor(scene, types, simulation).catch((err) => showError("#floor", err));
   } catch (err) {
     showError("#state", err);
   } finally {
@@ -178,4 +301,5 @@ async function run() {
 
 header("compare");
 $("#run").addEventListener("click", run);
+$("#catalogue").addEventListener("change", showCatalogueControls);
 loadSources().catch((err) => showError("#state", err));

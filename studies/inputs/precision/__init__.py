@@ -1,18 +1,16 @@
-"""What a precision process sees of the machine's motion: stages on a servo (their following error) and
-relative points (tool to work); :func:`precision_inputs` turns both into a batch's arrays."""
+"""What a precision process sees of the machine's motion: stages on a servo (their following error),
+relative points (tool to work) and the base's elastic deflection between them (``machine.flexible``:
+``base_flexibility``); :func:`precision_inputs` turns the first two into a batch's arrays,
+:func:`flexible_base` the last."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from isolab.engine.scene import SceneBatch
+from isolab.studies.inputs.precision.base_flexibility import CaseValues, flexible_base
 from isolab.studies.inputs.precision.relative_points import point_signature, relative_points
 from isolab.studies.inputs.precision.servo import servo_kind, servo_stages
 
-if TYPE_CHECKING:
-    from isolab.studies.inputs.base_flexibility import CaseValues
-
-__all__ = ["point_signature", "precision_inputs", "servo_kind"]
+__all__ = ["flexible_base", "point_signature", "precision_inputs", "servo_kind"]
 
 
 def precision_inputs(batch: SceneBatch, cases: CaseValues) -> SceneBatch:

@@ -20,7 +20,7 @@ from isolab.studies.inputs.schema.scene import Scene
 from isolab.studies.inputs.schema.scene_paths import stage_servo
 
 if TYPE_CHECKING:
-    from isolab.studies.inputs.base_flexibility import CaseValues
+    from isolab.studies.inputs.precision.base_flexibility import CaseValues
 
 DEFAULT_DAMPING_RATIO = 0.7
 """The following error's damping ratio when a bandwidth is given without one."""

@@ -10,6 +10,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from isolab.studies.inputs.catalogues import (
+    AXIS_DAMPING,
     MAX_PER_CORNER,
     Catalogue,
     ProductId,
@@ -192,6 +193,12 @@ class Orifice(InputModel):
     area: Annotated[Area, Field(gt=0)] = Field(description="bore cross-section, m^2")
     length: Annotated[Length, Field(gt=0)] = Field(description="bore length, m")
     viscosity: Annotated[Viscosity, Field(gt=0)] = Field(1.81e-5, description="the gas's viscosity, Pa s")
+    model: Literal["equivalent", "zener"] = Field(
+        "equivalent",
+        description="equivalent: a spring and viscous damper matching the orifice at the mount's own "
+        "vertical frequency; zener: the standard linear solid with its own state (damping that depends "
+        "on frequency; the lti and ltv levels)",
+    )
 
 
 class AirSpring(InputModel):
@@ -216,6 +223,47 @@ class AirSpring(InputModel):
     def _orifice_needs_reservoir(self) -> AirSpring:
         if self.orifice is not None and not self.reservoir_volume > 0:
             raise ValueError("air.orifice: an orifice needs a reservoir_volume above 0")
+        return self
+
+
+class LadderBranch(InputModel):
+    """One Maxwell branch of an elastomer: a spring in series with a dashpot."""
+
+    stiffness_ratio: Annotated[Dimensionless, Field(gt=0)] = Field(
+        description="the branch's spring over the mount's static stiffness on each axis, 1"
+    )
+    relaxation_time: Annotated[Time, Field(gt=0)] = Field(description="dashpot over spring, s")
+
+
+class Elastomer(InputModel):
+    """An elastomer mount's frequency-dependent stiffness and loss as a Maxwell ladder with a state per
+    branch and axis (the lti and ltv levels): fitted to a ``loss_factor`` nearly constant over
+    ``[f_low, f_high]`` and a dynamic ``stiffening`` (stiffness at ``f_high`` over that at ``f_low``), or
+    given as a ``ladder``. The mount's stiffness from its preset (or ``k``) is the static spring on each of
+    its own axes; the ladder replaces its viscous damping (explicit ``c`` stays, in parallel)."""
+
+    loss_factor: Annotated[Dimensionless, Field(gt=0, le=1)] | None = Field(
+        None, description="loss factor to hold over the band, 1"
+    )
+    stiffening: Annotated[Dimensionless, Field(ge=1, le=10)] | None = Field(
+        None, description="dynamic stiffness at f_high over that at f_low, 1"
+    )
+    f_low: Annotated[Frequency, Field(gt=0)] = Field(2.0, description="the band's low end, Hz")
+    f_high: Annotated[Frequency, Field(gt=0)] = Field(20.0, description="the band's high end, Hz")
+    branches: Annotated[int, Field(ge=1, le=6)] = Field(3, description="Maxwell branches of the fit")
+    ladder: list[LadderBranch] | None = Field(
+        None, min_length=1, max_length=6, description="the branches themselves instead of a fit"
+    )
+
+    @model_validator(mode="after")
+    def _fit_or_ladder(self) -> Elastomer:
+        fit = self.loss_factor is not None or self.stiffening is not None
+        if (self.ladder is None) == (self.loss_factor is None or self.stiffening is None) or (
+            self.ladder is not None and fit
+        ):
+            raise ValueError("elastomer: give loss_factor and stiffening (a fitted ladder), or ladder")
+        if not self.f_low < self.f_high:
+            raise ValueError(f"elastomer.f_high: must be above f_low ({self.f_low:g} Hz): {self.f_high:g}")
         return self
 
 
@@ -249,6 +297,8 @@ class Mount(InputModel):
     f_vertical: MountFrequency | None = None
     f_horizontal: MountFrequency | None = None
     zeta: DampingRatio | None = None
+    zeta_vertical: DampingRatio | None = Field(None, description="damping ratio along the own z (not zeta)")
+    zeta_horizontal: DampingRatio | None = Field(None, description="damping ratio along the own x, y")
     skyhook: bool | None = None
     feedforward: FeedforwardSpec | None = None
     k: tuple[NonNegativeStiffness, NonNegativeStiffness, NonNegativeStiffness] | None = Field(
@@ -259,6 +309,7 @@ class Mount(InputModel):
     )
     orientation: Orientation | None = Field(None, description="the mount's own axes (default: the floor's)")
     air: AirSpring | None = Field(None, description="an air spring from its physics (vertical, own z axis)")
+    elastomer: Elastomer | None = Field(None, description="an elastomer's Maxwell ladder on its own axes")
     levelling: Levelling | None = Field(None, description="an air mount's levelling valve (default: none)")
 
 
@@ -277,7 +328,9 @@ class Isolators(InputModel):
 
     Stiffness and damping of a mount along each floor axis come, in order of precedence, from the mount's
     explicit ``k``/``c``, the group's ``k``/``c`` for that axis, or the preset frequency (X, Y from
-    ``f_horizontal``, Z from ``f_vertical``) and ``zeta`` applied to the static load the mount carries.
+    ``f_horizontal``, Z from ``f_vertical``) and ``zeta`` applied to the static load the mount carries;
+    ``zeta_vertical`` and ``zeta_horizontal`` (a product's damping per direction) take the place of ``zeta``
+    along the mount's own z and x, y, below a listed mount's own ``zeta`` or preset.
     ``tuning`` replaces a type's preset figures by those of the model this machine would use, whenever
     that type is chosen: a study that varies ``preset`` then compares those models, where the group's
     overrides would apply to every type alike. ``feedforward`` (active mounts: the stages' inertial wrench
@@ -304,12 +357,19 @@ class Isolators(InputModel):
     f_vertical: MountFrequency | None = None
     f_horizontal: MountFrequency | None = None
     zeta: DampingRatio | None = None
+    zeta_vertical: DampingRatio | None = Field(
+        None, description="damping ratio along every mount's own z, in place of zeta there"
+    )
+    zeta_horizontal: DampingRatio | None = Field(
+        None, description="damping ratio along every mount's own x and y, in place of zeta there"
+    )
     skyhook: bool | None = None
     feedforward: FeedforwardSpec | None = None
     k: AxisStiffness | None = None
     c: AxisDamping | None = None
     orientation: Orientation | None = Field(None, description="every mount's own axes (default: the floor's)")
     air: AirSpring | None = Field(None, description="every mount an air spring from its physics")
+    elastomer: Elastomer | None = Field(None, description="every mount an elastomer's Maxwell ladder")
     levelling: Levelling | None = Field(
         None, description="every mount's levelling valve (a mount's own wins; without a valve name: one each)"
     )
@@ -348,6 +408,8 @@ class Isolators(InputModel):
             except UnknownProductError as err:
                 raise ValueError(str(err)) from None
             figures = product_figures(product)
+            if block.zeta is not None:  # the block's own damping ratio wins on every axis
+                figures = {k: v for k, v in figures.items() if k not in AXIS_DAMPING}
             if "preset" in block.model_fields_set and block.preset != product.type:
                 raise ValueError(
                     f"{where}.preset: product {product.id!r} is {product.type}; leave preset out or give "

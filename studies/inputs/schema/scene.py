@@ -176,8 +176,8 @@ class Scene(InputModel):
         if sim.request is not None:
             key = "accuracy" if sim.accuracy is not None else "tolerance"
             raise ValueError(
-                f"simulation.{key}: the accuracy chooser measures errors against the nonlinear level, which "
-                f"does not model levelling valves ({where}); choose the fidelity "
+                f"simulation.{key}: the accuracy chooser does not choose a model for levelling valves "
+                f"({where}) yet (a dead band is stepped by rk4 alone); choose the fidelity "
                 f"({' or '.join(LEVELLING_LEVELS)}) and the integrator ({' or '.join(LEVELLING_INTEGRATORS)})"
             )
         if sim.fidelity not in (None, *LEVELLING_LEVELS):
@@ -194,6 +194,11 @@ class Scene(InputModel):
             raise ValueError(
                 f"floor: levelling valves ({where}) are not modelled together with a floor motion in time "
                 "(sine or recorded) yet; give the floor as a spectrum, or leave the valves out"
+            )
+        if self.machine.flexible is not None:
+            raise ValueError(
+                f"machine.flexible: levelling valves ({where}) are not modelled together with a flexible "
+                "base yet (the valve would sense and push the base's modes at its mounts); leave one out"
             )
         banded = [w for w, b in given if b.dead_band > 0]
         if banded and sim.integrator is not None and sim.integrator not in DEAD_BAND_INTEGRATORS:

@@ -28,6 +28,9 @@ FLEXIBLE_POISSON_RATIO = f"{MACHINE_FLEXIBLE}.poisson_ratio"
 
 ISOLATORS = "isolators"
 ISOLATOR_PRESET = f"{ISOLATORS}.preset"
+ISOLATOR_MODEL = f"{ISOLATORS}.model"
+"""A product of the scene's catalogue for every mount: a choice a comparison of products varies (its
+levels are the catalogue's ids; the product decides the type and figures)."""
 MOUNT_FIGURES = ("f_vertical", "f_horizontal", "zeta")
 """The preset figures the isolator group and each listed mount may override (``isolators.zeta``,
 ``isolators.list.2.zeta``)."""

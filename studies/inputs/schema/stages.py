@@ -8,6 +8,8 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import Discriminator, Field, Tag, field_validator, model_validator
 
+from isolab.engine.modal import MOTION_NAMES
+from isolab.engine.results import N_MODES
 from isolab.studies.inputs.schema.fields import (
     MAX_SEGMENTS,
     InputModel,
@@ -22,22 +24,78 @@ from isolab.studies.inputs.schema.fields import (
 )
 from isolab.studies.units import Damping, Dimensionless, Frequency, Length, Stiffness
 
+SHAPER_MODES: dict[str, str] = {
+    **{motion: dof for dof, motion in MOTION_NAMES.items()},
+    **{dof: dof for dof in MOTION_NAMES},
+}
+"""The names a shaper's ``mode`` may take -> the degree of freedom the mode moves most: the motions
+(surge, sway, heave, pitch, roll, yaw) and the degrees of freedom (x, y, z, rx, ry, rz)."""
+
 
 class ShaperSpec(InputModel):
     """An input shaper on the profile (docs/physics.md, "Input shaping"): the profile's acceleration
-    convolved with the shaper's impulses, tuned to a mode of ``frequency`` and ``damping``. The move gets
+    convolved with the shaper's impulses, tuned to a mode of ``frequency`` and ``damping``, or to one of
+    the scene's own rigid-body modes (``mode``: its frequency and damping ratio in each case). The move gets
     longer by the shaper's duration: half the mode's damped period (ZV) or a whole one (ZVD, EI)."""
 
     type: Literal["zv", "zvd", "ei"] = Field(
         description="zv (zero vibration), zvd (zero vibration and derivative: less sensitive to a frequency "
         "error) or ei (extra insensitive, 5 % vibration tolerated at the frequency)"
     )
-    frequency: Annotated[Frequency, within(0.1, 1000.0, "frequency", "a mode of a machine on isolators")] = (
-        Field(description="the mode's natural frequency, Hz")
+    frequency: (
+        Annotated[Frequency, within(0.1, 1000.0, "frequency", "a mode of a machine on isolators")] | None
+    ) = Field(None, description="the mode's natural frequency, Hz (or name the mode)")
+    damping: Annotated[Dimensionless, within(0.0, 0.9, "dimensionless", "an underdamped mode")] | None = (
+        Field(
+            None,
+            description="the mode's damping ratio, 1 (with frequency, 0 if not given; a named mode "
+            "brings its own)",
+        )
     )
-    damping: Annotated[Dimensionless, within(0.0, 0.9, "dimensionless", "an underdamped mode")] = Field(
-        0.0, description="the mode's damping ratio, 1"
+    mode: int | str | None = Field(
+        None,
+        description=f"tune to one of the scene's own rigid-body modes instead, its frequency and damping "
+        f"ratio those of each case: its number (1 to {N_MODES}, ascending frequency) or the motion it moves "
+        "most (surge, sway, heave, pitch, roll, yaw; or x, y, z, rx, ry, rz)",
     )
+
+    @field_validator("mode", mode="before")
+    @classmethod
+    def _known_mode(cls, value: Any) -> int | str | None:
+        if value is None:
+            return None
+        if isinstance(value, str) and value.strip().isdigit():
+            value = int(value.strip())
+        if isinstance(value, bool) or not isinstance(value, int | str):
+            raise ValueError(f"must be a mode number or name, got {value!r}")
+        if isinstance(value, int) and not 1 <= value <= N_MODES:
+            raise ValueError(
+                f"mode number {value!r} is out of range: the rigid base has modes 1 to {N_MODES}"
+            )
+        if isinstance(value, str):
+            name = value.strip().lower()
+            if name not in SHAPER_MODES:
+                raise ValueError(
+                    f"unknown mode {value!r}: name a mode by its number (1 to {N_MODES}, ascending "
+                    f"frequency) or by the motion it moves most ({', '.join(SHAPER_MODES)})"
+                )
+            return name
+        return value
+
+    @model_validator(mode="after")
+    def _one_tuning(self) -> ShaperSpec:
+        if self.mode is not None and self.frequency is not None:
+            raise ValueError(
+                "shaper.frequency: give frequency or mode, not both (a mode brings its frequency)"
+            )
+        if self.mode is None and self.frequency is None:
+            raise ValueError("shaper.frequency: give the frequency to tune to, or the mode (mode: heave)")
+        if self.mode is not None and self.damping is not None:
+            raise ValueError(
+                "shaper.damping: a shaper tuned to a mode takes the mode's damping ratio; give damping "
+                "with frequency only"
+            )
+        return self
 
 
 class TrapezoidProfile(InputModel):

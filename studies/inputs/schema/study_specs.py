@@ -71,15 +71,25 @@ class RobustSpec(InputModel):
 class DesignSpec(InputModel):
     """How cases are drawn: full factorial ``grid``, ``lhs``, ``sobol``, ``random``, ``saltelli`` (Sobol'
     indices: ``samples`` is the base sample N and the study runs N (D + 2) cases, N (2D + 2) with
-    ``second_order``), explicit ``list``, or ``optimize`` (a pymoo optimiser picks the cases generation
-    by generation within ``budget``: :mod:`studies.run.optimisation`), or ``monte_carlo`` (``samples``
-    cases drawn from the study's ``tolerances``: :mod:`studies.questions.tolerances`)."""
+    ``second_order``, times ``replicates``), explicit ``list``, or ``optimize`` (a pymoo optimiser picks
+    the cases generation by generation within ``budget``: :mod:`studies.run.optimisation`), or
+    ``monte_carlo`` (``samples`` cases drawn from the study's ``tolerances``:
+    :mod:`studies.questions.tolerances`)."""
 
     type: Literal["grid", "lhs", "sobol", "random", "saltelli", "list", "optimize", "monte_carlo"] = "grid"
     samples: int | None = Field(None, ge=1, le=10_000_000)
     seed: int = Field(0, ge=0)
     second_order: bool | None = Field(
         None, description="saltelli only: also run the cases pairwise (second-order) indices need; default no"
+    )
+    replicates: int | None = Field(
+        None,
+        ge=1,
+        le=1000,
+        description="saltelli only: independent replicates of the design, each of `samples` base samples on "
+        "its own scrambled Sobol' sequence (the study runs replicates x samples x (D + 2) cases); the "
+        "indices' 95 % intervals come from their spread (a t interval): 8 is a good choice; default 1 (one "
+        "design, bootstrap intervals)",
     )
     cases: list[dict[str, Value]] | None = Field(None, max_length=MAX_LIST_ENTRIES)
     sampling: Literal["sobol", "random"] | None = Field(
@@ -135,6 +145,8 @@ class DesignSpec(InputModel):
                 f"design.samples: a saltelli design needs at least {MIN_SALTELLI_SAMPLES} base samples "
                 f"(its indices compare the samples with one another), got {self.samples}"
             )
+        if self.replicates is not None and self.type != "saltelli":
+            raise ValueError(f"design.replicates: only a saltelli design takes it (type: {self.type})")
         if self.type == "optimize":
             given = [k for k in ("samples", "second_order", "cases") if getattr(self, k) is not None]
             if given:

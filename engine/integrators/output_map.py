@@ -21,14 +21,9 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
+from isolab.engine.kernels.between_steps import ONE_THIRD, cubic_extremes, hermite
 from isolab.engine.kernels.params import Params
-from isolab.engine.kernels.peaks import (
-    DIVERGED_DISPLACEMENT,
-    DIVERGED_ROTATION,
-    ONE_THIRD,
-    cubic_extremes,
-    hermite,
-)
+from isolab.engine.kernels.peaks import DIVERGED_DISPLACEMENT, DIVERGED_ROTATION
 
 Map = namedtuple("Map", ["G", "KF", "target", "rest_target", "GZ"])
 """``G`` (C, 6, m): positions (m, rad) to outputs (m); ``KF`` (C, 2, 3 n) each mount's stiffness (N/m) and
