@@ -42,10 +42,9 @@ def step(P, c, level, t, h, x, S, idx, W):
     At the time-varying levels the terms that depend on time only are evaluated at ``t``, ``t + h/2`` and
     ``t + h`` (``engine.kernels.cached_terms.time_terms``; those at ``t`` are usually still there from the
     previous step's end), and the slopes read them through arrays bound once per step. The time-varying
-    levels only: :func:`step_lti` steps the LTI level (the driver calls the one of its level, so numba
-    compiles only that one)."""
-    if level == NONLINEAR and not (P.ffon or P.ft.shape[0] > 0):
-        return step_nonlinear(P, c, t, h, x, S, idx, W)
+    levels only: :func:`step_lti` steps the LTI level and :func:`step_nonlinear` the nonlinear level's
+    cases without feedforward actuators or a recorded floor (the driver calls the one of its level, so
+    numba compiles only that one)."""
     nx = x.shape[0]
     xs = S[0]
     # The workspace's arrays bound once, and only functions that call no other (whose own references
@@ -85,7 +84,7 @@ def step(P, c, level, t, h, x, S, idx, W):
     return True
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def step_nonlinear(P, c, t, h, x, S, idx, W):
     """:func:`step` at the nonlinear level for a case without recorded floor motion or feedforward
     actuators: the same arithmetic with no array reference counted inside the step.

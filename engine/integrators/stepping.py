@@ -3,9 +3,9 @@
 Like scipy's ``OdeSolver.step`` over each method's ``_step_impl``, the driver owns everything that is the
 same for every method: the loop over cases and output steps, splitting a step where a stage enters a new
 piece of its motion profile, observing the outputs after each step, and the status of each case. A method
-supplies only its step (``euler.step``, ``rk4.step`` and ``rk4.step_lti``, ``exact.step``) and, for
-``exact``, where its sub-steps end and the maps it prepared. The method is named by a code (:data:`EULER`,
-:data:`RK4`, :data:`EXACT`).
+supplies only its step (``euler.step``, ``rk4.step`` with ``rk4.step_lti`` and ``rk4.step_nonlinear``,
+``exact.step``) and, for ``exact``, where its sub-steps end and the maps it prepared. The method is named
+by a code (:data:`EULER`, :data:`RK4`, :data:`EXACT`).
 
 Each (method, level) pair has a driver of its own (:func:`pair_driver`, in :data:`ENTRIES`): the method's
 and the level's codes are constants of the driver's closure, so numba drops the branches of the other
@@ -29,7 +29,7 @@ from numba import njit
 from isolab.engine.integrators import euler, exact, output_map, rk4
 from isolab.engine.kernels.excitation import advance_pieces, next_breakpoint
 from isolab.engine.kernels.params import FIDELITIES, LTI, NONLINEAR, Params, Work
-from isolab.engine.kernels.peaks import Peaks, observe
+from isolab.engine.kernels.peaks import Peaks, observe, observe_nonlinear
 from isolab.engine.kernels.structs import kernel_struct
 from isolab.engine.results import FAILED, OK, UNSTABLE
 
@@ -56,6 +56,8 @@ def pair_driver(method: int, level: int) -> Any:
         and that is not recorded.
         """
         C = dt.shape[0]
+        # the nonlinear level's lean RK4 step: no feedforward actuators, no recorded floor
+        lean = not (P.ffon or P.ft.shape[0] > 0)
         nx = 13 if level == NONLINEAR else 12 + P.zA.shape[1]  # the base, then the extra linear states
         nA = 2 * P.sm.shape[1] if method == EXACT and nx > 13 else 0  # exact: the stages' accelerations
         z = np.zeros(nx + 6 * (deg + 1) + nA)  # the state, then exact's forcing carried between steps
@@ -91,6 +93,8 @@ def pair_driver(method: int, level: int) -> Any:
             piece_end = -np.inf  # the earliest start of a stage's next piece, s
             if linear:
                 output_map.observe(c, 0.0, x, 0, G, KF, F0, tgt, rtgt, rest, ptol, Smap, Vmap, Qmap, GZ)
+            elif level == NONLINEAR:
+                observe_nonlinear(P, c, 0.0, x, W, O, first)
             else:
                 observe(P, c, level, 0.0, x, W, O, first)
             ET = full[c if method == EXACT else 0]
@@ -133,6 +137,8 @@ def pair_driver(method: int, level: int) -> Any:
                         tb = piece_end if piece_end < t1 - tol else t1
                         if method == RK4 and level == LTI:
                             ok = rk4.step_lti(P, c, ta, tb - ta, x, S, idx, W)
+                        elif method == RK4 and level == NONLINEAR and lean:
+                            ok = rk4.step_nonlinear(P, c, ta, tb - ta, x, S, idx, W)
                         elif method == RK4:
                             ok = rk4.step(P, c, level, ta, tb - ta, x, S, idx, W)
                         else:
@@ -148,6 +154,8 @@ def pair_driver(method: int, level: int) -> Any:
                     seen = output_map.observe(
                         c, t1, x, k + 1, G, KF, F0, tgt, rtgt, rest, ptol, Smap, Vmap, Qmap, GZ
                     )
+                elif level == NONLINEAR:
+                    seen = observe_nonlinear(P, c, t1, x, W, O, k + 1)
                 else:
                     seen = observe(P, c, level, t1, x, W, O, k + 1)
                 if not seen:

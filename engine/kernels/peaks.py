@@ -210,8 +210,6 @@ def observe(P, c, level, t, x, W, O, step):
     Returns False (and stores ``t`` in ``O.diverged``) when the state is not finite or has left any
     physically possible range.
     """
-    if level == NONLINEAR:
-        return observe_nonlinear(P, c, t, x, W, O, step)
     W.acc[0], W.acc[1], W.acc[2] = x[3], x[4], x[5]
     u0, u1, u2 = x[0], x[1], x[2]
     ok = True
@@ -417,7 +415,7 @@ def observe(P, c, level, t, x, W, O, step):
     return True
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def observe_nonlinear(P, c, t, x, W, O, step):
     """:func:`observe` at the nonlinear level, the same arithmetic on arrays bound once as views whose
     references numba does not count (``engine.kernels.params.borrowed``)."""
