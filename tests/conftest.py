@@ -12,6 +12,7 @@ for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_name, "1")
 
 import anyio  # noqa: E402
+import pytest  # noqa: E402
 
 # The suite starts dozens of short-lived services: warming each one's workers would cost every start a few
 # seconds of CPU (and, on an empty kernel cache, compile pairs no test of that service runs). The tests of
@@ -25,3 +26,57 @@ os.environ["ISOLAB_KERNEL_WARMUP"] = "off"
 for _name in dir(anyio):
     if not _name.startswith("_"):
         getattr(anyio, _name)
+
+
+# On an empty kernel cache (a fresh clone, or any engine edit), each test process, and each service's Dask
+# workers that a test starts, compiled the kernels of every pair it met first: the two test processes
+# started on the same pairs at once and compiled them twice, and services started meanwhile a third and
+# fourth time. The controller of a parallel run compiles each pair once before the test processes start,
+# one pair per child process, as many at a time as there are test processes (`ISOLAB_TEST_PREWARM=off`
+# skips it).
+PREWARM_ORDER = (
+    ("nonlinear", "rk4"),
+    ("lti", "exact"),
+    ("ltv", "rk4"),
+    ("lti", "rk4"),
+    ("ltv", "euler"),
+    ("lti", "euler"),
+    ("nonlinear", "euler"),
+    ("nonlinear", "reference"),
+)
+"""Every (fidelity, integrator) pair the suite runs, the longest to compile first (so two processes finish
+together): nonlinear/rk4 about 35 s of CPU, lti/exact 31, the reference 3."""
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Compile the engine's kernels once, in parallel, before the test processes of a parallel run start."""
+    import subprocess
+    import sys
+    import time
+    from concurrent.futures import ThreadPoolExecutor
+
+    if hasattr(config, "workerinput") or os.environ.get("ISOLAB_TEST_PREWARM") == "off":
+        return  # a test process, or turned off
+    processes = getattr(config.option, "numprocesses", None)
+    if not isinstance(processes, int) or processes < 2:
+        return
+    from isolab.studies.run.kernel_cache import kernels_cached
+
+    pairs = [pair for pair in PREWARM_ORDER if not kernels_cached([pair[1]], fidelity=pair[0])]
+    if not pairs:
+        return
+    script = "import sys\nfrom isolab.studies.run import kernel_cache as k\nk.warm_kernels([sys.argv[1:]])"
+    started = time.perf_counter()
+    print(f"\nisolab: compiling the kernels of {len(pairs)} pairs, {processes} at a time ...", flush=True)
+
+    def compile_pair(pair: tuple[str, str]) -> int:
+        return subprocess.run([sys.executable, "-c", script, *pair], check=False).returncode
+
+    with ThreadPoolExecutor(max_workers=processes) as pool:
+        codes = list(pool.map(compile_pair, pairs))
+    failed = [f"{f}/{i}" for (f, i), code in zip(pairs, codes, strict=True) if code]
+    print(
+        f"isolab: kernels compiled in {time.perf_counter() - started:.0f} s"
+        + (f" (failed, left to the tests: {', '.join(failed)})" if failed else ""),
+        flush=True,
+    )
