@@ -348,3 +348,28 @@ def test_a_sequence_is_edited_move_by_move_and_a_mount_is_dragged_on_the_plan(pa
     accepted(page)
     assert page.query_selector(field(["isolators", "layout", "span_x"])) is not None
     assert not page.errors, page.errors
+
+
+def test_an_answer_to_an_older_check_never_marks_newer_typing_accepted(page, base_url: str) -> None:
+    """A check's answer that lands after the engineer typed again is for the scene as it was: the page keeps
+    saying it is checking, and shows the newer scene's mass once its own answer lands."""
+    page.goto(f"{base_url}/ui/scene?example=article-scriber")
+    wait_until(page, "document.querySelector('#base-mass') !== null", timeout_s=WAIT_S)
+    accepted(page)
+    assert page.inner_text("#base-mass") == "10.02 t"
+    held = []  # the checks asked from here on, answered when the test says
+    page.route("**/scenes/check", lambda route: held.append(route))
+    type_in(page, ["machine", "block", "density"], "1350 kg/m^3")  # half the granite's
+    page.wait_for_timeout(800)  # past the check's delay: the half-density check is asked and held
+    assert len(held) == 1
+    type_in(page, ["machine", "block", "density"], "2025 kg/m^3")  # typed while that answer is on its way
+    held.pop().continue_()  # the older answer lands now
+    page.wait_for_timeout(100)
+    assert page.inner_text("#check-status") == "Checking…"
+    assert page.is_disabled("#run")
+    assert page.inner_text("#base-mass") == "10.02 t"  # not the held answer's 5.01 t
+    page.unroute("**/scenes/check")  # the newer check goes through
+    for route in held:
+        route.continue_()
+    accepted(page)
+    assert page.inner_text("#base-mass") == "7.518 t"  # 2.6 x 4.2 x 0.34 m at 2025 kg/m^3

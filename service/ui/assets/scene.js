@@ -314,6 +314,7 @@ function renderForms() {
 // ------------------------------------------------------------------------------------- checking
 function scheduleCheck() {
   clearTimeout(checkTimer);
+  checkSeq++; // an answer still on its way is for the scene as it was: dropped when it lands
   $("#run").disabled = true;
   $("#check-status").className = "muted";
   $("#check-status").textContent = "Checking…";
