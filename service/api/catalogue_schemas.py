@@ -3,13 +3,12 @@ product and the catalogue block of the answer (SI; costs in the catalogue's curr
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, StrictFloat, StrictInt
+from pydantic import BaseModel, ConfigDict, Field
 
 from isolab.service.api.schemas import EXAMPLE_COMPARISON, Comparison, ComparisonRequest, Recommendation
-from isolab.studies.answers.sizing import DEFAULT_LOAD_MARGIN, MAX_PER_CORNER
-from isolab.studies.inputs.catalogues import CatalogueFormat
+from isolab.studies.inputs.catalogues import DEFAULT_LOAD_MARGIN, CatalogueFormat, LoadMargin, PerCornerCounts
 
 MAX_CATALOGUE_TEXT = 2_000_000
 """Most characters of a catalogue file read by ``POST /catalogues/read``."""
@@ -42,17 +41,13 @@ class CatalogueComparisonRequest(ComparisonRequest):
         "catalogue file: name, currency, products) or a shipped one by name (representative); "
         "isolator_types then picks the products' types",
     )
-    margin: StrictFloat = Field(
+    margin: LoadMargin = Field(
         DEFAULT_LOAD_MARGIN,
-        ge=0.0,
-        le=0.9,
         description="with a catalogue: each isolator's static load may change by this fraction either way "
         "and stay in its rated range, 1",
     )
-    per_corner: list[Annotated[StrictInt, Field(ge=1, le=MAX_PER_CORNER)]] | None = Field(
+    per_corner: PerCornerCounts | None = Field(
         None,
-        min_length=1,
-        max_length=MAX_PER_CORNER,
         description="with a catalogue: how many isolators side by side a mount position may take (default: "
         "the scene's isolators.per_corner, else [1])",
     )

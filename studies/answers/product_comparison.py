@@ -30,13 +30,12 @@ from isolab.studies.answers.comparisons import (
     run_comparison,
 )
 from isolab.studies.answers.sizing import (
-    DEFAULT_LOAD_MARGIN,
     Candidate,
     product_candidates,
     requested_catalogue,
     scene_loads,
 )
-from isolab.studies.inputs.catalogues import Catalogue
+from isolab.studies.inputs.catalogues import DEFAULT_LOAD_MARGIN, Catalogue
 from isolab.studies.inputs.definitions import DefinitionError, detail
 from isolab.studies.inputs.isolators import mount_labels
 from isolab.studies.inputs.schema.scene_paths import ISOLATOR_MODEL

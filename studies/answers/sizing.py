@@ -18,15 +18,18 @@ from __future__ import annotations
 import copy
 import math
 from dataclasses import dataclass, field
-from typing import Annotated, Any
+from typing import Any
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from isolab.engine import simulate
 from isolab.studies.inputs.catalogues import (
+    DEFAULT_LOAD_MARGIN,
     MAX_PER_CORNER,
     Catalogue,
+    LoadMargin,
+    PerCornerCounts,
     Product,
     load_catalogue,
     scene_catalogue,
@@ -40,7 +43,6 @@ from isolab.studies.questions.criteria import add_criteria
 from isolab.studies.results.dataset import to_dataset
 from isolab.studies.run.accuracy import resolved_study
 
-DEFAULT_LOAD_MARGIN = 0.10
 """The static load of each isolator may change by this fraction either way and stay in its rated range."""
 MAX_SIZING_CASES = 64
 """Most candidate designs one sizing simulates (``max_cases``)."""
@@ -63,17 +65,13 @@ class SizingRequest(BaseModel):
         description="the catalogue inline (as in a catalogue file: name, currency, products), or a shipped "
         "one by name (default: representative)",
     )
-    margin: float = Field(
+    margin: LoadMargin = Field(
         DEFAULT_LOAD_MARGIN,
-        ge=0.0,
-        le=0.9,
         description="load margin: each isolator's static load may change by this fraction either way and "
         "stay in its rated range, 1",
     )
-    per_corner: list[Annotated[int, Field(ge=1, le=MAX_PER_CORNER)]] | None = Field(
+    per_corner: PerCornerCounts | None = Field(
         None,
-        min_length=1,
-        max_length=MAX_PER_CORNER,
         description="how many isolators side by side a mount position may take (default: the scene's "
         "isolators.per_corner, else [1])",
     )

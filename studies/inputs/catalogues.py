@@ -17,7 +17,16 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    StrictFloat,
+    StrictInt,
+    field_validator,
+    model_validator,
+)
 
 from isolab.studies.units import (
     STANDARD_GRAVITY,
@@ -40,6 +49,17 @@ MAX_PRODUCTS = 1000
 """Most products of one catalogue."""
 MAX_PER_CORNER = 8
 """Most isolators one mount position may take side by side."""
+DEFAULT_LOAD_MARGIN = 0.10
+"""The load margin a sizing keeps when none is asked for: each isolator's static load may change by 10 %
+either way and stay in its product's rated range."""
+PerCornerCounts = Annotated[
+    list[Annotated[StrictInt, Field(ge=1, le=MAX_PER_CORNER)]],
+    Field(min_length=1, max_length=MAX_PER_CORNER),
+]
+"""How many isolators side by side a mount position may take, each a choice (of 1 to MAX_PER_CORNER)."""
+LoadMargin = Annotated[StrictFloat, Field(ge=0.0, le=0.9)]
+"""A load margin, 1: the fraction by which each isolator's static load may change either way and stay in its
+product's rated range."""
 CATALOGUE_SUFFIXES = (".yaml", ".yml", ".json", ".csv")
 """Endings of a catalogue file name (a ``catalogue:`` naming no shipped catalogue but a file)."""
 CatalogueFormat = Literal["yaml", "json", "csv"]

@@ -41,10 +41,10 @@ from isolab.studies.answers.comparisons import compare as run_compare
 from isolab.studies.answers.floor_response import FloorSpectra, point_spectra, velocity_spectra
 from isolab.studies.answers.product_comparison import compare_products
 from isolab.studies.answers.single_case import MAX_CASE_SECONDS, run_single_case, single_case_study
-from isolab.studies.answers.sizing import DEFAULT_LOAD_MARGIN, SizingAnswer, SizingRequest
+from isolab.studies.answers.sizing import SizingAnswer, SizingRequest
 from isolab.studies.answers.sizing import size as run_size
 from isolab.studies.authoring.authoring import parse_text
-from isolab.studies.inputs.catalogues import Catalogue, read_catalogue_text
+from isolab.studies.inputs.catalogues import DEFAULT_LOAD_MARGIN, Catalogue, read_catalogue_text
 from isolab.studies.inputs.definitions import DefinitionError, validation_details
 
 router = APIRouter(tags=["comparisons"], route_class=JsonParsedOffLoop)

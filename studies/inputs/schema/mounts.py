@@ -11,8 +11,8 @@ from pydantic import Field, model_validator
 
 from isolab.studies.inputs.catalogues import (
     AXIS_DAMPING,
-    MAX_PER_CORNER,
     Catalogue,
+    PerCornerCounts,
     ProductId,
     UnknownProductError,
     product_figures,
@@ -347,11 +347,8 @@ class Isolators(InputModel):
         description="the catalogue model: names: a shipped one (representative, the default), a file (read "
         "when the scene file is loaded) or the catalogue inline",
     )
-    per_corner: list[Annotated[int, Field(ge=1, le=MAX_PER_CORNER)]] | None = Field(
-        None,
-        min_length=1,
-        max_length=MAX_PER_CORNER,
-        description="how many isolators side by side a mount position may take when sized (default [1])",
+    per_corner: PerCornerCounts | None = Field(
+        None, description="how many isolators side by side a mount position may take when sized (default [1])"
     )
     tuning: dict[PresetName, PresetTuning] = Field(default_factory=dict)
     f_vertical: MountFrequency | None = None
