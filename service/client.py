@@ -36,6 +36,8 @@ if TYPE_CHECKING:
 KEEPALIVE_S = 2.0
 """Seconds an idle connection is kept for reuse (uvicorn closes idle connections after 5 s)."""
 FINISHED = ("done", "failed", "cancelled")
+STATUS_WAIT_S = 30.0
+"""Longest the service holds a status request for its study to end (``GET /studies/{id}?wait=``), s."""
 
 
 class ClientError(RuntimeError):
@@ -159,9 +161,15 @@ class Client:
         body = dict(study) if isinstance(study, Mapping) else read_study_file(study)
         return self._request("POST", "/studies", json=body).json()
 
-    def status(self, study_id: str) -> dict[str, Any]:
-        """A study's status, progress ``{done, total, failed}``, times, error and definition."""
-        return self._request("GET", f"/studies/{study_id}").json()
+    def status(self, study_id: str, wait: float = 0.0) -> dict[str, Any]:
+        """A study's status, progress ``{done, total, failed}``, times, error and definition.
+
+        Args:
+            wait: seconds the service may hold the answer while the study is queued or running (at most
+                its bound, 30 s): it answers as soon as the study ends, else at ``wait`` with the
+                progress then."""
+        params = {"wait": f"{wait:g}"} if wait > 0 else None
+        return self._request("GET", f"/studies/{study_id}", params=params).json()
 
     def list(self, **filters: Any) -> builtins.list[dict[str, Any]]:
         """Studies in the catalog, newest first. Filters: name, status, isolator_type, created_after,
@@ -176,25 +184,32 @@ class Client:
         poll: float = 0.5,
         timeout: float | None = None,
     ) -> dict[str, Any]:
-        """Poll until the study is done, failed or cancelled; returns its final status.
+        """Wait until the study is done, failed or cancelled; returns its final status.
+
+        Each status request waits on the service for the study to end (``GET /studies/{id}?wait=``), so
+        the end is seen as soon as it comes, and the progress every ``poll`` seconds meanwhile.
 
         Args:
-            progress: called with each status polled (its ``progress`` is ``{done, total, failed}``),
+            progress: called with each status asked (its ``progress`` is ``{done, total, failed}``),
                 e.g. the progress bar of ``isolab submit --wait``,
                 :class:`isolab.service.cli.remote.StudyProgressBar`.
-            poll: seconds between polls.
+            poll: seconds between progress reports.
             timeout: give up after this many seconds (ClientError); None waits for ever.
         """
         deadline = None if timeout is None else time.monotonic() + timeout
+        read_timeout = self._http.timeout.read
+        step = min(max(float(poll), 0.0), STATUS_WAIT_S, read_timeout / 2 if read_timeout else STATUS_WAIT_S)
         while True:
-            info = self.status(study_id)
+            asked = time.monotonic()
+            hold = step if deadline is None else min(step, max(deadline - asked, 0.0))
+            info = self.status(study_id, wait=hold)
             if progress is not None:
                 progress(info)
             if info["status"] in FINISHED:
                 return info
             if deadline is not None and time.monotonic() > deadline:
                 raise ClientError(f"study {study_id} is still {info['status']} after {timeout} s")
-            time.sleep(poll)
+            time.sleep(max(step - (time.monotonic() - asked), 0.0))  # a service that answered at once
 
     def download(self, study_id: str, path: str | Path) -> Path:
         """Stream a done study's netCDF dataset to ``path`` (written atomically); returns the path."""

@@ -36,13 +36,25 @@ def _own_or_group(
     return getattr(iso, key), f"{ISOLATORS}.{key}"
 
 
+def any_mount_has(groups: Sequence[Isolators], n: int, key: str) -> bool:
+    """Whether a mount ``0 <= j < n`` of any case has a ``key`` block, its own or its group's (what
+    :func:`_own_or_group` finds): one look per distinct group (the cases of a batch mostly share one),
+    not per case and mount."""
+    distinct = {id(iso): iso for iso in groups}.values()
+    return n > 0 and any(
+        getattr(iso, key) is not None or any(getattr(m, key) is not None for m in iso.listed[:n])
+        for iso in distinct
+    )
+
+
 def axis_damping_ratios(groups: Sequence[Isolators], zeta: np.ndarray, varied: bool = False) -> np.ndarray:
     """(C, n, 3) damping ratio per mount and own axis, 1: ``zeta`` (C, n) on every axis, but where a
     listed mount, or the group below a listed mount's own ``zeta`` or preset, gives ``zeta_horizontal``
     (x, y) or ``zeta_vertical`` (z), that. ``varied``: a study varies ``isolators.zeta``, which then sets
     every axis of the group. ``groups``: each case's isolators (one per case)."""
     out = np.repeat(zeta[..., None], 3, axis=-1)
-    if all(getattr(b, key) is None for iso in groups for b in (iso, *iso.listed) for key in AXIS_DAMPING):
+    distinct = {id(iso): iso for iso in groups}.values()  # the cases of a batch mostly share one group
+    if all(getattr(b, key) is None for iso in distinct for b in (iso, *iso.listed) for key in AXIS_DAMPING):
         return out  # no ratio per direction: zeta on every axis
     for key, axes in (("zeta_horizontal", [0, 1]), ("zeta_vertical", [2])):
         for j in range(zeta.shape[1]):
@@ -84,8 +96,8 @@ def apply_mount_physics(
             ``max_pressure``.
     """
     C, n = load.shape
-    air = any(_own_or_group(iso, j, "air")[0] is not None for iso in groups for j in range(n))
-    turned = any(_own_or_group(iso, j, "orientation")[0] is not None for iso in groups for j in range(n))
+    air = any_mount_has(groups, n, "air")
+    turned = any_mount_has(groups, n, "orientation")
     if not air and not turned:
         return iso_k, iso_c, None
     iso_k, iso_c = iso_k.copy(), iso_c.copy()
@@ -190,6 +202,8 @@ def mount_states(
     """
     groups = cases.each(lambda s: s.isolators)
     C, n = load.shape
+    if not (any_mount_has(groups, n, "air") or any_mount_has(groups, n, "elastomer")):
+        return batch  # no mount with internal states
     rows: list[tuple[int, int, int, np.ndarray, np.ndarray]] = []  # (case, mount, axis, k_b, tau_b)
     iso_k = np.array(batch.iso_k, dtype=float)
     iso_c = np.array(batch.iso_c, dtype=float)

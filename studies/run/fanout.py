@@ -82,7 +82,8 @@ the study and build the batches (s), engine wall and CPU time (s), time to pack 
 the worker's process id."""
 RESERVED_PRIORITY = 2
 """Dask priority of a run's reserved chunk (see the module docstring): above the small studies' chunks
-(minus their number), accuracy pilots (0), and the error-estimate reruns and finish tasks (1)."""
+(minus their number), accuracy pilots (0), the finish tasks (1) and the error-estimate reruns (just below
+their run's chunks, see :func:`run_chunks`)."""
 LOW_LANE_PER_WORKER = 2
 """Chunks per worker a run keeps in flight at the low priority: one running, one queued to follow it."""
 _POLL_SECONDS = 0.05
@@ -335,6 +336,7 @@ def run_chunks(
     key_prefix: str = "isolab",
     task: Callable[..., dict[str, np.ndarray]] = run_chunk,
     store_target: tuple[str, str] | None = None,
+    on_dispatched: Callable[[int], None] | None = None,
 ) -> FanoutReport:
     """Run every chunk not in ``skip`` on ``client`` and hand back each chunk's arrays as it arrives.
 
@@ -355,6 +357,9 @@ def run_chunks(
         task: the worker function (default :func:`run_chunk`).
         store_target: ``(store root, study id)``: workers that see that store save their chunks there
             themselves, and hand back only the case statuses with ``saved`` set (see :func:`run_chunk`).
+        on_dispatched: called once every chunk is with Dask, with the Dask priority just below this run's
+            chunks: tasks submitted at it run once the run's chunks have all gone to the workers (its
+            tail), as a chunk of a run one chunk larger would.
 
     Raises:
         FanoutError: every submitted chunk failed.
@@ -419,8 +424,10 @@ def run_chunks(
         fut.add_done_callback(arrived.put)
         return fut
 
+    dispatched = False  # on_dispatched called
+
     def top_up() -> None:
-        nonlocal low_in_flight, reserved_future
+        nonlocal low_in_flight, reserved_future, dispatched
         while waiting and low_in_flight < LOW_LANE_PER_WORKER * n_workers:
             submit(reserved=False)
             low_in_flight += 1
@@ -428,6 +435,9 @@ def run_chunks(
             reserved_future = submit(reserved=True)
         if not waiting:
             lane.leave(run)
+            if on_dispatched is not None and not dispatched:  # once
+                dispatched = True
+                on_dispatched(-len(todo) - 1)
 
     try:
         top_up()

@@ -30,7 +30,6 @@ import logging
 import os
 import tempfile
 import threading
-import time
 import uuid
 from collections.abc import Callable
 from pathlib import Path
@@ -167,8 +166,13 @@ def run_study(
         )
         if skip:
             log.info("study %s: resuming, %d of %d chunks already done", study_id, len(skip), len(chunks))
-        # the error estimate's sampled cases run beside the chunks (a few engine calls each)
-        samples = _submit_samples(client, run, run_json, f"isolab-{study_id}")
+        # the error estimate's sampled cases run in the run's tail and beside the dataset's writing: sent
+        # once every chunk is out, just below them
+        sampled: list[tuple[list[int], list[Any], tuple[str, str]]] = []
+
+        def submit_samples(priority: int) -> None:
+            sampled.append(_submit_samples(client, run, run_json, f"isolab-{study_id}", priority))
+
         report = run_chunks(
             client,
             run_json,
@@ -179,13 +183,10 @@ def run_study(
             cancel=cancel,
             key_prefix=f"isolab-{study_id}",
             store_target=(str(store.root), study_id),
+            on_dispatched=submit_samples,
         )
         if report.cancelled:
-            client.cancel(samples[1])
-            store.update(study_id, status="cancelled", finished=utc_now())
-            return study_id
-        estimate = _error_estimate(client, run, samples, cancel)
-        if estimate is None:
+            client.cancel([f for s in sampled for f in s[1]])
             store.update(study_id, status="cancelled", finished=utc_now())
             return study_id
 
@@ -198,27 +199,35 @@ def run_study(
             **choice.attrs(),
             "auto_step": bool(sim.auto_step),
         }
-        # the dataset is assembled and written on a worker that sees the store (the results, the error
-        # estimate's bookkeeping and the netCDF compression stay out of this process, which serves
-        # requests: the load benchmark's p99 went from 70-146 ms to 46-67 ms), else here
+        # the dataset is assembled and written on a worker that sees the store (the results and the netCDF
+        # compression stay out of this process, which serves requests: the load benchmark's p99 went from
+        # 70-146 ms to 46-67 ms), else here; the error estimate's sampled cases that are left run on the
+        # other workers meanwhile, and its figures are added to the written file when both are done
         future = client.submit(
             finish_study,
             str(store.root),
             study_id,
             run_json,
             json.dumps(attrs),
-            estimate,
+            None,
             pure=False,
             retries=TASK_RETRIES,
             priority=1,
             key=f"isolab-{study_id}-finish-{uuid.uuid4().hex[:8]}",
         )
-        n_failed = _wait(client, future, cancel)
-        if cancel is not None and cancel.is_set():
+        if not sampled:  # every chunk was done already (a resumed run)
+            submit_samples(1)
+        samples = sampled[0]
+        estimate = _error_estimate(client, run, samples, cancel)
+        n_failed = _wait(client, future, cancel) if estimate is not None else None
+        if estimate is None or (cancel is not None and cancel.is_set()):
+            client.cancel([future, *samples[1]])
             store.update(study_id, status="cancelled", finished=utc_now())
             return study_id
-        if n_failed is None:
+        if n_failed is None:  # the worker does not see the store: finished here
             n_failed = assemble_dataset(store, study_id, run_json, attrs, estimate)
+        else:
+            store.publish_dataset(study_id, estimate_dataset(estimate))
         store.clear_chunks(study_id)
         if n_cases and int(n_failed) >= n_cases:  # not one case has a result: the study failed, saying why
             reason = f"every case failed ({failures(store.path(study_id))})"
@@ -246,17 +255,20 @@ larger ones are streamed chunk by chunk. ``ISOLAB_IN_MEMORY_CASES`` in the envir
 
 
 def assemble_dataset(
-    store: Store, study_id: str, run_json: str, attrs: dict[str, Any], estimate: ErrorEstimate
+    store: Store, study_id: str, run_json: str, attrs: dict[str, Any], estimate: ErrorEstimate | None
 ) -> int:
     """Build a study's dataset from its saved chunks, add the error ``estimate`` and write it atomically;
-    the number of cases that did not end OK.
+    the number of cases that did not end OK. Without an estimate the dataset is written staged
+    (:meth:`studies.results.store.Store.staged_path`), for
+    :meth:`~studies.results.store.Store.publish_dataset` to add the estimate's variables
+    (:func:`estimate_dataset`) and move it into place.
 
     Up to ``IN_MEMORY_CASES`` cases the dataset is built whole in memory and written at once (fastest:
-    1.8 s for 100,000 cases). Beyond, it is streamed (:func:`studies.results.dataset.streamed_dataset`): each
-    chunk
-    is read when its slice is written and let go after, so the memory this takes does not grow with the
-    number of cases (only the statuses, 1 byte a case, and the parameter values, 8 bytes a case per
-    parameter, are held), at about 7x the writing time."""
+    0.3 s of CPU for 100,000 cases, compressing only the variables that shrink). Beyond, it is streamed
+    (:func:`studies.results.dataset.streamed_dataset`): each chunk is read when its slice is written and
+    let go after, so the memory this takes does not grow with the number of cases (only the statuses, 1 byte
+    a case, and the parameter values, 8 bytes a case per parameter, are held), at many times the writing
+    time (13 s at 100,000 cases, every variable compressed)."""
 
     run = study_from_json(run_json)
     iso_names, point_names = study_labels(run)
@@ -289,8 +301,28 @@ def assemble_dataset(
         )
     if run.spreads:  # a monte_carlo design: the probability of meeting the criteria within tolerances
         ds = add_reliability(ds, run.spreads, run.design_spec.sampling or "sobol")
-    ds = add_error_estimate(
-        ds,
+    if estimate is not None:
+        ds = add_error_estimate(
+            ds,
+            estimate.values,
+            worst_case=estimate.worst_case,
+            cases=estimate.cases,
+            excluded=estimate.excluded,
+            method=estimate.method,
+            meaning=OUTPUT_MEANING,
+            units=OUTPUT_UNITS,
+        )
+    store.write_dataset(study_id, ds, staged=estimate is None)  # a streamed one: chunk by chunk
+    return n_failed
+
+
+def estimate_dataset(estimate: ErrorEstimate) -> xr.Dataset:
+    """The variables and attributes a study's error ``estimate`` adds to its dataset
+    (:func:`studies.results.dataset.add_error_estimate`), alone."""
+    import xarray as xr
+
+    return add_error_estimate(
+        xr.Dataset(),
         estimate.values,
         worst_case=estimate.worst_case,
         cases=estimate.cases,
@@ -299,15 +331,13 @@ def assemble_dataset(
         meaning=OUTPUT_MEANING,
         units=OUTPUT_UNITS,
     )
-    store.write_dataset(study_id, ds)  # each chunk's slice is read and written in turn
-    return n_failed
 
 
 def finish_study(
-    store_root: str, study_id: str, run_json: str, attrs_json: str, estimate: ErrorEstimate
+    store_root: str, study_id: str, run_json: str, attrs_json: str, estimate: ErrorEstimate | None = None
 ) -> int | None:
-    """The Dask task that finishes a study on a worker (:func:`assemble_dataset`); None when this worker
-    does not see the store, so the runner finishes."""
+    """The Dask task that finishes a study on a worker (:func:`assemble_dataset`; staged without an
+    ``estimate``); None when this worker does not see the store, so the runner finishes."""
     store = Store(store_root, catalog=False)
     if not store.has_chunk_plan(study_id):
         return None
@@ -315,15 +345,15 @@ def finish_study(
 
 
 def _wait(client: Any, future: Any, cancel: threading.Event | None) -> Any:
-    """The result of a Dask future; None (and the future cancelled) when ``cancel`` is set first."""
+    """The result of a Dask future, as soon as it is done; None (and the future cancelled) when ``cancel``
+    is set first (looked at every 50 ms)."""
+    ended = threading.Event()
+    future.add_done_callback(lambda _: ended.set())
     while not future.done():
         if cancel is not None and cancel.is_set():
             client.cancel([future])
             return None
-        if cancel is not None:
-            cancel.wait(0.05)
-        else:
-            time.sleep(0.05)
+        ended.wait(0.05)
     return future.result()
 
 
@@ -347,9 +377,9 @@ def _choice(
 
 
 def _submit_samples(
-    client: Any, study: Study, run_json: str, key_prefix: str
+    client: Any, study: Study, run_json: str, key_prefix: str, priority: int
 ) -> tuple[list[int], list[Any], tuple[str, str]]:
-    """The error estimate's seeded sample of cases, the Dask futures of their
+    """The error estimate's seeded sample of cases, the Dask futures (at ``priority``) of their
     :func:`studies.run.error_estimate.sample_arrays` (none for a study that runs at its reference level
     itself) and the reference they rerun at (:func:`studies.run.error_estimate.reference_pair` of the
     sampled cases: the nonlinear level does not model a scene's extra linear states)."""
@@ -363,7 +393,13 @@ def _submit_samples(
     token = uuid.uuid4().hex[:8]
     futures = [
         client.submit(
-            sample_arrays, run_json, c, pair, pure=False, priority=1, key=f"{key_prefix}-sample-{c}-{token}"
+            sample_arrays,
+            run_json,
+            c,
+            pair,
+            pure=False,
+            priority=priority,
+            key=f"{key_prefix}-sample-{c}-{token}",
         )
         for c in cases
     ]

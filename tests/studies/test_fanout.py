@@ -245,6 +245,50 @@ def test_the_reserved_lane_caps_its_slots_and_goes_round() -> None:
     assert lane.peak == 2
 
 
+def started_at(seconds: float) -> float:
+    """A stand-in side task (an error-estimate rerun): sleeps ``seconds``, returns when it started."""
+    start = time.time()
+    time.sleep(seconds)
+    return start
+
+
+def test_tasks_given_the_dispatch_priority_wait_for_every_chunk_of_the_run(client: Client) -> None:
+    """The error estimate's reruns go out when ``on_dispatched`` says every chunk is out, at the priority it
+    gives: below the run's chunks, so they run in its tail (and beside the dataset's writing) instead of
+    holding its first chunks back."""
+    side: list = []
+    priorities: list[int] = []
+
+    def dispatched(priority: int) -> None:
+        priorities.append(priority)
+        side.extend(
+            client.submit(started_at, 0.05, pure=False, priority=priority, key=f"side-{i}") for i in range(3)
+        )
+
+    report = run_chunks(
+        client,
+        json.dumps({"sleep": 0.15, "study": "tail"}),
+        plan_chunks(10, 1),
+        task=timed_task,
+        key_prefix="tail",
+        on_dispatched=dispatched,
+    )
+    assert priorities == [-11]  # just below the run's 10 chunks, once
+    starts = [f.result(timeout=30) for f in side]
+    timings = report.timings.values()
+    last_out = max(t.submitted for t in timings)  # the last chunk handed to Dask, once 5 had come back
+    assert sum(t.task_end <= last_out + 0.01 for t in timings) >= 5
+    assert min(starts) >= last_out, (starts, last_out)
+    # a run with nothing left to do hands nothing out
+    assert (
+        run_chunks(
+            client, "{}", plan_chunks(2, 1), skip={0, 1}, task=timed_task, on_dispatched=dispatched
+        ).submitted
+        == []
+    )
+    assert priorities == [-11]
+
+
 def _stream_small_studies(client: Client, stop: threading.Event, turnarounds: list, n: int) -> None:
     """Submit 2-chunk studies of ``SMALL_CHUNK_S`` chunks one after the other until ``stop``, noting each
     one's turnaround (s), or what went wrong (a string)."""

@@ -108,19 +108,32 @@ def written(ds: xr.Dataset, path: Path) -> xr.Dataset:
         return f.load()
 
 
-def assert_same_file(old: xr.Dataset, new: xr.Dataset, block: int | None) -> None:
+COMPRESSION = ("zlib", "complevel", "shuffle", "contiguous")
+"""Encoding keys that say whether a variable is compressed: a dataset built in memory compresses only the
+variables that shrink (studies.results.compression), a streamed one every numeric variable."""
+
+
+def assert_same_file(
+    old: xr.Dataset, new: xr.Dataset, block: int | None, same_compression: bool = False
+) -> None:
     xr.testing.assert_identical(new, old)
     assert list(new.attrs) == list(old.attrs)
     for name in old.variables:
         a, b = dict(old[name].encoding), dict(new[name].encoding)
         for e in (a, b):
             e.pop("source", None)
+        if same_compression:
+            assert [a.get(k) for k in COMPRESSION] == [b.get(k) for k in COMPRESSION], name
+        for e in (a, b):  # either none or zlib at level 1 with the shuffle filter
+            assert not e.get("zlib") or (e.get("complevel"), e.get("shuffle")) == (1, True), name
         if b.get("zlib") and block is not None and name in new.data_vars and new[name].dims[0] == "case":
             # the file's chunks are the streamed blocks along the cases
             assert b["chunksizes"][0] == block and tuple(b["chunksizes"][1:]) == new[name].shape[1:], name
         for e in (a, b):
             e.pop("chunksizes", None)
             e.pop("preferred_chunks", None)
+            for key in COMPRESSION:
+                e.pop(key, None)
         assert a.keys() == b.keys(), name
         for key in a:
             assert str(a[key]) == str(b[key]), (name, key)
@@ -199,6 +212,53 @@ def test_a_streamed_grid_study_equals_the_one_built_in_memory(tmp_path: Path) ->
     assert_same_file(old, new, None)
     assert new.status.sel(isolator_type="air").values.tolist() == [FAILED, FAILED]
     assert np.isnan(new.peak_displacement.sel(isolator_type="air")).all()
+
+
+@pytest.mark.parametrize("how", ["in memory", "streamed"])
+def test_a_dataset_staged_then_given_its_error_estimate_equals_the_one_written_whole(
+    tmp_path: Path, how: str
+) -> None:
+    """The runner writes the dataset while the error estimate's cases run, then adds the estimate to the
+    file and moves it into place: the same values, attributes, units and encodings as the file written
+    with the estimate inside, and nothing under the study's name until it is complete."""
+    n = 5_000
+    design = sampled_design(n)
+    chunks = [np.arange(s, min(s + 2000, n)) for s in range(0, n, 2000)]
+    parts = chunk_parts(design, chunks, failed_chunk=1)
+    whole = written(in_memory(parts, chunks, design), tmp_path / "whole.nc")
+    if how == "in memory":
+        result = from_chunks(parts, chunks, n_isolators=len(ISOLATORS), n_points=len(POINTS))
+        bulk = add_criteria(
+            to_dataset(result, design, isolator_names=ISOLATORS, point_names=POINTS, attrs=ATTRS), CRITERIA
+        )
+    else:
+        bulk = streamed_dataset(
+            parts.__getitem__,
+            chunks,
+            design,
+            isolator_names=ISOLATORS,
+            point_names=POINTS,
+            attrs=ATTRS,
+            criteria=CRITERIA,
+        )
+    store = Store(tmp_path / "store")
+    sid = "ab" * 16
+    store.write_dataset(sid, bulk, staged=True)
+    assert store.staged_path(sid).is_file() and not store.path(sid).exists()
+    store.publish_dataset(sid, add_error_estimate(xr.Dataset(), **ESTIMATE))
+    assert store.path(sid).is_file() and not store.staged_path(sid).exists()
+    with xr.open_dataset(store.path(sid)) as f:
+        published = f.load()
+    # one block of three chunks when streamed; built in memory, the same variables compressed
+    assert_same_file(whole, published, n if how == "streamed" else None, same_compression=how == "in memory")
+    assert published["error_estimate_peak_displacement"].attrs == {
+        "units": "1",
+        "long_name": "largest relative error of peak_displacement, over the sampled cases against the "
+        "reference level",
+        "case": 3,
+    }
+    assert published["error_estimate_peak_displacement"].item() == 1.5e-3
+    assert np.isnan(published["error_estimate_natural_frequency"].item())
 
 
 def test_a_chunk_that_does_not_fit_fails_the_write_and_leaves_no_file(tmp_path: Path) -> None:

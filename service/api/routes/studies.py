@@ -9,14 +9,18 @@ catalog and files are :class:`isolab.studies.results.store.Store`, running is
 from __future__ import annotations
 
 import re
+import time
 from datetime import UTC, datetime
 from typing import Annotated, Any
 
+import anyio
+from anyio import to_thread
 from fastapi import APIRouter, Body, HTTPException, Query, Request, Response
 from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, HTMLResponse
 
 from isolab.service.api.jobs import JobQueue
+from isolab.service.api.kernel_warmup import KernelWarmup
 from isolab.service.api.request_limits import JsonParsedOffLoop
 from isolab.service.api.routes import (
     INVALID,
@@ -235,12 +239,56 @@ def list_studies(
     )
 
 
-@router.get("/{study_id}", response_model=StudyDetail, responses=NOT_FOUND, summary="A study's status")
-def get_study(study_id: StudyId, store: StoreDep, kernels: KernelsDep) -> StudyDetail:
-    """Status, progress, times, error and the definition of one study; while the service compiles the
-    engine's kernels (first start only), a study waiting for them says so in ``note``."""
+MAX_WAIT_S = 30.0
+"""Longest a status request may wait for its study to end (``GET /studies/{id}?wait=``), s."""
+WAIT_STEP_S = 0.02
+"""How often a waiting status request looks whether its study has ended, s (in memory, no catalog read)."""
+
+
+async def wait_for_end(jobs: JobQueue, study_id: str, seconds: float, request: Request | None = None) -> bool:
+    """Wait up to ``seconds`` (s) while the study is queued or running in ``jobs``; True when it is not
+    (any more), False at the bound or when the client of ``request`` has gone away."""
+    deadline = time.monotonic() + seconds
+    while jobs.is_active(study_id):
+        left = deadline - time.monotonic()
+        if left <= 0 or (request is not None and await request.is_disconnected()):
+            return False
+        await anyio.sleep(min(WAIT_STEP_S, left))
+    return True
+
+
+def study_detail(store: Store, study_id: str, kernels: KernelWarmup | None) -> StudyDetail:
+    """A study's :class:`StudyDetail` from its catalog row (404 when there is none)."""
     row = study_row(store, study_id)
     return StudyDetail(**summary(row, kernels.note() if kernels else None), definition=row["definition"])
+
+
+@router.get(
+    "/{study_id}", response_model=StudyDetail, responses={**NOT_FOUND, **INVALID}, summary="A study's status"
+)
+async def get_study(
+    study_id: StudyId,
+    request: Request,
+    store: StoreDep,
+    jobs: JobsDep,
+    kernels: KernelsDep,
+    wait: Annotated[
+        float,
+        Query(
+            ge=0,
+            le=MAX_WAIT_S,
+            allow_inf_nan=False,
+            description="seconds to wait while the study is queued or running (a long poll): the answer "
+            "comes as soon as it ends, else at this bound with its progress then; 0 answers at once",
+        ),
+    ] = 0.0,
+) -> StudyDetail:
+    """Status, progress, times, error and the definition of one study; while the service compiles the
+    engine's kernels (first start only), a study waiting for them says so in ``note``. With ``wait``, the
+    answer waits for the study to end, at most that many seconds."""
+    if wait > 0:
+        await wait_for_end(jobs, study_id, wait, request)
+    return await to_thread.run_sync(study_detail, store, study_id, kernels)
 
 
 @router.delete("/{study_id}", status_code=204, responses=NOT_FOUND, summary="Delete a study")
