@@ -126,7 +126,8 @@ def step_nonlinear(c, t, h, V, g, pbase):
     ``V`` are the case's arrays as views without owner (:func:`nonlinear_views`), ``g`` gravity (m/s^2) and
     ``pbase`` the preload convention (``Params.pbase``). Numba counts a reference (an atomic add and
     subtract, dearer than the arithmetic here) for every array bound, sliced or passed on, and for the
-    structs a kernel takes; on views made once per case a step counts none."""
+    structs a kernel takes; on views made once per case a step counts none. The driver inlines the step: a
+    called step counts its arguments' references at every call, which costs what the views save."""
     x, S, idx, key, tc, cc, cs, cm, sw, swt, R, F, acc = V
     xs, k1, k2, k3, k4 = S[0], S[1], S[2], S[3], S[4]
     nx = x.shape[0]
