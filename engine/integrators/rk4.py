@@ -20,6 +20,7 @@ from isolab.engine.kernels.cached_terms import (
     recorded_and_feedforward,
     set_key,
     stages_and_floor,
+    stages_unchanged,
 )
 from isolab.engine.kernels.dynamics import derivative, ltv_acc, nonlinear_acc, rates, slot_rates
 from isolab.engine.kernels.params import LTI, LTV, NONLINEAR, borrowed
@@ -42,9 +43,9 @@ def step(P, c, level, t, h, x, S, idx, W):
     At the time-varying levels the terms that depend on time only are evaluated at ``t``, ``t + h/2`` and
     ``t + h`` (``engine.kernels.cached_terms.time_terms``; those at ``t`` are usually still there from the
     previous step's end), and the slopes read them through arrays bound once per step. The time-varying
-    levels only: :func:`step_lti` steps the LTI level and :func:`step_nonlinear` the nonlinear level's
-    cases without feedforward actuators or a recorded floor (the driver calls the one of its level, so
-    numba compiles only that one)."""
+    levels only: :func:`step_lti` steps the LTI level, and :func:`step_nonlinear` the nonlinear level when
+    the batch has no recorded floor motion or feedforward actuators (:func:`lean_nonlinear`; the driver
+    calls the one that applies, so numba compiles only those of its level)."""
     nx = x.shape[0]
     xs = S[0]
     # The workspace's arrays bound once, and only functions that call no other (whose own references
@@ -84,34 +85,65 @@ def step(P, c, level, t, h, x, S, idx, W):
     return True
 
 
-@njit(cache=True)
-def step_nonlinear(P, c, t, h, x, S, idx, W):
+@njit(cache=True, inline="always")
+def lean_nonlinear(P):
+    """Whether the batch ``P`` steps at the nonlinear level through :func:`step_nonlinear`: no recorded floor
+    motion and no feedforward actuators (those take :func:`step`)."""
+    return not (P.ffon or P.ft.shape[0] > 0)
+
+
+@njit(cache=True, inline="always")
+def nonlinear_views(P, c, W, x, S, idx, swt):
+    """Case ``c``'s terms packed into the workspace ``W`` (``engine.kernels.cached_terms.pack_case``) and the
+    arrays :func:`step_nonlinear` reads, as views without owner (``engine.kernels.params.borrowed``): the
+    state ``x``, the scratch ``S``, the pieces ``idx``, the workspace's arrays and ``swt`` (m, 9), where a
+    slope puts the stages' state at its time before it replaces ``W.sw``. Made once per case by the driver,
+    in its own body (the function is inlined), so no step counts a reference to them."""
+    pack_case(P, c, W, W.cc)
+    b = borrowed
+    return (
+        b(x),
+        b(S),
+        b(idx),
+        b(W.key),
+        b(W.tc),
+        b(W.cc),
+        b(W.cs),
+        b(W.cm),
+        b(W.sw),
+        b(swt),
+        b(W.R),
+        b(W.F),
+        b(W.acc),
+    )
+
+
+@njit(cache=True, inline="always")
+def step_nonlinear(c, t, h, V, g, pbase):
     """:func:`step` at the nonlinear level for a case without recorded floor motion or feedforward
     actuators: the same arithmetic with no array reference counted inside the step.
 
-    Numba counts a reference (an atomic add and subtract, dearer than the arithmetic here) for every array
-    bound, sliced or passed on; the per-case terms are packed first, then every array is bound once as a
-    view without owner (``engine.kernels.params.borrowed``), whose references are not counted."""
-    pack_case(P, c, W, W.cc)
-    g, pbase = P.g, P.pbase
-    key, tc, cc, cs, cm = borrowed(W.key), borrowed(W.tc), borrowed(W.cc), borrowed(W.cs), borrowed(W.cm)
-    sw, R, F, acc = borrowed(W.sw), borrowed(W.R), borrowed(W.F), borrowed(W.acc)
-    x, idx, S = borrowed(x), borrowed(idx), borrowed(S)
+    ``V`` are the case's arrays as views without owner (:func:`nonlinear_views`), ``g`` gravity (m/s^2) and
+    ``pbase`` the preload convention (``Params.pbase``). Numba counts a reference (an atomic add and
+    subtract, dearer than the arithmetic here) for every array bound, sliced or passed on, and for the
+    structs a kernel takes; on views made once per case a step counts none. The driver inlines the step: a
+    called step counts its arguments' references at every call, which costs what the views save."""
+    x, S, idx, key, tc, cc, cs, cm, sw, swt, R, F, acc = V
     xs, k1, k2, k3, k4 = S[0], S[1], S[2], S[3], S[4]
     nx = x.shape[0]
     for i in range(nx):
         xs[i] = x[i]
-    ok = _nonlinear_slope(c, t, True, xs, k1, idx, key, tc, cc, cs, cm, sw, R, F, acc, g, pbase)
+    ok = _nonlinear_slope(c, t, True, xs, k1, idx, key, tc, cc, cs, cm, sw, swt, R, F, acc, g, pbase)
     tm = t + 0.5 * h
     for i in range(nx):
         xs[i] = x[i] + 0.5 * h * k1[i]
-    ok &= _nonlinear_slope(c, tm, True, xs, k2, idx, key, tc, cc, cs, cm, sw, R, F, acc, g, pbase)
+    ok &= _nonlinear_slope(c, tm, True, xs, k2, idx, key, tc, cc, cs, cm, sw, swt, R, F, acc, g, pbase)
     for i in range(nx):
         xs[i] = x[i] + 0.5 * h * k2[i]
-    ok &= _nonlinear_slope(c, tm, False, xs, k3, idx, key, tc, cc, cs, cm, sw, R, F, acc, g, pbase)
+    ok &= _nonlinear_slope(c, tm, False, xs, k3, idx, key, tc, cc, cs, cm, sw, swt, R, F, acc, g, pbase)
     for i in range(nx):
         xs[i] = x[i] + h * k3[i]
-    ok &= _nonlinear_slope(c, t + h, True, xs, k4, idx, key, tc, cc, cs, cm, sw, R, F, acc, g, pbase)
+    ok &= _nonlinear_slope(c, t + h, True, xs, k4, idx, key, tc, cc, cs, cm, sw, swt, R, F, acc, g, pbase)
     if not ok:
         return False
     _combine(NONLINEAR, h, x, k1, k2, k3, k4)
@@ -119,13 +151,23 @@ def step_nonlinear(P, c, t, h, x, S, idx, W):
 
 
 @njit(cache=True, inline="always")
-def _nonlinear_slope(c, ts, check, xs, k, idx, key, tc, cc, cs, cm, sw, R, F, acc, g, pbase):
+def _nonlinear_slope(c, ts, check, xs, k, idx, key, tc, cc, cs, cm, sw, swt, R, F, acc, g, pbase):
     """One slope ``k`` of the nonlinear level at ``ts`` (s) and the stage state ``xs``; the time-only terms
     made those of ``ts`` first where ``check`` (the middle slopes share them). Returns whether the mass
-    matrix is positive definite."""
+    matrix is positive definite.
+
+    Where the stages' state at ``ts`` is bit for bit the one the terms in ``tc`` were evaluated from (the
+    stages stand still), the terms are kept (``engine.kernels.cached_terms.stages_unchanged``): the floor's
+    rows are made those of ``ts``, and :func:`moving_terms` would give the same values again."""
     if check and not key_holds(c, NONLINEAR, ts, idx, key):
-        stages_and_floor(ts, idx, cc, cs, sw, tc)
-        set_key(c, NONLINEAR, ts, moving_terms(NONLINEAR, g, cc, cs, cm, sw, tc), idx, key)
+        stages_and_floor(ts, idx, cc, cs, swt, tc)
+        if stages_unchanged(c, NONLINEAR, key, swt, sw):
+            set_key(c, NONLINEAR, ts, key[3] != 0.0, idx, key)
+        else:
+            for i in range(sw.shape[0]):
+                for q in range(sw.shape[1]):
+                    sw[i, q] = swt[i, q]
+            set_key(c, NONLINEAR, ts, moving_terms(NONLINEAR, g, cc, cs, cm, sw, tc), idx, key)
     nonlinear_acc(xs, tc, cc, cm, R, F, acc, g, pbase)
     q0, q1, q2, q3 = xs[3], xs[4], xs[5], xs[6]
     w0, w1, w2 = xs[10], xs[11], xs[12]

@@ -56,8 +56,6 @@ def pair_driver(method: int, level: int) -> Any:
         and that is not recorded.
         """
         C = dt.shape[0]
-        # the nonlinear level's lean RK4 step: no feedforward actuators, no recorded floor
-        lean = not (P.ffon or P.ft.shape[0] > 0)
         nx = 13 if level == NONLINEAR else 12 + P.zA.shape[1]  # the base, then the extra linear states
         nA = 2 * P.sm.shape[1] if method == EXACT and nx > 13 else 0  # exact: the stages' accelerations
         z = np.zeros(nx + 6 * (deg + 1) + nA)  # the state, then exact's forcing carried between steps
@@ -75,6 +73,12 @@ def pair_driver(method: int, level: int) -> Any:
         Vmap = np.zeros((9, max(m, 1)))
         Qmap = np.zeros(13)
         F0, rest, ptol = P.f0, O.rest, O.point_tol
+        # RK4 at the nonlinear level without a recorded floor or feedforward actuators
+        # (``rk4.lean_nonlinear``): the lean step, inlined here on views of the case's arrays made once per
+        # case (``rk4.nonlinear_views``), so that no step counts a reference
+        lean_nl = method == RK4 and level == NONLINEAR and rk4.lean_nonlinear(P)
+        g, pbase = P.g, P.pbase
+        swt = np.zeros_like(W.sw)  # the lean step's stages' state at the time of a slope
         first = np.int64(0)  # the first output step, typed as the later ``k + 1``: one compiled observe
         for c in range(C):
             if status[c] != OK:
@@ -91,6 +95,8 @@ def pair_driver(method: int, level: int) -> Any:
             tol = 1e-6 * h
             passed = 0
             piece_end = -np.inf  # the earliest start of a stage's next piece, s
+            if method == RK4 and level == NONLINEAR:  # the lean step's arrays, once per case
+                V = rk4.nonlinear_views(P, c, W, x, S, idx, swt)
             if linear:
                 output_map.observe(c, 0.0, x, 0, G, KF, F0, tgt, rtgt, rest, ptol, Smap, Vmap, Qmap, GZ)
             elif level == NONLINEAR:
@@ -137,8 +143,8 @@ def pair_driver(method: int, level: int) -> Any:
                         tb = piece_end if piece_end < t1 - tol else t1
                         if method == RK4 and level == LTI:
                             ok = rk4.step_lti(P, c, ta, tb - ta, x, S, idx, W)
-                        elif method == RK4 and level == NONLINEAR and lean:
-                            ok = rk4.step_nonlinear(P, c, ta, tb - ta, x, S, idx, W)
+                        elif method == RK4 and level == NONLINEAR and lean_nl:
+                            ok = rk4.step_nonlinear(c, ta, tb - ta, V, g, pbase)  # inlined
                         elif method == RK4:
                             ok = rk4.step(P, c, level, ta, tb - ta, x, S, idx, W)
                         else:

@@ -123,58 +123,69 @@ def moving_terms(level, g, cc, cs, cm, sw, tc):
     """The time-only terms of the LTV and nonlinear levels in ``tc`` from the stages' state ``sw`` and the
     floor (rows ``TC_XF``, ``TC_VF``) and feedforward (``TC_SFA``, ``TC_DFA``) rows already in ``tc``. Returns
     False when the mass matrix is not positive definite."""
-    for r in range(TC_XF):
-        if r == TC_SFA or r == TC_DFA:
-            continue
-        for q in range(3):
-            tc[r, q] = 0.0
-    for r in range(TC_LD, TC_GW + 3):
-        for q in range(3):
-            tc[r, q] = 0.0
-    for a in range(3):
-        for b in range(3):
-            tc[TC_JT + a, b] = cc[CC_IN + 3 * a + b]
+    # the stages' sums, each in a register through the loop (the same sums, in the same order, as into
+    # ``tc``: the rows of ``tc`` may alias the stages' arrays for all the compiler knows, so each sum
+    # would be a load and a store)
+    sr0 = sr1 = sr2 = sv0 = sv1 = sv2 = sa0 = sa1 = sa2 = ta0 = ta1 = ta2 = wm0 = wm1 = 0.0
+    gw00 = gw01 = gw02 = gw10 = gw11 = gw12 = gw20 = gw21 = gw22 = 0.0
+    j00, j01, j02 = cc[CC_IN], cc[CC_IN + 1], cc[CC_IN + 2]
+    j10, j11, j12 = cc[CC_IN + 3], cc[CC_IN + 4], cc[CC_IN + 5]
+    j20, j21, j22 = cc[CC_IN + 6], cc[CC_IN + 7], cc[CC_IN + 8]
     for i in range(cs.shape[0]):
         m = cs[i, 0]
         r0, r1, r2 = sw[i, 0], sw[i, 1], sw[i, 2]
         v0, v1, v2 = sw[i, 3], sw[i, 4], sw[i, 5]
         a0, a1, a2 = sw[i, 6], sw[i, 7], sw[i, 8]
-        tc[TC_SR, 0] += m * r0
-        tc[TC_SR, 1] += m * r1
-        tc[TC_SR, 2] += m * r2
-        tc[TC_SV, 0] += m * v0
-        tc[TC_SV, 1] += m * v1
-        tc[TC_SV, 2] += m * v2
-        tc[TC_SA, 0] += m * a0
-        tc[TC_SA, 1] += m * a1
-        tc[TC_SA, 2] += m * a2
+        sr0 += m * r0
+        sr1 += m * r1
+        sr2 += m * r2
+        sv0 += m * v0
+        sv1 += m * v1
+        sv2 += m * v2
+        sa0 += m * a0
+        sa1 += m * a1
+        sa2 += m * a2
         h0, h1, h2 = cross(r0, r1, r2, a0, a1, a2)
-        tc[TC_TA, 0] += m * h0
-        tc[TC_TA, 1] += m * h1
-        tc[TC_TA, 2] += m * h2
+        ta0 += m * h0
+        ta1 += m * h1
+        ta2 += m * h2
         # (rho - rho_h) x (0, 0, -g)
-        tc[TC_WM, 0] -= m * (r1 - cs[i, CS_H + 1]) * g
-        tc[TC_WM, 1] += m * (r0 - cs[i, CS_H]) * g
+        wm0 -= m * (r1 - cs[i, CS_H + 1]) * g
+        wm1 += m * (r0 - cs[i, CS_H]) * g
         # G_w += m ((rho . v) 1 - v rho^T); J += m (|rho|^2 1 - rho rho^T)
         rv = m * (r0 * v0 + r1 * v1 + r2 * v2)
-        tc[TC_GW, 0] += rv - m * v0 * r0
-        tc[TC_GW, 1] -= m * v0 * r1
-        tc[TC_GW, 2] -= m * v0 * r2
-        tc[TC_GW + 1, 0] -= m * v1 * r0
-        tc[TC_GW + 1, 1] += rv - m * v1 * r1
-        tc[TC_GW + 1, 2] -= m * v1 * r2
-        tc[TC_GW + 2, 0] -= m * v2 * r0
-        tc[TC_GW + 2, 1] -= m * v2 * r1
-        tc[TC_GW + 2, 2] += rv - m * v2 * r2
-        tc[TC_JT, 0] += m * (r1 * r1 + r2 * r2)
-        tc[TC_JT + 1, 1] += m * (r0 * r0 + r2 * r2)
-        tc[TC_JT + 2, 2] += m * (r0 * r0 + r1 * r1)
-        tc[TC_JT, 1] -= m * r0 * r1
-        tc[TC_JT + 1, 0] -= m * r0 * r1
-        tc[TC_JT, 2] -= m * r0 * r2
-        tc[TC_JT + 2, 0] -= m * r0 * r2
-        tc[TC_JT + 1, 2] -= m * r1 * r2
-        tc[TC_JT + 2, 1] -= m * r1 * r2
+        gw00 += rv - m * v0 * r0
+        gw01 -= m * v0 * r1
+        gw02 -= m * v0 * r2
+        gw10 -= m * v1 * r0
+        gw11 += rv - m * v1 * r1
+        gw12 -= m * v1 * r2
+        gw20 -= m * v2 * r0
+        gw21 -= m * v2 * r1
+        gw22 += rv - m * v2 * r2
+        j00 += m * (r1 * r1 + r2 * r2)
+        j11 += m * (r0 * r0 + r2 * r2)
+        j22 += m * (r0 * r0 + r1 * r1)
+        j01 -= m * r0 * r1
+        j10 -= m * r0 * r1
+        j02 -= m * r0 * r2
+        j20 -= m * r0 * r2
+        j12 -= m * r1 * r2
+        j21 -= m * r1 * r2
+    tc[TC_SR, 0], tc[TC_SR, 1], tc[TC_SR, 2] = sr0, sr1, sr2
+    tc[TC_SV, 0], tc[TC_SV, 1], tc[TC_SV, 2] = sv0, sv1, sv2
+    tc[TC_SA, 0], tc[TC_SA, 1], tc[TC_SA, 2] = sa0, sa1, sa2
+    tc[TC_TA, 0], tc[TC_TA, 1], tc[TC_TA, 2] = ta0, ta1, ta2
+    tc[TC_WM, 0], tc[TC_WM, 1], tc[TC_WM, 2] = wm0, wm1, 0.0
+    for r in range(TC_LD, TC_GW):
+        for q in range(3):
+            tc[r, q] = 0.0
+    tc[TC_GW, 0], tc[TC_GW, 1], tc[TC_GW, 2] = gw00, gw01, gw02
+    tc[TC_GW + 1, 0], tc[TC_GW + 1, 1], tc[TC_GW + 1, 2] = gw10, gw11, gw12
+    tc[TC_GW + 2, 0], tc[TC_GW + 2, 1], tc[TC_GW + 2, 2] = gw20, gw21, gw22
+    tc[TC_JT, 0], tc[TC_JT, 1], tc[TC_JT, 2] = j00, j01, j02
+    tc[TC_JT + 1, 0], tc[TC_JT + 1, 1], tc[TC_JT + 1, 2] = j10, j11, j12
+    tc[TC_JT + 2, 0], tc[TC_JT + 2, 1], tc[TC_JT + 2, 2] = j20, j21, j22
     # Schur complement of the translation block: S = J - X^T X / m_tot with X = -[SR]x,
     # X^T X = |SR|^2 1 - SR SR^T
     if not cc[CC_MT] > 0.0:
@@ -321,6 +332,22 @@ def recorded_and_feedforward(P, c, t, idx, W, cm, tc):
             tc[TC_DFA, 0] += m0
             tc[TC_DFA, 1] += m1
             tc[TC_DFA, 2] += m2
+
+
+@njit(cache=True, inline="always")
+def stages_unchanged(c, level, key, swt, sw):
+    """Whether the stages' state ``swt`` (m, 9) just evaluated (:func:`stages_and_floor`) is bit for bit
+    ``sw``, the one the time-only terms keyed in ``key`` were evaluated from, for case ``c`` and ``level``:
+    then :func:`moving_terms` (at the nonlinear level a function of the case and ``sw`` alone) would give
+    the same terms again. Every evaluation of the terms writes ``sw`` just before them."""
+    if key[0] != c or key[1] != level:
+        return False
+    for i in range(sw.shape[0]):
+        for q in range(sw.shape[1]):
+            a, b = swt[i, q], sw[i, q]
+            if a != b or (a == 0.0 and np.copysign(1.0, a) != np.copysign(1.0, b)):
+                return False
+    return True
 
 
 @njit(cache=True)

@@ -94,15 +94,7 @@ def ltv_acc(x, tc, K, cc, g, ffon, gstiff, acc):
     mount operator ``K`` (12, 6), the packed case ``cc`` and gravity ``g`` (m/s^2)."""
     f0, f1, f2 = tc[TC_BT, 0], tc[TC_BT, 1], tc[TC_BT, 2]
     r0, r1, r2 = tc[TC_BR, 0], tc[TC_BR, 1], tc[TC_BR, 2]
-    for k in range(12):
-        xk = x[k]
-        f0 += K[k, 0] * xk
-        f1 += K[k, 1] * xk
-        f2 += K[k, 2] * xk
-        r0 += K[k, 3] * xk
-        r1 += K[k, 4] * xk
-        r2 += K[k, 5] * xk
-    for k in range(12, K.shape[0]):  # the extra linear states' generalised force (``Params.zG``)
+    for k in range(K.shape[0]):  # the base's 12 rows, then the extra linear states' (``Params.zG``)
         xk = x[k]
         f0 += K[k, 0] * xk
         f1 += K[k, 1] * xk

@@ -47,55 +47,64 @@ def oriented_force(Q, k0, k1, k2, c0, c1, c2, e0, e1, e2, s0, s1, s2):
     )
 
 
+@njit(cache=True, inline="always")
+def mount_force(level, x, R, xf, vf, c, j, k, cd, sky, orient, qm, d0, d1, d2, r0, r1, r2):
+    """Dynamic force (N, floor frame) of isolator ``j`` of case ``c`` at state ``x``, its point at ``d``
+    (m, from the c.g.) moved by ``r`` (m, :func:`mount_offset`): ``-K delta - C delta_dot`` with
+    ``delta = u + r - x_floor``; the damper acts on ``delta_dot`` or, for a sky-hook mount, on the absolute
+    velocity of the mount point. ``k``, ``cd``, ``sky``, ``qm`` are ``Params``' arrays (or views of them),
+    ``orient`` says whether some mount has its own axes (:func:`oriented_force`)."""
+    off = 7 if level == NONLINEAR else 6
+    u0, u1, u2 = x[0], x[1], x[2]
+    v0, v1, v2 = x[off], x[off + 1], x[off + 2]
+    w0, w1, w2 = x[off + 3], x[off + 4], x[off + 5]
+    if level == NONLINEAR:
+        b0, b1, b2 = cross(w0, w1, w2, d0, d1, d2)
+        q0 = R[0, 0] * b0 + R[0, 1] * b1 + R[0, 2] * b2
+        q1 = R[1, 0] * b0 + R[1, 1] * b1 + R[1, 2] * b2
+        q2 = R[2, 0] * b0 + R[2, 1] * b1 + R[2, 2] * b2
+    else:
+        q0, q1, q2 = cross(w0, w1, w2, d0, d1, d2)
+    rel = 1.0 - sky[c, j]
+    if orient:
+        return oriented_force(
+            qm[c, j],
+            k[c, j, 0],
+            k[c, j, 1],
+            k[c, j, 2],
+            cd[c, j, 0],
+            cd[c, j, 1],
+            cd[c, j, 2],
+            u0 + r0 - xf[0],
+            u1 + r1 - xf[1],
+            u2 + r2 - xf[2],
+            v0 + q0 - rel * vf[0],
+            v1 + q1 - rel * vf[1],
+            v2 + q2 - rel * vf[2],
+        )
+    return (
+        -k[c, j, 0] * (u0 + r0 - xf[0]) - cd[c, j, 0] * (v0 + q0 - rel * vf[0]),
+        -k[c, j, 1] * (u1 + r1 - xf[1]) - cd[c, j, 1] * (v1 + q1 - rel * vf[1]),
+        -k[c, j, 2] * (u2 + r2 - xf[2]) - cd[c, j, 2] * (v2 + q2 - rel * vf[2]),
+    )
+
+
 @njit(cache=True)
 def isolator_forces(P, c, level, x, R, xf, vf, F):
-    """Dynamic isolator forces on the machine ``F`` (n, 3) N, floor frame, at state ``x``.
+    """Dynamic isolator forces on the machine ``F`` (n, 3) N, floor frame, at state ``x``
+    (:func:`mount_force` of each mount).
 
-    ``delta = u + (R - I) d - x_floor`` (:func:`mount_offset`); the damper acts on ``delta_dot`` or, for
-    a sky-hook mount, on the absolute velocity of the mount point. Linear levels use ``theta x d`` for
+    ``delta = u + (R - I) d - x_floor`` (:func:`mount_offset`); linear levels use ``theta x d`` for
     ``(R - I) d``.
     """
     D, k, cd, sky = P.d, P.k, P.cd, P.sky  # bound once: an attribute read counts a reference each time
     orient, qm = P.orient, P.qm
-    n = D.shape[1]
-    if level == NONLINEAR:
-        off = 7
-    else:
-        off = 6
-    u0, u1, u2 = x[0], x[1], x[2]
-    v0, v1, v2 = x[off], x[off + 1], x[off + 2]
-    w0, w1, w2 = x[off + 3], x[off + 4], x[off + 5]
-    for j in range(n):
+    for j in range(D.shape[1]):
         d0, d1, d2 = D[c, j, 0], D[c, j, 1], D[c, j, 2]
         r0, r1, r2 = mount_offset(level, x, R, d0, d1, d2)
-        if level == NONLINEAR:
-            b0, b1, b2 = cross(w0, w1, w2, d0, d1, d2)
-            q0 = R[0, 0] * b0 + R[0, 1] * b1 + R[0, 2] * b2
-            q1 = R[1, 0] * b0 + R[1, 1] * b1 + R[1, 2] * b2
-            q2 = R[2, 0] * b0 + R[2, 1] * b1 + R[2, 2] * b2
-        else:
-            q0, q1, q2 = cross(w0, w1, w2, d0, d1, d2)
-        rel = 1.0 - sky[c, j]
-        if orient:
-            F[j, 0], F[j, 1], F[j, 2] = oriented_force(
-                qm[c, j],
-                k[c, j, 0],
-                k[c, j, 1],
-                k[c, j, 2],
-                cd[c, j, 0],
-                cd[c, j, 1],
-                cd[c, j, 2],
-                u0 + r0 - xf[0],
-                u1 + r1 - xf[1],
-                u2 + r2 - xf[2],
-                v0 + q0 - rel * vf[0],
-                v1 + q1 - rel * vf[1],
-                v2 + q2 - rel * vf[2],
-            )
-            continue
-        F[j, 0] = -k[c, j, 0] * (u0 + r0 - xf[0]) - cd[c, j, 0] * (v0 + q0 - rel * vf[0])
-        F[j, 1] = -k[c, j, 1] * (u1 + r1 - xf[1]) - cd[c, j, 1] * (v1 + q1 - rel * vf[1])
-        F[j, 2] = -k[c, j, 2] * (u2 + r2 - xf[2]) - cd[c, j, 2] * (v2 + q2 - rel * vf[2])
+        F[j, 0], F[j, 1], F[j, 2] = mount_force(
+            level, x, R, xf, vf, c, j, k, cd, sky, orient, qm, d0, d1, d2, r0, r1, r2
+        )
 
 
 @njit(cache=True)

@@ -33,7 +33,7 @@ from isolab.engine.kernels.between_steps import (
     peak_point,
 )
 from isolab.engine.kernels.excitation import floor_motion, recorded_floor
-from isolab.engine.kernels.mounts import isolator_forces, mount_offset
+from isolab.engine.kernels.mounts import isolator_forces, mount_force, mount_offset
 from isolab.engine.kernels.params import NONLINEAR, borrowed
 from isolab.engine.kernels.rotations import cross
 
@@ -418,7 +418,8 @@ def observe(P, c, level, t, x, W, O, step):
 @njit(cache=True)
 def observe_nonlinear(P, c, t, x, W, O, step):
     """:func:`observe` at the nonlinear level, the same arithmetic on arrays bound once as views whose
-    references numba does not count (``engine.kernels.params.borrowed``)."""
+    references numba does not count (``engine.kernels.params.borrowed``), each mount's force computed in
+    the mount loop (``engine.kernels.mounts.mount_force``)."""
     b = borrowed
     x, R, xf, vf, F = b(x), b(W.R), b(W.xf), b(W.vf), b(W.F)
     famp, fomega, fphase = b(P.famp), b(P.fomega), b(P.fphase)
@@ -435,7 +436,7 @@ def observe_nonlinear(P, c, t, x, W, O, step):
     if P.ft.shape[0] > 0:
         recorded_floor(P, c, t, xf, vf)
     pts, pr, D, sky, f0 = b(P.pts), b(P.pr), b(P.d), b(P.sky), b(P.f0)
-    kk, cd, orient = b(P.k), b(P.cd), P.orient
+    kk, cd, qm, orient = b(P.k), b(P.cd), b(P.qm), P.orient
     peak_u, peak_th, poi, force, defl = b(O.u), b(O.th), b(O.poi), b(O.force), b(O.defl)
     min_load, max_load, last_u, last_th = b(O.min_load), b(O.max_load), b(O.last_u), b(O.last_th)
     last_poi, last_defl, last_floor, last_force = (
@@ -568,10 +569,13 @@ def observe_nonlinear(P, c, t, x, W, O, step):
             O.h_poi[slot, step, p, 2] = pv2
     if settle and err > O.tol[c]:
         last_viol[c] = t
-    isolator_forces(P, c, NONLINEAR, x, R, xf, vf, F)
     for j in range(D.shape[1]):
         d0, d1, d2 = D[c, j, 0], D[c, j, 1], D[c, j, 2]
         r0, r1, r2 = mount_offset(NONLINEAR, x, R, d0, d1, d2)
+        # the mount's force (as ``isolator_forces``, in this loop)
+        F[j, 0], F[j, 1], F[j, 2] = mount_force(
+            NONLINEAR, x, R, xf, vf, c, j, kk, cd, sky, orient, qm, d0, d1, d2, r0, r1, r2
+        )
         q0, q1, q2 = _arm_rate(NONLINEAR, wf0, wf1, wf2, r0, r1, r2, d0, d1, d2)
         skj = sky[c, j]
         f0j = f0[c, j]

@@ -7,6 +7,7 @@ import pytest
 from scenes import scene, y_stage
 
 from isolab.engine import model
+from isolab.engine.kernels.cached_terms import stages_unchanged
 from isolab.engine.kernels.dynamics import derivative
 from isolab.engine.kernels.excitation import advance_pieces
 from isolab.engine.kernels.params import FIDELITIES, NONLINEAR
@@ -52,3 +53,23 @@ def test_derivative_in_any_order_equals_a_fresh_evaluation(fidelity: str) -> Non
         assert derivative(P, c, level, t, x, idx, W, kept)
         assert derivative(P, c, level, t, x, idx, kernel_struct(model.work(b)), fresh)
         assert np.array_equal(kept, fresh), (c, t)
+
+
+def test_the_terms_are_kept_only_for_the_same_stage_state_bit_for_bit() -> None:
+    """The nonlinear RK4 step keeps the time-only terms where the stages' state is bit for bit the one they
+    were evaluated from, for the same case and level (``cached_terms.stages_unchanged``); a zero of the
+    other sign, another case or another level evaluates them again."""
+    key = np.array([3.0, float(NONLINEAR), 0.25, 1.0, 2.0])
+    sw = np.arange(18.0).reshape(2, 9) - 4.0
+    assert stages_unchanged(3, NONLINEAR, key, sw.copy(), sw)
+    moved = sw.copy()
+    moved[1, 8] = np.nextafter(moved[1, 8], np.inf)
+    assert not stages_unchanged(3, NONLINEAR, key, moved, sw)
+    signed = sw.copy()
+    signed[0, 4] = -0.0  # sw[0, 4] is +0.0
+    assert not stages_unchanged(3, NONLINEAR, key, signed, sw)
+    assert not stages_unchanged(2, NONLINEAR, key, sw.copy(), sw)
+    assert not stages_unchanged(3, NONLINEAR - 1, key, sw.copy(), sw)
+    nan = sw.copy()
+    nan[0, 0] = np.nan
+    assert not stages_unchanged(3, NONLINEAR, key, nan, nan.copy())
