@@ -105,8 +105,8 @@ def build(
 
 
 CAPACITY = 1024
-"""The most outputs (``m``) a case observed through the map may have (the scene's limits give at most 966);
-a case with more is observed by the general observer."""
+"""The most outputs (``m``) a case observed through the map may have (the scene's limits give at most 966),
+a multiple of 8; a case with more is observed by the general observer."""
 STRIDE = CAPACITY + 8
 """Elements between two rows of the observer's scratch: a fixed number, so every row is a known distance
 from the others and the compiler may vectorise a loop that reads some rows and writes others (rows of a
@@ -238,6 +238,11 @@ def observe(c, t, x, step, F0, tgt, rtgt, rest, ptol, B, Q, GZ):
     n = F0.shape[1]
     m = 6 + 3 * n_pts + 3 * n
     nf = 3 * n
+    # the loops over the outputs and the mount axes run to the next multiple of 8 (a vector's width):
+    # no scalar remainder; the entries past m and nf read zero rows of ``G`` and ``KF`` (the same m for
+    # every case of a batch) and keep zero, and the mounts' loop past nf computes zero forces
+    m8 = (m + 7) // 8 * 8
+    nf8 = (nf + 7) // 8 * 8
     settle = t >= Q[0] - 1e-12
     # the rest interval after a stage move that t falls in (time only increases: a cursor moves on)
     k = int(Q[4])
@@ -262,7 +267,7 @@ def observe(c, t, x, step, F0, tgt, rtgt, rest, ptol, B, Q, GZ):
     x0, x1, x2, x3, x4, x5 = x[0], x[1], x[2], x[3], x[4], x[5]
     v0, v1, v2, v3, v4, v5 = x[6], x[7], x[8], x[9], x[10], x[11]
     # values and rates of every output
-    for r in range(m):
+    for r in range(m8):
         g0, g1, g2 = B[_G + r], B[_G + STRIDE + r], B[_G + 2 * STRIDE + r]
         g3, g4, g5 = B[_G + 3 * STRIDE + r], B[_G + 4 * STRIDE + r], B[_G + 5 * STRIDE + r]
         B[_VAL + r] = g0 * x0 + g1 * x1 + g2 * x2 + g3 * x3 + g4 * x4 + g5 * x5
@@ -276,7 +281,7 @@ def observe(c, t, x, step, F0, tgt, rtgt, rest, ptol, B, Q, GZ):
     # reach past them (the cubic stays in their hull: only those can peak between the output times)
     hth = h * ONE_THIRD
     flagged = 0
-    for r in range(m):
+    for r in range(m8):
         val = B[_VAL + r]
         a = max(abs(val), B[_PEAK + r])
         B[_PEAK + r] = a
@@ -290,7 +295,7 @@ def observe(c, t, x, step, F0, tgt, rtgt, rest, ptol, B, Q, GZ):
     # law, shifted linearly to meet the forces at both ends (as engine.kernels.peaks.observe)
     inv_h = 1.0 / h if between else 0.0
     forces_flagged = 0
-    for q in range(nf):
+    for q in range(nf8):
         kk = B[_KF + q]
         cr = B[_KF + STRIDE + q]
         cc = cr * inv_h
@@ -350,10 +355,10 @@ def observe(c, t, x, step, F0, tgt, rtgt, rest, ptol, B, Q, GZ):
             hi = max(hi, f0j + ghi)
         B[_LO + j] = lo
         B[_HI + j] = hi
-    for r in range(m):
+    for r in range(m8):
         B[_PREV + r] = B[_VAL + r]
         B[_PREV_RATE + r] = B[_RATE + r]
-    for r in range(nf):
+    for r in range(nf8):
         B[_FPREV + r] = B[_FORCE + r]
     # RMS of the c.g. displacement, settling of the c.g. and the points after the last move
     for i in range(3):
