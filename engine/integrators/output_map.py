@@ -136,7 +136,7 @@ SCRATCH = 27 * STRIDE
 @njit(cache=True)
 def start(O, c, G, KF, B, Q):
     """Load case ``c``'s map ``G`` (C, 6, m) and ``KF`` (C, 2, 3 n) and its running state from the
-    accumulators ``O`` into the scratch ``B`` (:data:`SCRATCH`,) and ``Q`` (13,) (see :func:`observe`)."""
+    accumulators ``O`` into the scratch ``B`` (:data:`SCRATCH`,) and ``Q`` (15,) (see :func:`observe`)."""
     p = O.poi.shape[1]
     n = O.force.shape[1]
     m = 6 + 3 * p + 3 * n
@@ -176,6 +176,9 @@ def start(O, c, G, KF, B, Q):
     Q[7] = O.last_viol[c]
     Q[11] = O.nobs[c]
     Q[12] = O.diverged[c]
+    k = O.rest_k[c]
+    Q[13] = O.rest[c, k, 1] + 1e-12 if k < O.rest_n[c] else np.inf
+    Q[14] = O.rest[c, k, 0] - 1e-12 if k < O.rest_n[c] else np.inf
 
 
 @njit(cache=True)
@@ -218,14 +221,15 @@ def observe(c, t, x, step, F0, tgt, rtgt, rest, ptol, B, Q, GZ):
     rows of the flat scratch ``B`` (:data:`SCRATCH`,), each :data:`STRIDE` long (``_G`` ... ``_BERN``
     above: the peaks, the previous values and rates, the force peaks and previous forces (3 n), the
     smallest and largest loads (n), a flag, each point's last violation and worst settling time (p), and
-    this output time's values, rates, forces and force cubics); ``Q`` (13,) holds the last move's end, the
+    this output time's values, rates, forces and force cubics); ``Q`` (15,) holds the last move's end, the
     settling tolerance, the longest interpolated interval, the last output time, the rest-interval cursor
     and count, the last output time inside a rest interval, the last violation, the sums of squares (3),
-    the number of outputs and the divergence time. (:func:`start` and :func:`finish` move them in and out
-    of the accumulators.) The loops over the outputs read and write rows a fixed distance apart, so they
-    run as vector loops; the closed-form solve between output times runs only where a screen flagged an
-    output. Returns False (and keeps ``t`` as the divergence time) when the state is not finite or has left
-    any physically possible range.
+    the number of outputs, the divergence time, and the cursor's interval's end and start (s, +inf past
+    the last), so a step inside or between rest intervals checks one number each. (:func:`start` and
+    :func:`finish` move them in and out of the accumulators.) The loops over the outputs read and write
+    rows a fixed distance apart, so they run as vector loops; the closed-form solve between output times
+    runs only where a screen flagged an output. Returns False (and keeps ``t`` as the divergence time)
+    when the state is not finite or has left any physically possible range.
     """
     ok = True
     for i in range(3):
@@ -247,7 +251,7 @@ def observe(c, t, x, step, F0, tgt, rtgt, rest, ptol, B, Q, GZ):
     # the rest interval after a stage move that t falls in (time only increases: a cursor moves on)
     k = int(Q[4])
     nk = int(Q[5])
-    while k < nk and t > rest[c, k, 1] + 1e-12:
+    while t > Q[13]:  # past the end of the interval k (+inf when none is left)
         t0 = rest[c, k, 0]
         for q in range(n_pts):
             v = B[_VIOL + q]
@@ -259,7 +263,9 @@ def observe(c, t, x, step, F0, tgt, rtgt, rest, ptol, B, Q, GZ):
                 B[_VIOL + q] = -np.inf
         k += 1
         Q[4] = k
-    in_rest = k < nk and t >= rest[c, k, 0] - 1e-12
+        Q[13] = rest[c, k, 1] + 1e-12 if k < nk else np.inf
+        Q[14] = rest[c, k, 0] - 1e-12 if k < nk else np.inf
+    in_rest = t >= Q[14]
     if in_rest:
         Q[6] = t
     h = t - Q[3]

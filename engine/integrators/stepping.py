@@ -75,7 +75,7 @@ def pair_driver(method: int, level: int) -> Any:
         R = np.zeros(12 * (deg + 1))  # exact: the lean path's carried forced response (exact.free_step)
         carried = False
         Bmap = np.zeros(output_map.SCRATCH if m > 0 else 0)  # the output map's rows (output_map.observe)
-        Qmap = np.zeros(13)
+        Qmap = np.zeros(15)
         F0, rest, ptol = P.f0, O.rest, O.point_tol
         first = np.int64(0)  # the first output step, typed as the later ``k + 1``: one compiled observe
         for c in range(C):
