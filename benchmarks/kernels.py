@@ -140,14 +140,14 @@ def cpu_mhz() -> float:
 
 
 def exact_flops_per_step(P) -> int:
-    """Floating-point operations per step of the exact path: the state update ``x <- E [x, F]`` (2 per
-    multiply-add), the Taylor shift that carries the forcing polynomial to the next step, and the peaks
-    (the forcing is rebuilt from the stage kinematics only where a profile piece begins: not counted)."""
-    Z, deg, osc = exact.augmented(P)
-    N = Z.shape[-1]
+    """Floating-point operations per step of the exact path's whole step inside a piece: the state update
+    ``x <- Phi x + R_0`` (2 per multiply-add, ``exact.free_step``), the Taylor shift that carries the forced
+    response ``R`` (12 (deg + 1)) to the next step, and the peaks (the forcing and its response are rebuilt
+    only where a profile piece begins: not counted)."""
+    _, deg, _ = exact.augmented(P)
     n, p = P.d.shape[1], P.pts.shape[1]
-    update = 2 * 12 * N
-    shift = 6 * deg * (deg + 1)
+    update = 2 * 12 * 12 + 12
+    shift = 12 * deg * (deg + 1)
     peaks = 30 + p * 30 + n * 40
     return update + shift + peaks
 

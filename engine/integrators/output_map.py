@@ -11,7 +11,9 @@ the closed-form solve for an extremum between output times runs only for the out
 control points flag one. The running peaks are kept in per-case scratch (:func:`start`) and written back
 to the ``engine.kernels.peaks.Peaks`` accumulators when the case ends (:func:`finish`).
 
-Layout of the output vector: ``[u (3), theta (3), points (p, 3), mount deflections (n, 3)]``.
+Layout of the output vector: ``[mount deflections (n, 3), u (3), theta (3), points (p, 3)]``: the mounts
+first, so the loops over their forces start at 0 as the loops over every output do (a loop starting at a
+run-time index does not vectorise).
 """
 
 from __future__ import annotations
@@ -75,10 +77,10 @@ def build(
     C = d.shape[0]
     rows = np.concatenate(
         [
+            _arm_rows(d).reshape(C, -1, 6),
             np.broadcast_to(np.eye(6), (C, 6, 6)),
             # a relative point (or a following error) does not move with the base (``Params.pr``)
             np.where(np.asarray(P.pr, dtype=bool)[..., None, None], _arm_rows(pts), 0.0).reshape(C, -1, 6),
-            _arm_rows(d).reshape(C, -1, 6),
         ],
         axis=1,
     )  # (C, m, 6)
@@ -91,7 +93,10 @@ def build(
     nz = P.zA.shape[1]
     GZ = np.zeros((C, 2, nz, G.shape[2]))
     if nz:
-        GZ[..., 6:] = P.zO
+        p3, nf = 3 * pts.shape[1], 3 * d.shape[1]
+        zO = np.asarray(P.zO)  # (C, 2, nz, 3 p + 3 n): the points', then the mounts'
+        GZ[..., :nf] = zO[..., p3:]
+        GZ[..., nf + 6 :] = zO[..., :p3]
         if slot_target is not None:
             tgt = tgt + np.einsum("czm,cz->cm", GZ[:, 0], slot_target)
         if slot_rest_target is not None:
@@ -99,32 +104,68 @@ def build(
     return Map(G, KF, np.ascontiguousarray(tgt), np.ascontiguousarray(rtgt), GZ)
 
 
+CAPACITY = 1024
+"""The most outputs (``m``) a case observed through the map may have (the scene's limits give at most 966),
+a multiple of 8; a case with more is observed by the general observer."""
+STRIDE = CAPACITY + 8
+"""Elements between two rows of the observer's scratch: a fixed number, so every row is a known distance
+from the others and the compiler may vectorise a loop that reads some rows and writes others (rows of a
+2-D array are a run-time stride apart, which it would have to check at run time, and gives up on); the 8
+more than ``CAPACITY`` start each row on another cache set."""
+_G = 0  # 6 rows: the case's map G (positions to outputs)
+_PEAK = 6 * STRIDE  # each output's running peak
+_PREV = 7 * STRIDE  # its value at the previous output time
+_PREV_RATE = 8 * STRIDE  # and its rate there
+_FPEAK = 9 * STRIDE  # each mount axis' force peak
+_FPREV = 10 * STRIDE  # its force at the previous output time
+_LO = 11 * STRIDE  # each mount's smallest load (n)
+_HI = 12 * STRIDE  # and its largest
+_FLAG = 13 * STRIDE  # how far an output's inner Bernstein control points reach past its peak
+_VIOL = 14 * STRIDE  # each point's last output time outside its settling band (p)
+_SETTLE = 15 * STRIDE  # and its worst settling time (p)
+_VAL = 16 * STRIDE  # each output's value now
+_RATE = 17 * STRIDE  # and its rate
+_FORCE = 18 * STRIDE  # each mount axis' force now (3 n)
+_CUBIC = 19 * STRIDE  # 4 rows: the force's cubic over the last output interval (3 n)
+_BERN = 23 * STRIDE  # 2 rows: its inner Bernstein control points (3 n)
+_KF = 25 * STRIDE  # 2 rows: each mount axis' stiffness and damping, the case's ``KF`` (3 n)
+SCRATCH = 27 * STRIDE
+"""Length of the observer's scratch (:func:`start`, :func:`observe`)."""
+
+
 @njit(cache=True)
-def start(O, c, S, Q):
-    """Load case ``c``'s running state from the accumulators ``O`` into the scratch ``S`` (10, m) and
-    ``Q`` (13,) (see :func:`observe`)."""
+def start(O, c, G, KF, B, Q):
+    """Load case ``c``'s map ``G`` (C, 6, m) and ``KF`` (C, 2, 3 n) and its running state from the
+    accumulators ``O`` into the scratch ``B`` (:data:`SCRATCH`,) and ``Q`` (15,) (see :func:`observe`)."""
     p = O.poi.shape[1]
     n = O.force.shape[1]
     m = 6 + 3 * p + 3 * n
+    nf = 3 * n
+    for i in range(6):
+        for r in range(m):
+            B[_G + i * STRIDE + r] = G[c, i, r]
+    for i in range(2):
+        for r in range(3 * n):
+            B[_KF + i * STRIDE + r] = KF[c, i, r]
     for i in range(3):
-        S[0, i] = O.u[c, i]
-        S[0, 3 + i] = O.th[c, i]
+        B[_PEAK + nf + i] = O.u[c, i]
+        B[_PEAK + nf + 3 + i] = O.th[c, i]
         for q in range(p):
-            S[0, 6 + 3 * q + i] = O.poi[c, q, i]
+            B[_PEAK + nf + 6 + 3 * q + i] = O.poi[c, q, i]
         for j in range(n):
-            S[0, 6 + 3 * p + 3 * j + i] = O.defl[c, j, i]
-            S[3, 3 * j + i] = O.force[c, j, i]
+            B[_PEAK + 3 * j + i] = O.defl[c, j, i]
+            B[_FPEAK + 3 * j + i] = O.force[c, j, i]
         Q[8 + i] = O.sumsq[c, i]
     for j in range(n):
-        S[5, j] = O.min_load[c, j]
-        S[6, j] = O.max_load[c, j]
+        B[_LO + j] = O.min_load[c, j]
+        B[_HI + j] = O.max_load[c, j]
     for r in range(m):
-        S[1, r] = 0.0
-        S[2, r] = 0.0
-        S[7, r] = 0.0
+        B[_PREV + r] = 0.0
+        B[_PREV_RATE + r] = 0.0
+        B[_FLAG + r] = 0.0
     for q in range(p):
-        S[8, q] = O.p_viol[c, q]
-        S[9, q] = O.p_settle[c, q]
+        B[_VIOL + q] = O.p_viol[c, q]
+        B[_SETTLE + q] = O.p_settle[c, q]
     Q[0] = O.t_last[c]
     Q[1] = O.tol[c]
     Q[2] = O.h_interp[c]
@@ -135,28 +176,32 @@ def start(O, c, S, Q):
     Q[7] = O.last_viol[c]
     Q[11] = O.nobs[c]
     Q[12] = O.diverged[c]
+    k = O.rest_k[c]
+    Q[13] = O.rest[c, k, 1] + 1e-12 if k < O.rest_n[c] else np.inf
+    Q[14] = O.rest[c, k, 0] - 1e-12 if k < O.rest_n[c] else np.inf
 
 
 @njit(cache=True)
-def finish(O, c, S, Q):
-    """Write case ``c``'s running state from the scratch ``S``, ``Q`` back into the accumulators ``O``."""
+def finish(O, c, B, Q):
+    """Write case ``c``'s running state from the scratch ``B``, ``Q`` back into the accumulators ``O``."""
     p = O.poi.shape[1]
     n = O.force.shape[1]
+    nf = 3 * n
     for i in range(3):
-        O.u[c, i] = S[0, i]
-        O.th[c, i] = S[0, 3 + i]
+        O.u[c, i] = B[_PEAK + nf + i]
+        O.th[c, i] = B[_PEAK + nf + 3 + i]
         for q in range(p):
-            O.poi[c, q, i] = S[0, 6 + 3 * q + i]
+            O.poi[c, q, i] = B[_PEAK + nf + 6 + 3 * q + i]
         for j in range(n):
-            O.defl[c, j, i] = S[0, 6 + 3 * p + 3 * j + i]
-            O.force[c, j, i] = S[3, 3 * j + i]
+            O.defl[c, j, i] = B[_PEAK + 3 * j + i]
+            O.force[c, j, i] = B[_FPEAK + 3 * j + i]
         O.sumsq[c, i] = Q[8 + i]
     for j in range(n):
-        O.min_load[c, j] = S[5, j]
-        O.max_load[c, j] = S[6, j]
+        O.min_load[c, j] = B[_LO + j]
+        O.max_load[c, j] = B[_HI + j]
     for q in range(p):
-        O.p_viol[c, q] = S[8, q]
-        O.p_settle[c, q] = S[9, q]
+        O.p_viol[c, q] = B[_VIOL + q]
+        O.p_settle[c, q] = B[_SETTLE + q]
     O.last_t[c] = Q[3]
     O.rest_k[c] = int(Q[4])
     O.rest_tprev[c] = Q[6]
@@ -166,21 +211,25 @@ def finish(O, c, S, Q):
 
 
 @njit(cache=True, inline="always")
-def observe(c, t, x, step, G, KF, F0, tgt, rtgt, rest, ptol, S, V, Q, GZ):
-    """Update case ``c``'s peaks with the linear-level state ``x`` (12,) at time ``t`` (s), output sample
-    ``step``, the floor at rest, as ``engine.kernels.peaks.observe`` does.
+def observe(c, t, x, step, F0, tgt, rtgt, rest, ptol, B, Q, GZ):
+    """Update case ``c``'s peaks with the linear-level state ``x`` (12 + nz,) at time ``t`` (s), output
+    sample ``step``, the floor at rest, as ``engine.kernels.peaks.observe`` does.
 
-    ``G``, ``KF``, ``tgt``, ``rtgt``, ``GZ`` are the output map (:func:`build`), ``F0`` (C, n) the static
-    loads (N), ``rest`` (C, K, 2) the rest intervals (s) and ``ptol`` (C, p) the points' settling tolerances
-    (m) of ``engine.kernels.peaks.Peaks``. The case's running state lives in ``S`` (10, m): rows 0 the peaks,
-    1 and 2 the previous values and rates, 3 the force peaks and 4 the previous forces (3 n), 5 and 6 the
-    smallest and largest loads (n), 7 a flag, 8 and 9 each point's last violation and worst settling time (p);
-    and ``Q`` (13,): the last move's end, the settling tolerance, the longest interpolated interval, the last
-    output time, the rest-interval cursor and count, the last output time inside a rest interval, the last
-    violation, the sums of squares (3), the number of outputs and the divergence time. (:func:`start` and
-    :func:`finish` move them in and out of the accumulators.) ``V`` (9, m) is scratch. Rows are indexed, not
-    sliced: a view per call costs more than the arithmetic. Returns False (and keeps ``t`` as the divergence
-    time) when the state is not finite or has left any physically possible range.
+    ``tgt``, ``rtgt``, ``GZ`` are the output map (:func:`build`; its ``G`` and ``KF`` are in ``B``), ``F0``
+    (C, n) the static loads (N), ``rest`` (C, K, 2) the rest intervals (s) and ``ptol`` (C, p) the points'
+    settling tolerances (m) of ``engine.kernels.peaks.Peaks``. The case's map and running state live in
+    rows of the flat scratch ``B`` (:data:`SCRATCH`,), each :data:`STRIDE` long (``_G`` ... ``_BERN``
+    above: the peaks, the previous values and rates, the force peaks and previous forces (3 n), the
+    smallest and largest loads (n), a flag, each point's last violation and worst settling time (p), and
+    this output time's values, rates, forces and force cubics); ``Q`` (15,) holds the last move's end, the
+    settling tolerance, the longest interpolated interval, the last output time, the rest-interval cursor
+    and count, the last output time inside a rest interval, the last violation, the sums of squares (3),
+    the number of outputs, the divergence time, and the cursor's interval's end and start (s, +inf past
+    the last), so a step inside or between rest intervals checks one number each. (:func:`start` and
+    :func:`finish` move them in and out of the accumulators.) The loops over the outputs read and write
+    rows a fixed distance apart, so they run as vector loops; the closed-form solve between output times
+    runs only where a screen flagged an output. Returns False (and keeps ``t`` as the divergence time)
+    when the state is not finite or has left any physically possible range.
     """
     ok = True
     for i in range(3):
@@ -192,63 +241,76 @@ def observe(c, t, x, step, G, KF, F0, tgt, rtgt, rest, ptol, S, V, Q, GZ):
     n_pts = ptol.shape[1]
     n = F0.shape[1]
     m = 6 + 3 * n_pts + 3 * n
-    first_defl = 6 + 3 * n_pts
+    nf = 3 * n
+    # the loops over the outputs and the mount axes run to the next multiple of 8 (a vector's width):
+    # no scalar remainder; the entries past m and nf read zero rows of ``G`` and ``KF`` (the same m for
+    # every case of a batch) and keep zero, and the mounts' loop past nf computes zero forces
+    m8 = (m + 7) // 8 * 8
+    nf8 = (nf + 7) // 8 * 8
     settle = t >= Q[0] - 1e-12
     # the rest interval after a stage move that t falls in (time only increases: a cursor moves on)
     k = int(Q[4])
     nk = int(Q[5])
-    while k < nk and t > rest[c, k, 1] + 1e-12:
+    while t > Q[13]:  # past the end of the interval k (+inf when none is left)
         t0 = rest[c, k, 0]
         for q in range(n_pts):
-            v = S[8, q]
+            v = B[_VIOL + q]
             if v > -np.inf:
                 if v == Q[6]:
                     v = rest[c, k, 1]  # still outside at the interval's last output: its length
-                if v - t0 > S[9, q]:
-                    S[9, q] = v - t0
-                S[8, q] = -np.inf
+                if v - t0 > B[_SETTLE + q]:
+                    B[_SETTLE + q] = v - t0
+                B[_VIOL + q] = -np.inf
         k += 1
         Q[4] = k
-    in_rest = k < nk and t >= rest[c, k, 0] - 1e-12
+        Q[13] = rest[c, k, 1] + 1e-12 if k < nk else np.inf
+        Q[14] = rest[c, k, 0] - 1e-12 if k < nk else np.inf
+    in_rest = t >= Q[14]
     if in_rest:
         Q[6] = t
     h = t - Q[3]
     between = step > 0 and h > 0.0 and h <= Q[2]
     x0, x1, x2, x3, x4, x5 = x[0], x[1], x[2], x[3], x[4], x[5]
     v0, v1, v2, v3, v4, v5 = x[6], x[7], x[8], x[9], x[10], x[11]
-    # values and rates of every output (vectorised over the outputs)
-    for r in range(m):
-        g0, g1, g2, g3, g4, g5 = G[c, 0, r], G[c, 1, r], G[c, 2, r], G[c, 3, r], G[c, 4, r], G[c, 5, r]
-        V[0, r] = g0 * x0 + g1 * x1 + g2 * x2 + g3 * x3 + g4 * x4 + g5 * x5
-        V[1, r] = g0 * v0 + g1 * v1 + g2 * v2 + g3 * v3 + g4 * v4 + g5 * v5
+    # values and rates of every output
+    for r in range(m8):
+        g0, g1, g2 = B[_G + r], B[_G + STRIDE + r], B[_G + 2 * STRIDE + r]
+        g3, g4, g5 = B[_G + 3 * STRIDE + r], B[_G + 4 * STRIDE + r], B[_G + 5 * STRIDE + r]
+        B[_VAL + r] = g0 * x0 + g1 * x1 + g2 * x2 + g3 * x3 + g4 * x4 + g5 * x5
+        B[_RATE + r] = g0 * v0 + g1 * v1 + g2 * v2 + g3 * v3 + g4 * v4 + g5 * v5
     for j in range(GZ.shape[2]):  # the extra linear states (a flexible base's modes ...)
         zj = x[12 + j]
         for r in range(m):
-            V[0, r] += GZ[c, 0, j, r] * zj
-            V[1, r] += GZ[c, 1, j, r] * zj
+            B[_VAL + r] += GZ[c, 0, j, r] * zj
+            B[_RATE + r] += GZ[c, 1, j, r] * zj
     # peaks at the output times, and a flag on the outputs whose cubic's inner Bernstein control points
     # reach past them (the cubic stays in their hull: only those can peak between the output times)
     hth = h * ONE_THIRD
-    for r in range(m):
-        a = max(abs(V[0, r]), S[0, r])
-        S[0, r] = a
-        b1 = S[1, r] + hth * S[2, r]
-        b2 = V[0, r] - hth * V[1, r]
-        S[7, r] = max(abs(b1), abs(b2)) - a
+    flagged = 0
+    for r in range(m8):
+        val = B[_VAL + r]
+        a = max(abs(val), B[_PEAK + r])
+        B[_PEAK + r] = a
+        b1 = B[_PREV + r] + hth * B[_PREV_RATE + r]
+        b2 = val - hth * B[_RATE + r]
+        reach = max(abs(b1), abs(b2)) - a
+        B[_FLAG + r] = reach
+        if reach > 0.0:
+            flagged += 1
     # isolator forces -k delta - c delta' and their cubics: the deflection's Hermite cubic through the force
     # law, shifted linearly to meet the forces at both ends (as engine.kernels.peaks.observe)
-    nf = 3 * n
     inv_h = 1.0 / h if between else 0.0
-    for r in range(nf):
-        q = first_defl + r
-        kk = KF[c, 0, r]
-        cc = KF[c, 1, r] * inv_h
-        p0 = S[1, q]
-        m0 = S[2, q]
-        p1 = V[0, q]
-        m1 = V[1, q]
-        f = -kk * p1 - KF[c, 1, r] * m1
-        V[2, r] = f
+    forces_flagged = 0
+    for q in range(nf8):
+        kk = B[_KF + q]
+        cr = B[_KF + STRIDE + q]
+        cc = cr * inv_h
+        p0 = B[_PREV + q]
+        m0 = B[_PREV_RATE + q]
+        p1 = B[_VAL + q]
+        m1 = B[_RATE + q]
+        f = -kk * p1 - cr * m1
+        B[_FORCE + q] = f
         c1 = h * m0
         c2 = 3.0 * (p1 - p0) - h * (2.0 * m0 + m1)
         c3 = 2.0 * (p0 - p1) + h * (m0 + m1)
@@ -256,68 +318,84 @@ def observe(c, t, x, step, G, KF, F0, tgt, rtgt, rest, ptol, S, V, Q, GZ):
         a1 = -kk * c1 - cc * (2.0 * c2)
         a2 = -kk * c2 - cc * (3.0 * c3)
         a3 = -kk * c3
-        e0 = S[4, r] - a0
+        e0 = B[_FPREV + q] - a0
         e1 = f - (a0 + a1 + a2 + a3)
         a0 += e0
         a1 += e1 - e0
-        V[3, r] = a0
-        V[4, r] = a1
-        V[5, r] = a2
-        V[6, r] = a3
+        B[_CUBIC + q] = a0
+        B[_CUBIC + STRIDE + q] = a1
+        B[_CUBIC + 2 * STRIDE + q] = a2
+        B[_CUBIC + 3 * STRIDE + q] = a3
         b1 = a0 + a1 * ONE_THIRD
         b2 = b1 + (a1 + a2) * ONE_THIRD
-        V[7, r] = b1
-        V[8, r] = b2
-        S[3, r] = max(abs(f), S[3, r])
-    if between:
+        B[_BERN + q] = b1
+        B[_BERN + STRIDE + q] = b2
+        peak = max(abs(f), B[_FPEAK + q])
+        B[_FPEAK + q] = peak
+        if max(abs(b1), abs(b2)) > peak:
+            forces_flagged += 1
+    if between and flagged > 0:
         for r in range(m):
-            if S[7, r] > 0.0:
-                c0, c1, c2, c3 = hermite(S[1, r], S[2, r], V[0, r], V[1, r], h)
+            if B[_FLAG + r] > 0.0:
+                c0, c1, c2, c3 = hermite(B[_PREV + r], B[_PREV_RATE + r], B[_VAL + r], B[_RATE + r], h)
                 lo, hi = cubic_extremes(c0, c1, c2, c3)
                 if hi >= lo:
-                    S[0, r] = max(S[0, r], abs(lo), abs(hi))
+                    B[_PEAK + r] = max(B[_PEAK + r], abs(lo), abs(hi))
+    if between and forces_flagged > 0:
         for r in range(nf):
-            if max(abs(V[7, r]), abs(V[8, r])) > S[3, r]:
-                lo, hi = cubic_extremes(V[3, r], V[4, r], V[5, r], V[6, r])
+            if max(abs(B[_BERN + r]), abs(B[_BERN + STRIDE + r])) > B[_FPEAK + r]:
+                lo, hi = _force_extremes(B, r)
                 if hi >= lo:
-                    S[3, r] = max(S[3, r], abs(lo), abs(hi))
+                    B[_FPEAK + r] = max(B[_FPEAK + r], abs(lo), abs(hi))
     # the loads on the mounts: static plus the vertical force, their extremes between output times too
     for j in range(n):
         r = 3 * j + 2
         f0j = F0[c, j]
-        load = f0j + V[2, r]
-        lo = min(S[5, j], load)
-        hi = max(S[6, j], load)
-        if between and (f0j + min(V[7, r], V[8, r]) < lo or f0j + max(V[7, r], V[8, r]) > hi):
-            glo, ghi = cubic_extremes(V[3, r], V[4, r], V[5, r], V[6, r])
+        load = f0j + B[_FORCE + r]
+        lo = min(B[_LO + j], load)
+        hi = max(B[_HI + j], load)
+        b1, b2 = B[_BERN + r], B[_BERN + STRIDE + r]
+        if between and (f0j + min(b1, b2) < lo or f0j + max(b1, b2) > hi):
+            glo, ghi = _force_extremes(B, r)
             lo = min(lo, f0j + glo)
             hi = max(hi, f0j + ghi)
-        S[5, j] = lo
-        S[6, j] = hi
-    for r in range(m):
-        S[1, r] = V[0, r]
-        S[2, r] = V[1, r]
-    for r in range(nf):
-        S[4, r] = V[2, r]
+        B[_LO + j] = lo
+        B[_HI + j] = hi
+    for r in range(m8):
+        B[_PREV + r] = B[_VAL + r]
+        B[_PREV_RATE + r] = B[_RATE + r]
+    for r in range(nf8):
+        B[_FPREV + r] = B[_FORCE + r]
     # RMS of the c.g. displacement, settling of the c.g. and the points after the last move
     for i in range(3):
         Q[8 + i] += x[i] * x[i]
     Q[11] += 1.0
     if settle:
-        err = 0.0
-        for r in range(3):
-            err = max(err, abs(V[0, r] - tgt[c, r]))
-        for r in range(6, first_defl):
-            err = max(err, abs(V[0, r] - tgt[c, r]))
-        if err > Q[1]:
+        tol = Q[1]
+        outside = 0  # outputs beyond the settling band: a count, so the loops run as vector loops
+        for r in range(nf, nf + 3):
+            if abs(B[_VAL + r] - tgt[c, r]) > tol:
+                outside += 1
+        for r in range(nf + 6, m):
+            if abs(B[_VAL + r] - tgt[c, r]) > tol:
+                outside += 1
+        if outside > 0:
             Q[7] = t
     if in_rest:
         for q in range(n_pts):
             e = 0.0
             for i in range(3):
-                r = 6 + 3 * q + i
-                e = max(e, abs(V[0, r] - rtgt[c, k, r]))
+                r = nf + 6 + 3 * q + i
+                e = max(e, abs(B[_VAL + r] - rtgt[c, k, r]))
             if e > ptol[c, q]:
-                S[8, q] = t
+                B[_VIOL + q] = t
     Q[3] = t
     return True
+
+
+@njit(cache=True, inline="always")
+def _force_extremes(B, r):
+    """The extremes of mount axis ``r``'s force cubic strictly inside the last output interval (N)."""
+    return cubic_extremes(
+        B[_CUBIC + r], B[_CUBIC + STRIDE + r], B[_CUBIC + 2 * STRIDE + r], B[_CUBIC + 3 * STRIDE + r]
+    )

@@ -66,12 +66,14 @@ def pair_driver(method: int, level: int) -> Any:
         idx = np.zeros(P.sm.shape[1], dtype=np.int64)
         G, KF, tgt, rtgt, still, GZ = outmap
         m = G.shape[2]
-        # exact: a whole step inside one piece with no actuator, oscillator, recorded floor input or extra
-        # linear state takes the lean path (exact.full_step, which advances the base's 12 rows)
-        lean = not P.ffon and not osc and P.ft.shape[0] == 0 and nx == 12
-        Smap = np.zeros((10, max(m, 1)))  # the output map's running state and scratch (output_map.observe)
-        Vmap = np.zeros((9, max(m, 1)))
-        Qmap = np.zeros(13)
+        # exact: a whole step inside one piece with no actuator, recorded floor input or extra linear state
+        # takes the lean path (exact.free_step, which advances the base's 12 rows), for a case under no
+        # sine floor
+        lean = not P.ffon and P.ft.shape[0] == 0 and nx == 12
+        R = np.zeros(12 * (deg + 1))  # exact: the lean path's carried forced response (exact.free_step)
+        carried = False
+        Bmap = np.zeros(output_map.SCRATCH if m > 0 else 0)  # the output map's rows (output_map.observe)
+        Qmap = np.zeros(15)
         F0, rest, ptol = P.f0, O.rest, O.point_tol
         # RK4 at the nonlinear level without a recorded floor or feedforward actuators
         # (``rk4.lean_nonlinear``): the lean step, inlined here on views of the case's arrays made once per
@@ -83,9 +85,9 @@ def pair_driver(method: int, level: int) -> Any:
         for c in range(C):
             if status[c] != OK:
                 continue
-            linear = level != NONLINEAR and m > 0 and still[c] and O.slot[c] < 0
+            linear = level != NONLINEAR and 0 < m <= output_map.CAPACITY and still[c] and O.slot[c] < 0
             if linear:
-                output_map.start(O, c, Smap, Qmap)
+                output_map.start(O, c, G, KF, Bmap, Qmap)
             x[:] = 0.0
             if level == NONLINEAR:
                 x[3] = 1.0
@@ -94,11 +96,13 @@ def pair_driver(method: int, level: int) -> Any:
             h = dt[c]
             tol = 1e-6 * h
             passed = 0
+            carried = False
+            still_c = P.famp[c, 0] == 0.0 and P.famp[c, 1] == 0.0 and P.famp[c, 2] == 0.0
             piece_end = -np.inf  # the earliest start of a stage's next piece, s
             if method == RK4 and level == NONLINEAR:  # the lean step's arrays, once per case
                 V = rk4.nonlinear_views(P, c, W, x, S, idx, swt)
             if linear:
-                output_map.observe(c, 0.0, x, 0, G, KF, F0, tgt, rtgt, rest, ptol, Smap, Vmap, Qmap, GZ)
+                output_map.observe(c, 0.0, x, 0, F0, tgt, rtgt, rest, ptol, Bmap, Qmap, GZ)
             elif level == NONLINEAR:
                 observe_nonlinear(P, c, 0.0, x, W, O, first)
             else:
@@ -115,10 +119,14 @@ def pair_driver(method: int, level: int) -> Any:
                         piece_end = next_breakpoint(P, c, idx, np.inf, tol)
                     if method == EXACT:
                         tb = exact.next_split(ev, c, passed, t1, tol)
-                        if lean and tb == t1 and ta == t0 and not fresh:
-                            exact.full_step(ET, z, Fv, deg, t1 - t0)  # as exact.step shifts: bit for bit
+                        if lean and still_c and tb == t1 and ta == t0 and not fresh:
+                            if not carried:  # the piece's forced response, from the forcing at t0
+                                exact.forced_response(ET, Fv, deg, R)
+                                carried = True
+                            exact.free_step(ET, x, R, deg, t1 - t0)
                             ok = True
                         else:
+                            carried = False  # exact.step builds the forcing anew wherever it uses it
                             ok = exact.step(
                                 P,
                                 c,
@@ -157,9 +165,7 @@ def pair_driver(method: int, level: int) -> Any:
                     status[c] = FAILED
                     break
                 if linear:
-                    seen = output_map.observe(
-                        c, t1, x, k + 1, G, KF, F0, tgt, rtgt, rest, ptol, Smap, Vmap, Qmap, GZ
-                    )
+                    seen = output_map.observe(c, t1, x, k + 1, F0, tgt, rtgt, rest, ptol, Bmap, Qmap, GZ)
                 elif level == NONLINEAR:
                     seen = observe_nonlinear(P, c, t1, x, W, O, k + 1)
                 else:
@@ -168,7 +174,7 @@ def pair_driver(method: int, level: int) -> Any:
                     status[c] = UNSTABLE
                     break
             if linear:
-                output_map.finish(O, c, Smap, Qmap)
+                output_map.finish(O, c, Bmap, Qmap)
 
     return drive
 

@@ -205,7 +205,10 @@ def finish_settling(O: Peaks, t_end: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def observe(P, c, level, t, x, W, O, step):
-    """Update case ``c``'s peaks with the state ``x`` at time ``t`` (s), output sample ``step``.
+    """Update case ``c``'s peaks with the state ``x`` (12 + nz,) of a linear level (``level``: ``LTI`` or
+    ``LTV``) at time ``t`` (s), output sample ``step``: the general observer of a case under floor motion,
+    recorded, or with mounts on their own axes (the others go through ``engine.integrators.output_map``;
+    the nonlinear level has :func:`observe_nonlinear`).
 
     Returns False (and stores ``t`` in ``O.diverged``) when the state is not finite or has left any
     physically possible range.
@@ -247,16 +250,9 @@ def observe(P, c, level, t, x, W, O, step):
     between = step > 0 and h > 0.0 and h <= O.h_interp[c]
     inv_h = 1.0 / h if between else 0.0
     orient = P.orient  # a mount with its own axes: its force peaks at the output times (no per-axis cubic)
-    off = 7 if level == NONLINEAR else 6
-    nz = 0 if level == NONLINEAR else x.shape[0] - 12
-    if level == NONLINEAR:
-        # angular velocity in the floor frame: the rate of the rotation vector, linearised
-        wb0, wb1, wb2 = x[off + 3], x[off + 4], x[off + 5]
-        wf0 = W.R[0, 0] * wb0 + W.R[0, 1] * wb1 + W.R[0, 2] * wb2
-        wf1 = W.R[1, 0] * wb0 + W.R[1, 1] * wb1 + W.R[1, 2] * wb2
-        wf2 = W.R[2, 0] * wb0 + W.R[2, 1] * wb1 + W.R[2, 2] * wb2
-    else:
-        wf0, wf1, wf2 = x[off + 3], x[off + 4], x[off + 5]
+    off = 6  # the velocities
+    nz = x.shape[0] - 12  # the extra linear states
+    wf0, wf1, wf2 = x[off + 3], x[off + 4], x[off + 5]
     err = 0.0
     for i in range(3):
         a = max(abs(x[i]), O.u[c, i])
@@ -286,11 +282,12 @@ def observe(P, c, level, t, x, W, O, step):
             O.h_u[slot, step, i] = x[i]
             O.h_th[slot, step, i] = W.acc[i]
     v0, v1, v2 = x[off], x[off + 1], x[off + 2]
-    # points of interest: u + (R - I) d  (linear: u + theta x d); rate v + w x (R d)  (linear: v + w x d)
+    # points of interest: u + theta x d; rate v + w x d
+    th0, th1, th2 = W.acc[0], W.acc[1], W.acc[2]
     for p in range(P.pts.shape[1]):
         d0, d1, d2 = P.pts[c, p, 0], P.pts[c, p, 1], P.pts[c, p, 2]
-        r0, r1, r2 = mount_offset(level, x, W.R, d0, d1, d2)
-        q0, q1, q2 = _arm_rate(level, wf0, wf1, wf2, r0, r1, r2, d0, d1, d2)
+        r0, r1, r2 = cross(th0, th1, th2, d0, d1, d2)
+        q0, q1, q2 = cross(wf0, wf1, wf2, d0, d1, d2)
         # a material point moves with the base; a relative point (or a following error) only by ``zO``
         material = P.pr[c, p] != 0.0
         b0, b1, b2 = (u0, u1, u2) if material else (0.0, 0.0, 0.0)
@@ -338,8 +335,8 @@ def observe(P, c, level, t, x, W, O, step):
     for j in range(P.d.shape[1]):
         d0, d1, d2 = P.d[c, j, 0], P.d[c, j, 1], P.d[c, j, 2]
         # deflection of the mount from its static state: the base's mount point minus the floor under it
-        r0, r1, r2 = mount_offset(level, x, W.R, d0, d1, d2)
-        q0, q1, q2 = _arm_rate(level, wf0, wf1, wf2, r0, r1, r2, d0, d1, d2)
+        r0, r1, r2 = cross(th0, th1, th2, d0, d1, d2)
+        q0, q1, q2 = cross(wf0, wf1, wf2, d0, d1, d2)
         sky = P.sky[c, j]
         load = P.f0[c, j] + W.F[j, 2]
         lo = load
