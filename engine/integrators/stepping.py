@@ -66,10 +66,11 @@ def pair_driver(method: int, level: int) -> Any:
         idx = np.zeros(P.sm.shape[1], dtype=np.int64)
         G, KF, tgt, rtgt, still, GZ = outmap
         m = G.shape[2]
-        # exact: a whole step inside one piece with no actuator, recorded floor input or extra linear state
-        # takes the lean path (exact.free_step, which advances the base's 12 rows), for a case under no
-        # sine floor
-        lean = not P.ffon and P.ft.shape[0] == 0 and nx == 12
+        # exact: a whole step inside one piece with no recorded floor input or extra linear state takes the
+        # lean path (exact.free_step, which advances the base's 12 rows), for a case under no sine floor and
+        # with no feedforward actuator: chosen per case, so that a case's result does not depend on the
+        # other cases of its batch (the lean path equals the general one to round-off, not bit for bit)
+        lean = P.ft.shape[0] == 0 and nx == 12
         R = np.zeros(12 * (deg + 1))  # exact: the lean path's carried forced response (exact.free_step)
         carried = False
         Bmap = np.zeros(output_map.SCRATCH if m > 0 else 0)  # the output map's rows (output_map.observe)
@@ -97,7 +98,11 @@ def pair_driver(method: int, level: int) -> Any:
             tol = 1e-6 * h
             passed = 0
             carried = False
-            still_c = P.famp[c, 0] == 0.0 and P.famp[c, 1] == 0.0 and P.famp[c, 2] == 0.0
+            lean_c = lean and P.famp[c, 0] == 0.0 and P.famp[c, 1] == 0.0 and P.famp[c, 2] == 0.0
+            if P.ffon:
+                for i in range(P.ffg.shape[1]):
+                    if P.ffg[c, i] != 0.0:
+                        lean_c = False  # the case's feedforward actuators: the general step
             piece_end = -np.inf  # the earliest start of a stage's next piece, s
             if method == RK4 and level == NONLINEAR:  # the lean step's arrays, once per case
                 V = rk4.nonlinear_views(P, c, W, x, S, idx, swt)
@@ -119,7 +124,7 @@ def pair_driver(method: int, level: int) -> Any:
                         piece_end = next_breakpoint(P, c, idx, np.inf, tol)
                     if method == EXACT:
                         tb = exact.next_split(ev, c, passed, t1, tol)
-                        if lean and still_c and tb == t1 and ta == t0 and not fresh:
+                        if lean_c and tb == t1 and ta == t0 and not fresh:
                             if not carried:  # the piece's forced response, from the forcing at t0
                                 exact.forced_response(ET, Fv, deg, R)
                                 carried = True

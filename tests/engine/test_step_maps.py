@@ -125,15 +125,20 @@ def test_linear_output_map_gives_the_general_observers_peaks() -> None:
 
 def test_a_cases_results_do_not_depend_on_its_batch() -> None:
     """A case alone and beside a case under a sine floor motion (which takes the dense exponential and the
-    general observer) gives bit-identical results: every path is chosen per case."""
+    general observer) and one on feedforward actuators (the general step) gives bit-identical results:
+    every path is chosen per case, so a study's case equals the case run alone whatever chunk it runs in."""
     from tests.engine.scenes import scene, y_stage
 
     still = scene(stages=[y_stage()], duration=1.0)
     shaken = scene(stages=[y_stage()], duration=1.0, floor_amp=(0.0, 0.0, 1e-5), floor_freq=(0.0, 0.0, 7.0))
+    fed = scene(stages=[y_stage()], duration=1.0)
+    fed.iso_ff_gain[:] = 0.8
+    fed.iso_ff_bandwidth[:] = 30.0
     for fidelity, integrator in (("lti", "exact"), ("ltv", "rk4")):
         alone = simulate(still, fidelity, integrator, dt=1e-3)
-        mixed = simulate(concat([still, shaken]), fidelity, integrator, dt=1e-3)
+        mixed = simulate(concat([still, shaken, fed]), fidelity, integrator, dt=1e-3)
         assert mixed.peak_displacement[1, 2] > 0.5e-5  # the floor does shake the second case
+        assert mixed.peak_displacement[2, 1] < 0.9 * mixed.peak_displacement[0, 1]  # the actuators do act
         for name in ("peak_displacement", "peak_point_displacement", "peak_isolator_force", "settling_time"):
             a, b = np.asarray(getattr(alone, name))[0], np.asarray(getattr(mixed, name))[0]
             assert np.array_equal(a, b), (fidelity, integrator, name)
