@@ -60,6 +60,7 @@ from isolab.studies.run.error_estimate import (
     output_errors,
     reference_pair,
     sizing_error,
+    valve_dead_band,
 )
 
 CANDIDATE_STEPS = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3)
@@ -211,6 +212,8 @@ def choose_for_batch(
     if states:
         levels = SERVO_LEVELS if len(batch.servo_stages) else SLOT_LEVELS  # a servo stage: lti only
         pairs = [p for p in pairs if p[0] in levels and p[1] in SLOT_INTEGRATORS]
+        if valve_dead_band(batch):
+            pairs = [p for p in pairs if p[1] != "exact"]  # a valve's dead band: stepped, not mapped
     truth_name = "/".join(truth_pair)
     truth: SimulationResult | SimpleNamespace = simulate(batch, *truth_pair, dt=fine, auto_step=auto_step)
     usable = np.flatnonzero(truth.status == OK)
@@ -350,10 +353,11 @@ def _take_result(result: Any, index: np.ndarray) -> SimpleNamespace:
 
 def pilot_cases(study: Study, limit: int = PILOT_LIMIT, seed: int = 0) -> list[int]:
     """Cases of ``study`` to measure candidates on, found by a cheap screening run (lti, exact at
-    :data:`SCREEN_STEP`, over at most :data:`SCREEN_LIMIT` cases, seeded). In order of priority: per group
-    of categorical values (isolator types), the case that rotates most (the hardest for the cheaper
-    levels); the case whose fastest mode is the fastest (the hardest for a fixed step); the case that moves
-    most; the case with the least damped mode (the longest ringing). At most ``limit`` cases, sorted."""
+    :data:`SCREEN_STEP`, rk4 under a levelling valve's dead band, which exact does not step; over at most
+    :data:`SCREEN_LIMIT` cases, seeded). In order of priority: per group of categorical values (isolator
+    types), the case that rotates most (the hardest for the cheaper levels); the case whose fastest mode is
+    the fastest (the hardest for a fixed step); the case that moves most; the case with the least damped
+    mode (the longest ringing). At most ``limit`` cases, sorted."""
     groups = case_groups(study)
     n = study.n_cases
     if n <= SCREEN_LIMIT:
@@ -362,7 +366,8 @@ def pilot_cases(study: Study, limit: int = PILOT_LIMIT, seed: int = 0) -> list[i
         rng = np.random.default_rng(seed)
         firsts = [g[0] for g in groups.values()]
         screen = np.unique(np.concatenate([firsts, rng.choice(n, SCREEN_LIMIT, replace=False)]))
-    r = simulate(study.batch(screen), "lti", "exact", dt=SCREEN_STEP)
+    batch = study.batch(screen)
+    r = simulate(batch, "lti", "rk4" if valve_dead_band(batch) else "exact", dt=SCREEN_STEP)
     ok = r.status == OK
     if not ok.any():
         return sorted({int(g[0]) for g in groups.values()})[:limit]

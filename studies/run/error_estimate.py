@@ -165,14 +165,19 @@ def component_errors(
     return out
 
 
+def valve_dead_band(batch: SceneBatch) -> bool:
+    """Whether some case of ``batch`` has a levelling valve with a dead band: a nonlinearity only the
+    stepping integrators (rk4) take, not exact's linear maps."""
+    return bool(np.any((np.asarray(batch.iso_valve) >= 0) & (np.asarray(batch.iso_level_band) > 0)))
+
+
 def reference_pair(batch: SceneBatch) -> tuple[str, str]:
     """The fidelity and integrator ``batch``'s errors are measured against: :data:`REFERENCE_PAIR`, or the
     best pair that models the scene's extra linear states where it has some (:data:`SERVO_REFERENCE_PAIR`
     with a stage on a servo, :data:`SERVO_DEAD_BAND_REFERENCE_PAIR` when a levelling valve also has a dead
     band, else :data:`STATES_REFERENCE_PAIR`)."""
     if len(batch.servo_stages):
-        banded = np.any((np.asarray(batch.iso_valve) >= 0) & (np.asarray(batch.iso_level_band) > 0))
-        return SERVO_DEAD_BAND_REFERENCE_PAIR if banded else SERVO_REFERENCE_PAIR
+        return SERVO_DEAD_BAND_REFERENCE_PAIR if valve_dead_band(batch) else SERVO_REFERENCE_PAIR
     if model.linear_slot(batch).A.shape[1]:
         return STATES_REFERENCE_PAIR
     return REFERENCE_PAIR

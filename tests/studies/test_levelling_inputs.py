@@ -105,7 +105,6 @@ def test_levelling_on_a_mount_that_is_not_air_and_unmodelled_choices_are_refused
     for sim, words in (
         ({"fidelity": "nonlinear"}, "simulation.fidelity: levelling valves"),
         ({"integrator": "euler"}, "simulation.integrator: levelling valves"),
-        ({"accuracy": "fast", "fidelity": None, "integrator": None, "dt": None}, "simulation.accuracy"),
     ):
         data = mounts_levelling(LEV, None, None, None)
         data["simulation"].update(sim)
@@ -156,3 +155,34 @@ def test_the_cost_model_knows_the_valves_extra_states() -> None:
     plain = validate_study(study(mounts_levelling(None, None, None, None)))
     per_step = [estimate_seconds_per_case(s) - CASE_OVERHEAD for s in (levelled, plain)]
     assert per_step[0] / per_step[1] == pytest.approx(LEVELLING_STEP_FACTOR[("ltv", "rk4")], rel=1e-12)
+
+
+@pytest.mark.parametrize("dead_band", [None, "5 um"])
+def test_the_accuracy_chooser_picks_a_pair_that_steps_the_valves(dead_band: str | None) -> None:
+    """An accuracy request on a scene with levelling valves: the truth is ltv/rk4 at the finest step, the
+    candidates are the pairs that model the valves (exact not under a dead band, which it does not step),
+    and the chosen model's measured error on the pilot cases is within the tolerance."""
+    from isolab.studies.run.accuracy import choose_for_batch, pilot_cases
+
+    spec = LEV if dead_band is None else {**LEV, "dead_band": dead_band}
+    data = mounts_levelling(spec, spec, None, None)
+    data["simulation"] = {"tolerance": "2 %", "duration": "6 s"}
+    scene = load_scene(data)
+    assert scene.simulation.fidelity is None  # a request, not a model
+    batch, _ = scene_batch(scene)
+    choice = choose_for_batch(batch, 0.02, steps=(2e-4, 1e-3, 5e-3))
+    tried = {(row["fidelity"], row["integrator"]) for row in choice.pilot}
+    allowed = {("lti", "rk4"), ("ltv", "rk4")} | (set() if dead_band else {("lti", "exact")})
+    assert tried <= allowed and (choice.fidelity, choice.integrator) in allowed
+    assert "ltv/rk4" in choice.reason and "nonlinear" not in choice.reason
+    chosen = [
+        r
+        for r in choice.pilot
+        if (r["fidelity"], r["integrator"], r["dt"]) == (choice.fidelity, choice.integrator, choice.dt)
+    ]
+    assert chosen and chosen[0]["meets"] and 0.0 <= chosen[0]["error"] <= 0.02
+    # the screening run that picks a study's pilot cases steps a dead band too
+    study = validate_study(
+        {"name": "lev", "scene": data, "parameters": [{"path": "stages.y.mass", "values": ["500 kg", "1 t"]}]}
+    )
+    assert pilot_cases(study) in ([0], [1], [0, 1])

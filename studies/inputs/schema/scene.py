@@ -163,7 +163,8 @@ class Scene(InputModel):
 
     @model_validator(mode="after")
     def _levelling_simulation(self) -> Scene:
-        """Levelling valves are stepped at lti and ltv by rk4 or exact, a dead band by rk4 alone."""
+        """Levelling valves are stepped at lti and ltv by rk4 or exact (a dead band by rk4 alone: the engine
+        refuses it at exact, and the accuracy chooser leaves exact out)."""
         iso = self.isolators
         blocks = [(f"{isolator_group(LEVELLING)}", iso.levelling)] + [
             (f"{mount(j)}.{LEVELLING}", m.levelling) for j, m in enumerate(iso.listed)
@@ -173,13 +174,6 @@ class Scene(InputModel):
             return self
         sim = self.simulation
         where = given[0][0]
-        if sim.request is not None:
-            key = "accuracy" if sim.accuracy is not None else "tolerance"
-            raise ValueError(
-                f"simulation.{key}: the accuracy chooser does not choose a model for levelling valves "
-                f"({where}) yet (a dead band is stepped by rk4 alone); choose the fidelity "
-                f"({' or '.join(LEVELLING_LEVELS)}) and the integrator ({' or '.join(LEVELLING_INTEGRATORS)})"
-            )
         if sim.fidelity not in (None, *LEVELLING_LEVELS):
             raise ValueError(
                 f"simulation.fidelity: levelling valves ({where}) are modelled at the "
