@@ -305,23 +305,30 @@ def _forcing_poly(P, c, t, idx, W, deg, Fv):
 
 
 @njit(cache=True, inline="always")
+def taylor_shift(V, n, deg, h):
+    """Carry a polynomial of degree ``deg`` (<= 3) in time forward by ``h`` s, exactly: ``V`` holds its
+    ``n`` values, then their first, second and third time derivatives (``n`` each, up to ``deg``)."""
+    for i in range(n):
+        if deg >= 1:
+            v1 = V[n + i]
+            if deg >= 2:
+                v2 = V[2 * n + i]
+                if deg >= 3:
+                    v3 = V[3 * n + i]
+                    V[i] += h * (v1 + h * (0.5 * v2 + h * v3 / 6.0))
+                    V[n + i] = v1 + h * (v2 + 0.5 * h * v3)
+                    V[2 * n + i] = v2 + h * v3
+                else:
+                    V[i] += h * (v1 + 0.5 * h * v2)
+                    V[n + i] = v1 + h * v2
+            else:
+                V[i] += h * v1
+
+
+@njit(cache=True, inline="always")
 def _shift(Fv, deg, h):
     """Carry the forcing derivatives ``F0..F_deg`` (6 each) of a polynomial piece forward by ``h`` s."""
-    for i in range(6):
-        if deg >= 1:
-            f1 = Fv[6 + i]
-            if deg >= 2:
-                f2 = Fv[12 + i]
-                if deg >= 3:
-                    f3 = Fv[18 + i]
-                    Fv[i] += h * (f1 + h * (0.5 * f2 + h * f3 / 6.0))
-                    Fv[6 + i] = f1 + h * (f2 + 0.5 * h * f3)
-                    Fv[12 + i] = f2 + h * f3
-                else:
-                    Fv[i] += h * (f1 + 0.5 * h * f2)
-                    Fv[6 + i] = f1 + h * f2
-            else:
-                Fv[i] += h * f1
+    taylor_shift(Fv, 6, deg, h)
     off = 6 * (deg + 1)
     m = (Fv.shape[0] - off) // 2  # the stages' accelerations ramp with their jerks (with extra states)
     for q in range(m):
@@ -440,21 +447,7 @@ def free_step(ET, x, R, deg, h):
         a11 += ET[j, 11] * xj
     x[0], x[1], x[2], x[3], x[4], x[5] = a0, a1, a2, a3, a4, a5
     x[6], x[7], x[8], x[9], x[10], x[11] = a6, a7, a8, a9, a10, a11
-    for i in range(12):
-        if deg >= 1:
-            r1 = R[12 + i]
-            if deg >= 2:
-                r2 = R[24 + i]
-                if deg >= 3:
-                    r3 = R[36 + i]
-                    R[i] += h * (r1 + h * (0.5 * r2 + h * r3 / 6.0))
-                    R[12 + i] = r1 + h * (r2 + 0.5 * h * r3)
-                    R[24 + i] = r2 + h * r3
-                else:
-                    R[i] += h * (r1 + 0.5 * h * r2)
-                    R[12 + i] = r1 + h * r2
-            else:
-                R[i] += h * r1
+    taylor_shift(R, 12, deg, h)
 
 
 @njit(cache=True, inline="always")

@@ -302,27 +302,16 @@ def assemble_dataset(
     if run.spreads:  # a monte_carlo design: the probability of meeting the criteria within tolerances
         ds = add_reliability(ds, run.spreads, run.design_spec.sampling or "sobol")
     if estimate is not None:
-        ds = add_error_estimate(
-            ds,
-            estimate.values,
-            worst_case=estimate.worst_case,
-            cases=estimate.cases,
-            excluded=estimate.excluded,
-            method=estimate.method,
-            meaning=OUTPUT_MEANING,
-            units=OUTPUT_UNITS,
-        )
+        ds = with_estimate(ds, estimate)
     store.write_dataset(study_id, ds, staged=estimate is None)  # a streamed one: chunk by chunk
     return n_failed
 
 
-def estimate_dataset(estimate: ErrorEstimate) -> xr.Dataset:
-    """The variables and attributes a study's error ``estimate`` adds to its dataset
-    (:func:`studies.results.dataset.add_error_estimate`), alone."""
-    import xarray as xr
-
+def with_estimate(ds: xr.Dataset, estimate: ErrorEstimate) -> xr.Dataset:
+    """``ds`` with the variables and attributes of a study's error ``estimate``
+    (:func:`studies.results.dataset.add_error_estimate`)."""
     return add_error_estimate(
-        xr.Dataset(),
+        ds,
         estimate.values,
         worst_case=estimate.worst_case,
         cases=estimate.cases,
@@ -331,6 +320,13 @@ def estimate_dataset(estimate: ErrorEstimate) -> xr.Dataset:
         meaning=OUTPUT_MEANING,
         units=OUTPUT_UNITS,
     )
+
+
+def estimate_dataset(estimate: ErrorEstimate) -> xr.Dataset:
+    """The variables and attributes a study's error ``estimate`` adds to its dataset, alone."""
+    import xarray as xr
+
+    return with_estimate(xr.Dataset(), estimate)
 
 
 def finish_study(
