@@ -171,6 +171,17 @@ async def compare(
     return ProductComparison(**answer)
 
 
+def refuse_tuning(request: ComparisonRequest, what: str) -> None:
+    """A 422 naming ``tune`` when ``request`` asks to tune the isolators of an answer that ``what`` (the
+    answer, in words: "the floor plot draws") the isolators as the scene gives them."""
+    if getattr(request, "tune", False):
+        raise invalid(
+            ["body", "tune"],
+            f"{what} the isolators as the scene gives them; tune them with POST /comparisons and write the "
+            "tuning into the scene",
+        )
+
+
 @router.post(
     "/comparisons/floor.png",
     response_class=Response,
@@ -192,12 +203,7 @@ async def floor_png(
     one line per isolator type, against the VC-A .. VC-G curves (log-log, um/s): a PNG. Steady state at
     the ``lti`` level, nothing is integrated
     (:func:`isolab.studies.answers.floor_response.velocity_spectra`)."""
-    if getattr(request, "tune", False):
-        raise invalid(
-            ["body", "tune"],
-            "the floor plot draws the isolators as the scene gives them; tune them with POST /comparisons "
-            "and write the tuning into the scene",
-        )
+    refuse_tuning(request, "the floor plot draws")
     spectra = await run_heavy(
         http,
         velocity_spectra,
@@ -231,12 +237,7 @@ async def floor_spectra(
     band, the VC-A .. VC-G curves (and the ISO 2631-2 lines) and the curve each point's velocity criterion
     names: what the page's floor view draws (:func:`isolab.studies.answers.floor_response.point_spectra`).
     Steady state at the ``lti`` level; the comparison's tolerance fields are not used."""
-    if request.tune:
-        raise invalid(
-            ["body", "tune"],
-            "the floor spectra are of the isolators as the scene gives them; tune them with POST "
-            "/comparisons and write the tuning into the scene",
-        )
+    refuse_tuning(request, "the floor spectra are of")
     return await run_heavy(
         http, point_spectra, request.scene, request.isolator_types, simulation=request.simulation
     )
