@@ -81,15 +81,17 @@ def chunk_parts(design: Design, chunks: list[np.ndarray], failed_chunk: int | No
     return parts
 
 
-def in_memory(parts: dict, chunks: list[np.ndarray], design: Design) -> xr.Dataset:
+def in_memory(parts: dict, chunks: list[np.ndarray], design: Design, estimate: bool = True) -> xr.Dataset:
     """The dataset as the runner built it whole before it streamed (from_chunks, to_dataset, criteria,
-    error estimate)."""
+    and the error estimate unless ``estimate`` is False)."""
     result = from_chunks(parts, chunks, n_isolators=len(ISOLATORS), n_points=len(POINTS))
-    ds = to_dataset(result, design, isolator_names=ISOLATORS, point_names=POINTS, attrs=ATTRS)
-    return add_error_estimate(add_criteria(ds, CRITERIA), **ESTIMATE)
+    ds = add_criteria(
+        to_dataset(result, design, isolator_names=ISOLATORS, point_names=POINTS, attrs=ATTRS), CRITERIA
+    )
+    return add_error_estimate(ds, **ESTIMATE) if estimate else ds
 
 
-def streamed(parts: dict, chunks: list[np.ndarray], design: Design) -> xr.Dataset:
+def streamed(parts: dict, chunks: list[np.ndarray], design: Design, estimate: bool = True) -> xr.Dataset:
     ds = streamed_dataset(
         parts.__getitem__,
         chunks,
@@ -99,7 +101,7 @@ def streamed(parts: dict, chunks: list[np.ndarray], design: Design) -> xr.Datase
         attrs=ATTRS,
         criteria=CRITERIA,
     )
-    return add_error_estimate(ds, **ESTIMATE)
+    return add_error_estimate(ds, **ESTIMATE) if estimate else ds
 
 
 def written(ds: xr.Dataset, path: Path) -> xr.Dataset:
@@ -226,21 +228,7 @@ def test_a_dataset_staged_then_given_its_error_estimate_equals_the_one_written_w
     chunks = [np.arange(s, min(s + 2000, n)) for s in range(0, n, 2000)]
     parts = chunk_parts(design, chunks, failed_chunk=1)
     whole = written(in_memory(parts, chunks, design), tmp_path / "whole.nc")
-    if how == "in memory":
-        result = from_chunks(parts, chunks, n_isolators=len(ISOLATORS), n_points=len(POINTS))
-        bulk = add_criteria(
-            to_dataset(result, design, isolator_names=ISOLATORS, point_names=POINTS, attrs=ATTRS), CRITERIA
-        )
-    else:
-        bulk = streamed_dataset(
-            parts.__getitem__,
-            chunks,
-            design,
-            isolator_names=ISOLATORS,
-            point_names=POINTS,
-            attrs=ATTRS,
-            criteria=CRITERIA,
-        )
+    bulk = (in_memory if how == "in memory" else streamed)(parts, chunks, design, estimate=False)
     store = Store(tmp_path / "store")
     sid = "ab" * 16
     store.write_dataset(sid, bulk, staged=True)
