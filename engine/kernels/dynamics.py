@@ -48,7 +48,7 @@ from isolab.engine.kernels.cached_terms import (
 )
 from isolab.engine.kernels.mounts import mount_offset
 from isolab.engine.kernels.params import LTI, LTV, NONLINEAR
-from isolab.engine.kernels.rotations import cross
+from isolab.engine.kernels.rotations import cross, quat_matrix
 
 
 @njit(cache=True)
@@ -152,17 +152,8 @@ def accel_nonlinear(P, c, x, W):
 def nonlinear_acc(x, tc, cc, cm, R, F, acc, g, pbase):
     """:func:`accel_nonlinear` on the workspace's arrays (``R`` (3, 3), ``F`` (n, 3) scratch; the packed
     case ``cc``, ``cm``)."""
-    # quat_to_matrix(x[3:7], R), without the slice
     qw, qx, qy, qz = x[3], x[4], x[5], x[6]
-    R[0, 0] = 1 - 2 * (qy * qy + qz * qz)
-    R[0, 1] = 2 * (qx * qy - qw * qz)
-    R[0, 2] = 2 * (qx * qz + qw * qy)
-    R[1, 0] = 2 * (qx * qy + qw * qz)
-    R[1, 1] = 1 - 2 * (qx * qx + qz * qz)
-    R[1, 2] = 2 * (qy * qz - qw * qx)
-    R[2, 0] = 2 * (qx * qz - qw * qy)
-    R[2, 1] = 2 * (qy * qz + qw * qx)
-    R[2, 2] = 1 - 2 * (qx * qx + qy * qy)
+    quat_matrix(qw, qx, qy, qz, R)
     u0, u1, u2 = x[0], x[1], x[2]
     v0, v1, v2 = x[7], x[8], x[9]
     w0, w1, w2 = x[10], x[11], x[12]

@@ -35,7 +35,7 @@ from isolab.engine.kernels.between_steps import (
 from isolab.engine.kernels.excitation import floor_motion, recorded_floor
 from isolab.engine.kernels.mounts import isolator_forces, mount_force, mount_offset
 from isolab.engine.kernels.params import NONLINEAR, borrowed
-from isolab.engine.kernels.rotations import cross
+from isolab.engine.kernels.rotations import cross, quat_matrix
 
 Peaks = namedtuple(
     "Peaks",
@@ -448,17 +448,7 @@ def observe_nonlinear(P, c, t, x, W, O, step):
     target, sumsq, nobs, last_viol, last_t = b(O.target), b(O.sumsq), b(O.nobs), b(O.last_viol), b(O.last_t)
     slot = O.slot[c]
     qw, qx, qy, qz = x[3], x[4], x[5], x[6]
-    R[0, 0] = 1 - 2 * (qy * qy + qz * qz)
-    R[0, 1] = 2 * (qx * qy - qw * qz)
-    R[0, 2] = 2 * (qx * qz + qw * qy)
-    R[1, 0] = 2 * (qx * qy + qw * qz)
-    R[1, 1] = 1 - 2 * (qx * qx + qz * qz)
-    R[1, 2] = 2 * (qy * qz - qw * qx)
-    R[2, 0] = 2 * (qx * qz - qw * qy)
-    R[2, 1] = 2 * (qy * qz + qw * qx)
-    R[2, 2] = 1 - 2 * (
-        qx * qx + qy * qy
-    )  # R and the rotation vector th: ``quat_to_matrix``, ``quat_to_rotvec``
+    quat_matrix(qw, qx, qy, qz, R)  # R and the rotation vector th: ``quat_to_rotvec``
     sn = np.sqrt(qx * qx + qy * qy + qz * qz)
     sign = 1.0
     if qw < 0.0:

@@ -18,10 +18,10 @@ def cross(a0, a1, a2, b0, b1, b2):
     return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
 
 
-@njit(cache=True)
-def quat_to_matrix(q, R):
-    """Rotation matrix (body to floor) of the unit quaternion ``q = (w, x, y, z)`` into ``R`` (3, 3)."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
+@njit(cache=True, inline="always")
+def quat_matrix(w, x, y, z, R):
+    """Rotation matrix (body to floor) of the unit quaternion ``(w, x, y, z)`` into ``R`` (3, 3); its four
+    numbers are given, so a state's are read without slicing it."""
     R[0, 0] = 1 - 2 * (y * y + z * z)
     R[0, 1] = 2 * (x * y - w * z)
     R[0, 2] = 2 * (x * z + w * y)
