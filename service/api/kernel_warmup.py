@@ -7,8 +7,9 @@ service instead hands the workers the warm-up, in the background (``/health`` an
 1. on an empty cache, one task per pair the example studies use (and the reference pair every error
    estimate reruns), spread over the workers, compiles it and saves it in the machine's kernel cache, so
    each kernel compiles once, on one worker;
-2. then one task pinned to each worker loads them all from the cache, imports the studies and builds the
-   engine's structures, so a worker's first chunk starts computing at once.
+2. then one task pinned to each worker loads them all from the cache, imports the studies and the libraries
+   that write a study's dataset and builds the engine's structures, so a worker's first chunk starts
+   computing at once and its first study's dataset is assembled without waiting for imports.
 
 The warm-up tasks run at a priority below every study task: a study submitted meanwhile runs first, and
 its chunk compiles (or loads) what it needs itself, as without the warm-up. ``ISOLAB_KERNEL_WARMUP=off``
@@ -159,6 +160,7 @@ class KernelWarmup:
                 client.submit(
                     warm_kernels,
                     pairs,
+                    datasets=True,
                     pure=False,
                     priority=WARMUP_PRIORITY,
                     workers=[address],

@@ -48,6 +48,12 @@ def test_a_dashboard_port_in_use_gives_no_dashboard_and_the_address_is_loopback(
     assert free_dashboard_address(port) == f"127.0.0.1:{port}"
 
 
+def _worker_setting(key: str) -> object:
+    import dask
+
+    return dask.config.get(key)
+
+
 @pytest.mark.slow
 def test_by_default_the_scheduler_serves_no_dashboard_and_only_on_loopback(tmp_path: Path) -> None:
     # 8787 held by another program on every interface: Dask used to warn it was in use and take another
@@ -71,6 +77,9 @@ def test_by_default_the_scheduler_serves_no_dashboard_and_only_on_loopback(tmp_p
             # no page of the dashboard or of the scheduler's own information (task keys hold study ids)
             for page in ("/status", "/info/main/workers.html", "/json/identity.json", "/metrics"):
                 assert httpx.get(f"{base}{page}", timeout=10).status_code == 404, page
+            # no dashboard, no profiler: the workers sample no stacks, and their housekeeping is slowed
+            assert set(client.run(_worker_setting, "distributed.worker.profile.enabled").values()) == {False}
+            assert set(client.run(_worker_setting, "distributed.admin.tick.interval").values()) == {"1s"}
         finally:
             stop_dask(client, cluster)
 
@@ -82,6 +91,8 @@ def test_with_a_port_set_the_dashboard_listens_on_loopback_alone(tmp_path: Path)
     try:
         assert http_addresses(cluster) == [("127.0.0.1", port)]
         assert httpx.get(f"http://127.0.0.1:{port}/info/main/workers.html", timeout=10).status_code == 200
+        # the dashboard shows the workers' profiles: they are sampled
+        assert set(client.run(_worker_setting, "distributed.worker.profile.enabled").values()) == {True}
     finally:
         stop_dask(client, cluster)
 

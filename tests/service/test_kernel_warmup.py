@@ -46,6 +46,8 @@ class StubClient:
             return self.pool.submit(lambda: ([("lti", "exact"), ("ltv", "rk4"), REFERENCE_PAIR], self.cached))
         assert func is kernel_warmup.warm_kernels
         assert kw["priority"] < -1e6, "the warm-up goes after every study task"
+        # each worker's own task also imports what writes a study's dataset (its first finish waits less)
+        assert kw.get("datasets", False) is (workers is not None)
 
         def warm() -> dict[str, float]:
             self.release.wait(30)
