@@ -165,3 +165,23 @@ def test_the_warm_up_can_be_turned_off(monkeypatch):
     warmup = KernelWarmup()
     warmup.start(client)
     assert warmup.state == "off" and not warmup.busy and warmup.note() is None and not client.calls
+
+
+def test_a_workers_warm_up_writes_a_dataset_first_and_leaves_no_file(tmp_path, monkeypatch):
+    # a fresh process: the first dataset it writes loads xarray's array-library lookups and the netCDF
+    # backend; after the warm-up those are loaded, and its temporary folder is gone
+    import subprocess
+
+    script = (
+        "import sys, tempfile\n"
+        "from isolab.studies.run.kernel_cache import warm_datasets\n"
+        "before = {m for m in ('xarray', 'netCDF4') if m in sys.modules}\n"
+        "warm_datasets()\n"
+        "print(sorted(before), 'xarray' in sys.modules, 'netCDF4' in sys.modules)\n"
+    )
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    out = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=True
+    )
+    assert out.stdout.split() == ["[]", "True", "True"], out.stdout + out.stderr
+    assert list(tmp_path.iterdir()) == []
