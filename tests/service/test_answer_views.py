@@ -16,13 +16,12 @@ import xarray as xr
 from fastapi.testclient import TestClient
 
 from isolab.engine import simulate
-from isolab.service.api.app import create_app
 from isolab.service.api.schemas import EXAMPLE_CALIBRATION, EXAMPLE_SCENE
-from isolab.service.settings import Settings
 from isolab.studies.answers.calibration.jobs import MAX_TRACE_POINTS
 from isolab.studies.answers.floor_response import velocity_spectra
 from isolab.studies.inputs.study import Study, validate_study
 from isolab.studies.questions.floor import ISO_LEVELS, VC_LEVELS
+from tests.service.conftest import live_app
 
 pytestmark = pytest.mark.slow  # a service with a Dask worker of its own
 
@@ -82,8 +81,7 @@ def wait(http: TestClient, path: str, seconds: float = 110.0) -> dict:
 
 @pytest.fixture(scope="module")
 def http(tmp_path_factory: pytest.TempPathFactory):
-    settings = Settings(data_dir=tmp_path_factory.mktemp("data"), workers=1, max_cases=2000)
-    with TestClient(create_app(settings)) as client:
+    with live_app(tmp_path_factory, workers=1, max_cases=2000) as client:
         yield client
 
 

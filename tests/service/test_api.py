@@ -32,6 +32,7 @@ from isolab.studies.results.cases import (
     parse_filter,
     select_cases,
 )
+from tests.service.conftest import live_app
 
 pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
 
@@ -68,8 +69,7 @@ def wait_done(http: TestClient, study_id: str, timeout: float = 40.0) -> dict:
 
 @pytest.fixture(scope="module")
 def http(tmp_path_factory: pytest.TempPathFactory):
-    settings = Settings(data_dir=tmp_path_factory.mktemp("data"), workers=2, max_cases=MAX_CASES)
-    with TestClient(create_app(settings)) as client:
+    with live_app(tmp_path_factory, workers=2, max_cases=MAX_CASES) as client:
         yield client
 
 

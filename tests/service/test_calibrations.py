@@ -33,12 +33,6 @@ TRUE_F_HORIZONTAL = 3.6  # Hz, what the example's measurement was made with
 TRUE_OFFSET = 0.1  # s
 
 
-@pytest.fixture(scope="module")
-def http(tmp_path_factory: pytest.TempPathFactory):
-    with TestClient(create_app(Settings(data_dir=tmp_path_factory.mktemp("data"), workers=1))) as client:
-        yield client
-
-
 def wait_done(http: TestClient, job_id: str, seconds: float = 110.0) -> dict:
     deadline = time.monotonic() + seconds
     while (info := http.get(f"/calibrations/{job_id}").json())["status"] in ("queued", "running"):

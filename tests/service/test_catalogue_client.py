@@ -107,12 +107,6 @@ def test_the_client_refuses_a_missing_file_and_reports_the_services_field(url: s
             api.compare_products(SCENE, "no-such-catalogue")
 
 
-@pytest.fixture(scope="module")
-def http(tmp_path_factory: pytest.TempPathFactory):
-    with TestClient(create_app(Settings(data_dir=tmp_path_factory.mktemp("read"), workers=1))) as client:
-        yield client
-
-
 def test_an_uploaded_catalogue_is_read_or_refused_naming_the_line(http: TestClient) -> None:
     r = http.post("/catalogues/read", json={"text": CSV, "format": "csv", "name": "mine"})
     assert r.status_code == 200, r.text

@@ -10,16 +10,7 @@ import pytest
 import xarray as xr
 from fastapi.testclient import TestClient
 
-from isolab.service.api.app import create_app
 from isolab.service.api.schemas import EXAMPLE_SCENE
-from isolab.service.settings import Settings
-
-
-@pytest.fixture(scope="module")
-def http(tmp_path_factory: pytest.TempPathFactory):
-    settings = Settings(data_dir=tmp_path_factory.mktemp("data"), workers=1)
-    with TestClient(create_app(settings)) as client:
-        yield client
 
 
 def scene(criteria: dict) -> dict:

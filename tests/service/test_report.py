@@ -17,6 +17,7 @@ from isolab.service.api.app import create_app
 from isolab.service.api.schemas import EXAMPLE_SCENE
 from isolab.service.plots.report import percent, quantity
 from isolab.service.settings import Settings
+from tests.service.conftest import live_app
 
 pytestmark = pytest.mark.slow  # a service with its cluster
 
@@ -38,8 +39,7 @@ STUDY = {
 
 @pytest.fixture(scope="module")
 def http(tmp_path_factory: pytest.TempPathFactory):
-    settings = Settings(data_dir=tmp_path_factory.mktemp("data"), workers=1, max_cases=100)
-    with TestClient(create_app(settings)) as client:
+    with live_app(tmp_path_factory, workers=1, max_cases=100) as client:
         yield client
 
 

@@ -15,12 +15,11 @@ from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
 from benchmarks.live_service import wait_finished
-from isolab.service.api.app import create_app
 from isolab.service.api.schemas import EXAMPLE_SCENE
 from isolab.service.cli import app as cli_app
 from isolab.service.client import Client, sensitivity_frame
-from isolab.service.settings import Settings
 from isolab.studies.answers import sensitivity as sensitivity_module
+from tests.service.conftest import live_app
 
 pytestmark = pytest.mark.slow  # a cluster of its own
 
@@ -48,8 +47,7 @@ SALTELLI = {
 
 @pytest.fixture(scope="module")
 def http(tmp_path_factory: pytest.TempPathFactory):
-    settings = Settings(data_dir=tmp_path_factory.mktemp("data"), workers=2, max_cases=1000)
-    with TestClient(create_app(settings)) as client:
+    with live_app(tmp_path_factory, workers=2, max_cases=1000) as client:
         yield client
 
 

@@ -12,16 +12,8 @@ import yaml
 from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
-from isolab.service.api.app import create_app
 from isolab.service.cli import app as cli_app
-from isolab.service.settings import Settings
 from tests.studies.test_sizing import CATALOGUE, QUARTER, SCENE
-
-
-@pytest.fixture(scope="module")
-def http(tmp_path_factory: pytest.TempPathFactory):
-    with TestClient(create_app(Settings(data_dir=tmp_path_factory.mktemp("data"), workers=1))) as client:
-        yield client
 
 
 def test_cli_and_rest_size_the_same_scene_alike(http: TestClient, tmp_path: Path) -> None:
