@@ -53,28 +53,15 @@ from isolab.service.settings import Settings, load_settings
 from isolab.studies.answers.calibration.jobs import CalibrationJobs
 from isolab.studies.results.calibrations import CalibrationStore
 from isolab.studies.results.store import StoreLock
+from isolab.studies.run.fanout import LOOPBACK, local_cluster
 
 if TYPE_CHECKING:  # Dask is imported when the service starts: `isolab serve` answers sooner
     from distributed import Client, LocalCluster
 
-#: The interface the in-process LocalCluster's dashboard listens on, whatever host the API binds to.
-DASHBOARD_HOST = "127.0.0.1"
-#: What the scheduler's HTTP server answers without the dashboard: its health check alone (no task keys,
-#: worker stacks or addresses).
-ROUTES_WITHOUT_DASHBOARD = ("distributed.http.health",)
+#: The interface the in-process LocalCluster listens on, its dashboard too, whatever host the API binds to.
+DASHBOARD_HOST = LOOPBACK
 #: Tasks the LocalCluster's scheduler gives a worker per thread: 1.0, none waiting in a worker's own queue.
 WORKER_SATURATION = 1.0
-#: Housekeeping of the LocalCluster the service owns, at the pace a machine running studies needs: Dask's
-#: defaults (a statistical profiler sampling each worker's stack every 10 ms, event-loop health ticks every
-#: 20 ms, system and memory monitors every 0.5 and 0.1 s) took 9.5 % of a core on an idle service with two
-#: workers, these 1.3 % (measured with psutil over 20 s; the workers' engine gets the rest). The profiler
-#: stays on when the dashboard, which shows it, is asked for.
-CLUSTER_HOUSEKEEPING: dict[str, object] = {
-    "distributed.worker.profile.enabled": False,
-    "distributed.admin.tick.interval": "1s",
-    "distributed.admin.system-monitor.interval": "5s",
-    "distributed.worker.memory.monitor-interval": "1s",
-}
 #: Seconds a thread may hold the interpreter lock while another waits (Python's default is 0.005).
 SWITCH_INTERVAL_S = 0.001
 
@@ -109,8 +96,7 @@ def start_dask(settings: Settings) -> tuple[Client, LocalCluster | None]:
 
     Returns the client and the LocalCluster it owns (``None`` when joining an external scheduler).
     """
-    import dask
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
     from isolab.service.api.worker_priority import LowerPriority
 
@@ -119,27 +105,11 @@ def start_dask(settings: Settings) -> tuple[Client, LocalCluster | None]:
         return Client(settings.scheduler_address), None
     # a worker holds only the chunk it runs: the next one is picked when it is free, by priority, so a
     # study submitted while a large one runs waits for one chunk (see studies.run.fanout), not for two
-    config: dict[str, object] = {
-        "distributed.scheduler.worker-saturation": WORKER_SATURATION,
-        **CLUSTER_HOUSEKEEPING,
-    }
-    dashboard = free_dashboard_address(settings.dashboard_port)
-    if dashboard is not None:
-        config["distributed.worker.profile.enabled"] = True
-    if dashboard is None:
-        # the scheduler's HTTP server still runs (Dask has no switch for it): on a free loopback port,
-        # answering its health check alone
-        config["distributed.scheduler.http.routes"] = list(ROUTES_WITHOUT_DASHBOARD)
-    with dask.config.set(config):
-        cluster = LocalCluster(
-            n_workers=settings.workers,
-            threads_per_worker=1,
-            processes=True,
-            host=DASHBOARD_HOST,
-            dashboard_address=dashboard or f"{DASHBOARD_HOST}:0",
-            scheduler_kwargs={"dashboard": dashboard is not None},
-            silence_logs=logging.WARNING,
-        )
+    cluster = local_cluster(
+        settings.workers,
+        free_dashboard_address(settings.dashboard_port),
+        **{"distributed.scheduler.worker-saturation": WORKER_SATURATION},
+    )
     try:
         client = Client(cluster)
         # the workers share this machine's cores with the API: the API answers first (see worker_priority)

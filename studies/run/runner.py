@@ -64,7 +64,15 @@ from isolab.studies.run.error_estimate import (
     reference_pair,
     sample_arrays,
 )
-from isolab.studies.run.fanout import TASK_RETRIES, choose_chunk_size, plan_chunks, run_chunks, worker_threads
+from isolab.studies.run.fanout import (
+    TASK_RETRIES,
+    choose_chunk_size,
+    local_cluster,
+    local_cluster_arguments,
+    plan_chunks,
+    run_chunks,
+    worker_threads,
+)
 from isolab.studies.run.optimisation import run_optimisation
 
 if TYPE_CHECKING:  # xarray loads with the first dataset built
@@ -454,11 +462,12 @@ def _design_extra(study: Study) -> dict[str, Any]:
 
 
 def make_client(
-    scheduler_address: str | None = None, workers: int = 2, *, dashboard_address: str | None = ":0"
+    scheduler_address: str | None = None, workers: int = 2, *, dashboard_address: str | None = None
 ):
     """A Dask client: to ``scheduler_address``, else ``DASK_SCHEDULER_ADDRESS`` / dask's
     ``scheduler-address`` config, else a new LocalCluster of ``workers`` processes with one thread each
-    (closed with the client; its dashboard on ``dashboard_address``, default a free port)."""
+    (:func:`studies.run.fanout.local_cluster_arguments`: on loopback; closed with the client; Dask's
+    dashboard on ``dashboard_address``, ``"127.0.0.1:<port>"``, none by default)."""
     import dask
     from dask.distributed import Client
 
@@ -470,11 +479,9 @@ def make_client(
     )
     if address:
         return Client(address)
-    if int(workers) < 1:
-        raise ValueError(f"workers: {workers} must be at least 1")
-    return Client(
-        n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=dashboard_address
-    )
+    config, arguments = local_cluster_arguments(workers, dashboard_address)
+    with dask.config.set(config):
+        return Client(**arguments)  # the client's own cluster: closed with it
 
 
 def run_local(
@@ -491,7 +498,7 @@ def run_local(
     write its dataset to ``out_path`` atomically, with the mode a new file gets under the umask. Uses
     ``store`` if given (the study stays in its catalog), else a temporary one. Returns the dataset (loaded
     in memory)."""
-    from dask.distributed import Client, LocalCluster
+    from dask.distributed import Client
 
     from isolab.studies.inputs.study import load_study
 
@@ -500,12 +507,7 @@ def run_local(
     study = source if isinstance(source, Study) else load_study(source)
     with tempfile.TemporaryDirectory(prefix="isolab-") as tmp:
         own = store if store is not None else Store(Path(tmp))
-        with (
-            LocalCluster(
-                n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=":0"
-            ) as cluster,
-            Client(cluster) as client,
-        ):
+        with local_cluster(int(workers)) as cluster, Client(cluster) as client:
             study_id = run_study(study, own, client, progress=progress)
         copy_atomic(own.path(study_id), out_path)
         return own.open_dataset(study_id)

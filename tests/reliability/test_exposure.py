@@ -9,10 +9,13 @@ from pathlib import Path
 
 import httpx
 import pytest
+from distributed import Client
 from fastapi.testclient import TestClient
 
 from isolab.service.api.app import create_app, free_dashboard_address, start_dask, stop_dask
 from isolab.service.settings import Settings, SettingsError, load_settings
+from isolab.studies.run.fanout import local_cluster
+from isolab.studies.run.runner import make_client
 
 
 def http_addresses(cluster) -> list[tuple[str, int]]:
@@ -95,6 +98,35 @@ def test_with_a_port_set_the_dashboard_listens_on_loopback_alone(tmp_path: Path)
         assert set(client.run(_worker_setting, "distributed.worker.profile.enabled").values()) == {True}
     finally:
         stop_dask(client, cluster)
+
+
+def listening_hosts() -> set[str]:
+    """The addresses every TCP socket of this process and its children listens on."""
+    import os
+
+    import psutil
+
+    me = psutil.Process(os.getpid())
+    return {
+        c.laddr.ip
+        for p in [me, *me.children(recursive=True)]
+        for c in p.net_connections(kind="tcp")
+        if c.status == psutil.CONN_LISTEN
+    }
+
+
+@pytest.mark.slow
+def test_the_cluster_of_a_local_run_and_of_the_default_client_listens_on_loopback_alone() -> None:
+    # `isolab run` and a notebook's default client start a LocalCluster of their own: its scheduler,
+    # workers and HTTP server (no dashboard) listen on 127.0.0.1 alone, and it runs the slowed housekeeping
+    with local_cluster(1) as cluster, Client(cluster) as client:
+        assert listening_hosts() == {"127.0.0.1"}
+        assert http_addresses(cluster)[0][0] == "127.0.0.1"
+        assert set(client.run(_worker_setting, "distributed.worker.profile.enabled").values()) == {False}
+    with make_client(workers=1) as client:
+        assert listening_hosts() == {"127.0.0.1"}
+        cluster = client.cluster
+    assert cluster.status.name == "closed"  # the client's own cluster closes with it
 
 
 # ------------------------------------------------------------------------------------------ headers
