@@ -209,24 +209,33 @@ def run_study(
         }
         # the dataset is assembled and written on a worker that sees the store (the results and the netCDF
         # compression stay out of this process, which serves requests: the load benchmark's p99 went from
-        # 70-146 ms to 46-67 ms), else here; the error estimate's sampled cases that are left run on the
-        # other workers meanwhile, and its figures are added to the written file when both are done
+        # 70-146 ms to 46-67 ms), else here; the error estimate's sampled cases run in the run's tail: when
+        # they are done already the worker writes the dataset with the estimate, else the ones left run on
+        # the other workers meanwhile, and the estimate's figures are added to the written file after
+        if not sampled:  # every chunk was done already (a resumed run)
+            submit_samples(1)
+        samples = sampled[0]
+        estimate: ErrorEstimate | None = None
+        if all(f.done() for f in samples[1]):
+            estimate = _error_estimate(client, run, samples, cancel)
+            if estimate is None:  # cancelled meanwhile
+                store.update(study_id, status="cancelled", finished=utc_now())
+                return study_id
+        ready = estimate
         future = client.submit(
             finish_study,
             str(store.root),
             study_id,
             run_json,
             json.dumps(attrs),
-            None,
+            ready,
             pure=False,
             retries=TASK_RETRIES,
             priority=1,
             key=f"isolab-{study_id}-finish-{uuid.uuid4().hex[:8]}",
         )
-        if not sampled:  # every chunk was done already (a resumed run)
-            submit_samples(1)
-        samples = sampled[0]
-        estimate = _error_estimate(client, run, samples, cancel)
+        if estimate is None:
+            estimate = _error_estimate(client, run, samples, cancel)
         n_failed = _wait(client, future, cancel) if estimate is not None else None
         if estimate is None or (cancel is not None and cancel.is_set()):
             client.cancel([future, *samples[1]])
@@ -234,7 +243,7 @@ def run_study(
             return study_id
         if n_failed is None:  # the worker does not see the store: finished here
             n_failed = assemble_dataset(store, study_id, run_json, attrs, estimate)
-        else:
+        elif ready is None:
             store.publish_dataset(study_id, estimate_dataset(estimate))
         store.clear_chunks(study_id)
         if n_cases and int(n_failed) >= n_cases:  # not one case has a result: the study failed, saying why

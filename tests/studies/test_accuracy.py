@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import xarray as xr
-from dask.distributed import Client, LocalCluster
+from dask.distributed import Client
 from pydantic import ValidationError
 
 from isolab.engine import simulate
@@ -23,6 +23,7 @@ from isolab.studies.run import accuracy
 from isolab.studies.run.accuracy import choose, choose_for_batch, pilot_cases, resolved_simulation
 from isolab.studies.run.costs import STEP_COST
 from isolab.studies.run.error_estimate import ESTIMATED_OUTPUTS, error_sample, output_errors, sizing_error
+from isolab.studies.run.fanout import local_cluster
 
 STEPS = (5e-4, 1e-3, 2e-3, 5e-3)  # a short ladder: the truth at 0.5 ms keeps the tests fast
 
@@ -303,7 +304,7 @@ def test_error_sample_is_seeded_and_covers_every_isolator_type() -> None:
 
 @pytest.fixture(scope="module")
 def client():
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
+    with local_cluster(2) as cluster:
         with Client(cluster) as c:
             yield c
 

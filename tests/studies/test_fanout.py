@@ -14,7 +14,7 @@ import cloudpickle
 import numpy as np
 import pytest
 import xarray as xr
-from distributed import Client, LocalCluster
+from distributed import Client, wait
 
 from isolab.engine import __version__ as engine_version
 from isolab.engine import simulate
@@ -29,6 +29,7 @@ from isolab.studies.run.fanout import (
     FanoutReport,
     ReservedLane,
     choose_chunk_size,
+    local_cluster,
     plan_chunks,
     reserved_lane,
     reserved_slots,
@@ -45,7 +46,7 @@ cloudpickle.register_pickle_by_value(sys.modules[__name__])
 
 @pytest.fixture(scope="module")
 def client():
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
+    with local_cluster(2) as cluster:
         with Client(cluster) as c:
             yield c
 
@@ -647,6 +648,30 @@ def test_a_study_is_finished_by_a_worker(client: Client, tmp_path: Path, monkeyp
         np.testing.assert_array_equal(ds[name].values, direct[name].values, err_msg=name)
     # the error estimate's reference reruns ran from the worker's task too
     assert json.loads(ds.attrs["error_estimate_cases"]) and "DOP853" in ds.attrs["error_estimate_method"]
+
+
+def test_reruns_done_before_the_finish_are_written_by_the_worker_at_once(
+    client: Client, tmp_path: Path, monkeypatch
+) -> None:
+    # the error estimate's reruns are done when the last chunk is (here: waited for as they are sent): the
+    # worker writes the dataset with the estimate, and nothing is added to the file afterwards
+    sent = runner._submit_samples
+
+    def sent_and_done(*args, **kwargs):
+        cases, futures, pair = sent(*args, **kwargs)
+        wait(futures)
+        return cases, futures, pair
+
+    monkeypatch.setattr(runner, "_submit_samples", sent_and_done)
+    monkeypatch.setattr(Store, "publish_dataset", lambda *a, **k: pytest.fail("the estimate added after"))
+    study = load_study(small_study(integrator="exact", duration="1 s"))
+    store = Store(tmp_path)
+    sid = run_study(study, store, client, chunk_size=2)
+    assert store.get(sid)["status"] == "done" and not store.chunk_dir(sid).exists()
+    ds = store.open_dataset(sid)
+    assert json.loads(ds.attrs["error_estimate_cases"]) and "DOP853" in ds.attrs["error_estimate_method"]
+    estimates = [ds[v].values for v in ds.data_vars if str(v).startswith("error_estimate_")]
+    assert estimates and all(np.isfinite(e) for e in estimates)
 
 
 def test_a_streamed_study_equals_one_assembled_in_memory(tmp_path: Path, monkeypatch) -> None:

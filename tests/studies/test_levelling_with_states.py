@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import xarray as xr
 import yaml
-from dask.distributed import Client, LocalCluster
+from dask.distributed import Client
 from pydantic import ValidationError
 
 from isolab.engine import model, simulate
@@ -28,6 +28,7 @@ from isolab.studies.run.error_estimate import (
     STATES_REFERENCE_PAIR,
     reference_pair,
 )
+from isolab.studies.run.fanout import local_cluster
 
 EXAMPLES = Path(__file__).parents[2] / "studies" / "examples"
 ZENER = {
@@ -107,7 +108,7 @@ def test_valves_and_a_flexible_base_are_refused_naming_the_field() -> None:
 
 @pytest.fixture(scope="module")
 def client():
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
+    with local_cluster(1) as cluster:
         with Client(cluster) as c:
             yield c
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
-from distributed import Client, LocalCluster
+from distributed import Client
 from fastapi.testclient import TestClient
 
 from isolab.service.api.app import create_app
@@ -33,6 +33,7 @@ from isolab.studies.questions.goals import (
 from isolab.studies.results.cases import case_table, filter_mask, parse_filter
 from isolab.studies.results.dataset import failed_arrays, from_chunks, to_dataset
 from isolab.studies.results.store import Store
+from isolab.studies.run.fanout import local_cluster
 from isolab.studies.run.optimisation import GENERATION_FILE, Journal, non_dominated, optimise
 from isolab.studies.run.runner import run_study
 
@@ -313,7 +314,7 @@ def test_bad_objective_is_422_through_rest(tmp_path: Path) -> None:
 
 @pytest.fixture(scope="module")
 def client():
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
+    with local_cluster(2) as cluster:
         with Client(cluster) as c:
             yield c
 

@@ -22,6 +22,7 @@ from isolab.studies.questions.criteria import add_criteria
 from isolab.studies.questions.goals import PENALTY, Robust, goal_values, robust_values
 from isolab.studies.results.cases import case_table
 from isolab.studies.results.dataset import result_arrays, to_dataset
+from isolab.studies.run.fanout import local_cluster
 from isolab.studies.run.optimisation import Journal, optimise
 from isolab.studies.run.optimum import optimum_dataset
 from isolab.studies.run.robust import CloudPlan
@@ -339,7 +340,7 @@ def test_the_robust_air_mount_example_is_checked_as_written() -> None:
 def test_a_cancelled_robust_study_resumes_to_the_same_result_on_a_cluster(tmp_path: Path) -> None:
     """Through the runner on a Dask cluster: cancelled in its second generation, run again with the same
     id, it ends with the same candidates, probabilities, statistics and optimum as an uninterrupted run."""
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
     from isolab.studies.results.store import Store
     from isolab.studies.run.runner import run_study
@@ -349,7 +350,7 @@ def test_a_cancelled_robust_study_resumes_to_the_same_result_on_a_cluster(tmp_pa
     )
     d["design"].update(budget=12, population=4, robust={"samples": 4, "require": "75 %"})
     study = validate_study(d)
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
+    with local_cluster(2) as cluster:
         with Client(cluster) as client:
             whole_store = Store(tmp_path / "whole")
             whole = whole_store.open_dataset(run_study(study, whole_store, client))

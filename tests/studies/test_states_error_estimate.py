@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import xarray as xr
 import yaml
-from dask.distributed import Client, LocalCluster
+from dask.distributed import Client
 
 from isolab.engine.results import OK
 from isolab.studies.inputs.study import load_scene, load_study, scene_batch
@@ -27,6 +27,7 @@ from isolab.studies.run.error_estimate import (
     reference_pair,
     sample_arrays,
 )
+from isolab.studies.run.fanout import local_cluster
 
 EXAMPLES = Path(__file__).parents[2] / "studies" / "examples"
 
@@ -84,7 +85,7 @@ def test_a_flexible_base_is_estimated_at_ltv_rk4_and_the_estimate_says_so() -> N
 
 @pytest.fixture(scope="module")
 def client():
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
+    with local_cluster(1) as cluster:
         with Client(cluster) as c:
             yield c
 
