@@ -289,11 +289,12 @@ def _unix(iso: str | None) -> float:
 
 
 def run_study(
-    svc: Service, definition: dict, poll: float = 0.2, timeout: float = 3600.0
+    svc: Service, definition: dict, poll: float | None = None, timeout: float = 3600.0
 ) -> tuple[str, dict[str, Any], float, float]:
-    """Submit ``definition`` and wait until it finishes with the client's wait (each status request waits
-    on the service for the study to end, and comes back every ``poll`` s meanwhile); returns (id, final
-    row, POST time, done-seen time)."""
+    """Submit ``definition`` and wait until it finishes with the client's wait, as ``isolab submit --wait``
+    does (each status request waits on the service for the study to end, and comes back every ``poll`` s
+    meanwhile: the client's default, 0.5 s, when None); returns (id, final row, POST time, done-seen
+    time)."""
     from isolab.service.client import Client
 
     def alive(info: dict[str, Any]) -> None:
@@ -303,7 +304,8 @@ def run_study(
     with Client(svc.url, timeout=600.0) as api:
         t_post = time.time()
         sid = api.submit(definition)["id"]
-        info = api.wait(sid, progress=alive, poll=poll, timeout=timeout)
+        polled = {} if poll is None else {"poll": poll}
+        info = api.wait(sid, progress=alive, timeout=timeout, **polled)
         return sid, info, t_post, time.time()
 
 
