@@ -29,7 +29,8 @@ from isolab.studies.inputs.definitions import definition_json, study_of
 from isolab.studies.inputs.isolators import mount_places
 from isolab.studies.inputs.study import Study, study_from_json, study_labels
 from isolab.studies.results.cases import CaseQueryError
-from isolab.studies.results.store import NETCDF_LOCK, Store, StudyRecord
+from isolab.studies.results.netcdf_locks import netcdf_writing
+from isolab.studies.results.store import Store, StudyRecord
 from isolab.studies.run.accuracy import recorded_choice, resolved_definition, resolved_study
 
 if TYPE_CHECKING:  # xarray loads with the first history dataset (a mode name needs none)
@@ -373,6 +374,6 @@ def netcdf_bytes(ds: xr.Dataset) -> bytes:
     """``ds`` as the bytes of a netCDF4 file."""
     with tempfile.TemporaryDirectory(prefix="isolab-") as tmp:
         path = Path(tmp) / "case.nc"
-        with NETCDF_LOCK:
+        with netcdf_writing():
             ds.to_netcdf(path, format="NETCDF4", engine="netcdf4")
         return path.read_bytes()

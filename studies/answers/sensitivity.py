@@ -653,7 +653,8 @@ def stored_sensitivity(store: Any, study_id: str, output: str) -> SensitivityRes
         FileNotFoundError: the study has no dataset file.
         ValueError: as :func:`sensitivity`.
     """
-    from isolab.studies.results.store import NETCDF_LOCK, atomic_path
+    from isolab.studies.results.netcdf_locks import NETCDF_LOCK
+    from isolab.studies.results.store import atomic_path
 
     path = Path(store.path(study_id))
     if not path.is_file():

@@ -26,7 +26,7 @@ import yaml
 
 from isolab.studies.inputs.definitions import DefinitionError, Loc, check_definition, detail, study_of
 from isolab.studies.results.dataset import ERROR_ESTIMATE_PREFIX
-from isolab.studies.results.store import NETCDF_LOCK
+from isolab.studies.results.netcdf_locks import NETCDF_LOCK
 from isolab.studies.run.costs import estimate_seconds_per_case
 from isolab.studies.units import to_si
 

@@ -31,7 +31,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from isolab.engine.results import ISOLATOR, OUTPUTS, OutputSpec
-from isolab.studies.results.store import NETCDF_LOCK, Store
+from isolab.studies.results.netcdf_locks import NETCDF_LOCK
+from isolab.studies.results.store import Store
 from isolab.studies.units import dimension_of, quantity_problem, to_si
 
 if TYPE_CHECKING:  # xarray and netCDF4 load with the first dataset read

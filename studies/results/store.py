@@ -61,6 +61,7 @@ from isolab.studies.results.catalog import (
     utc_now,
 )
 from isolab.studies.results.compression import deflate_encoding
+from isolab.studies.results.netcdf_locks import NETCDF_LOCK, netcdf_writing
 from isolab.studies.results.records import StudyFilter, StudyRecord, isolator_types
 from isolab.studies.results.timings import record_timing
 
@@ -71,7 +72,6 @@ log = logging.getLogger(__name__)
 
 __all__ = [
     "LOCK_FILE",
-    "NETCDF_LOCK",
     "STATUSES",
     "CatalogUnavailable",
     "Store",
@@ -227,11 +227,6 @@ STREAM_CHUNK_CACHE_BYTES = 1 << 20
 fill whole file chunks, so none waits there half-written (the library's default is 64 MB per variable,
 which holds a large study's every chunk until the file closes)."""
 
-NETCDF_LOCK = threading.RLock()
-"""Held around every netCDF open, read and write of this process: the netCDF-C and HDF5 libraries are not
-thread-safe (two threads in them at once, even on different files, can crash the process), and the
-service reads and writes datasets from several threads."""
-
 
 def netcdf_encoding(ds: xr.Dataset) -> dict[str, dict[str, Any]]:
     """Per-variable netCDF encoding: NaN ``_FillValue`` on floats, int8/-1 for yes/no, zlib on the numbers
@@ -275,7 +270,7 @@ def write_netcdf(ds: xr.Dataset, path: str | Path) -> Path:
     small_cache = bool(streamed) and all(
         "chunksizes" in encoding[k] for k in streamed if encoding[k].get("zlib")
     )
-    with atomic_path(path) as tmp, NETCDF_LOCK:
+    with atomic_path(path) as tmp, netcdf_writing():
         cache = netCDF4.get_chunk_cache()
         try:
             if small_cache:
@@ -548,7 +543,7 @@ class Store:
         (:meth:`staged_path`), with :func:`netcdf_encoding`, and move it to :meth:`path` atomically."""
         staged, path = self.staged_path(study_id), self.path(study_id)
         t0 = time.perf_counter()
-        with NETCDF_LOCK:
+        with netcdf_writing():
             extra.to_netcdf(
                 staged, mode="a", format="NETCDF4", engine="netcdf4", encoding=netcdf_encoding(extra)
             )
