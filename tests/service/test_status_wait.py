@@ -19,7 +19,7 @@ from fastapi.testclient import TestClient
 
 from isolab.service.api.jobs import JobQueue
 from isolab.service.api.routes import studies
-from isolab.service.api.routes.studies import MAX_WAIT_S, wait_for_end
+from isolab.service.api.routes.studies import GONE_STEP_S, MAX_WAIT_S, wait_for_end
 from isolab.service.client import STATUS_WAIT_S, Client
 from isolab.studies.results.store import Store
 
@@ -147,3 +147,17 @@ def test_a_waiting_status_stops_when_its_client_goes_away(held: HeldStudies) -> 
     held.end_after(0.2)
     assert anyio.run(wait_for_end, held.jobs, study_id, 20.0) is True
     assert held.store.get(study_id)["status"] == "done"
+
+
+def test_a_client_that_goes_away_while_waiting_is_let_go_within_half_a_second(held: HeldStudies) -> None:
+    study_id = held.new_study()
+    gone_at = time.monotonic() + 0.3
+
+    class LeavingClient:
+        async def is_disconnected(self) -> bool:
+            return time.monotonic() >= gone_at
+
+    assert anyio.run(wait_for_end, held.jobs, study_id, 20.0, LeavingClient()) is False
+    assert time.monotonic() - gone_at < GONE_STEP_S + 0.3
+    held.end_after(0.0)
+    assert anyio.run(wait_for_end, held.jobs, study_id, 5.0) is True

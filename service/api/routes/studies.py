@@ -243,16 +243,25 @@ MAX_WAIT_S = 30.0
 """Longest a status request may wait for its study to end (``GET /studies/{id}?wait=``), s."""
 WAIT_STEP_S = 0.02
 """How often a waiting status request looks whether its study has ended, s (in memory, no catalog read)."""
+GONE_STEP_S = 0.5
+"""How often it looks whether its client has gone away, s (the costlier look: asking the connection)."""
 
 
 async def wait_for_end(jobs: JobQueue, study_id: str, seconds: float, request: Request | None = None) -> bool:
     """Wait up to ``seconds`` (s) while the study is queued or running in ``jobs``; True when it is not
-    (any more), False at the bound or when the client of ``request`` has gone away."""
-    deadline = time.monotonic() + seconds
+    (any more), False at the bound or when the client of ``request`` has gone away (looked at every
+    :data:`GONE_STEP_S`)."""
+    now = time.monotonic()
+    deadline, ask = now + seconds, now
     while jobs.is_active(study_id):
-        left = deadline - time.monotonic()
-        if left <= 0 or (request is not None and await request.is_disconnected()):
+        now = time.monotonic()
+        left = deadline - now
+        if left <= 0:
             return False
+        if request is not None and now >= ask:
+            if await request.is_disconnected():
+                return False
+            ask = now + GONE_STEP_S
         await anyio.sleep(min(WAIT_STEP_S, left))
     return True
 
