@@ -224,11 +224,12 @@ def observe(c, t, x, step, F0, tgt, rtgt, rest, ptol, B, Q, GZ):
     ``Q`` (15,) holds the last move's end, the settling tolerance, the longest interpolated interval, the
     last output time, the rest-interval cursor and count, the last output time inside a rest interval, the
     last violation, the sums of squares (3), the number of outputs, the divergence time, and the cursor's
-    interval's end and start (s, +inf past the last), so a step inside or between rest intervals checks one number each. (:func:`start` and
-    :func:`finish` move them in and out of the accumulators.) The loops over the outputs read and write
-    rows a fixed distance apart, so they run as vector loops; the closed-form solve between output times
-    runs only where a screen flagged an output. Returns False (and keeps ``t`` as the divergence time)
-    when the state is not finite or has left any physically possible range.
+    interval's end and start (s, +inf past the last), so a step inside or between rest intervals checks
+    one number each. (:func:`start` and :func:`finish` move them in and out of the accumulators.) The
+    loops over the outputs read and write rows a fixed distance apart, so they run as vector loops; the
+    closed-form solve between output times runs only where a screen flagged an output. Returns False (and
+    keeps ``t`` as the divergence time) when the state is not finite or has left any physically possible
+    range.
     """
     ok = True
     for i in range(3):
