@@ -305,30 +305,34 @@ def _forcing_poly(P, c, t, idx, W, deg, Fv):
 
 
 @njit(cache=True, inline="always")
-def taylor_shift(V, n, deg, h):
-    """Carry a polynomial of degree ``deg`` (<= 3) in time forward by ``h`` s, exactly: ``V`` holds its
-    ``n`` values, then their first, second and third time derivatives (``n`` each, up to ``deg``)."""
-    for i in range(n):
-        if deg >= 1:
-            v1 = V[n + i]
-            if deg >= 2:
-                v2 = V[2 * n + i]
-                if deg >= 3:
-                    v3 = V[3 * n + i]
-                    V[i] += h * (v1 + h * (0.5 * v2 + h * v3 / 6.0))
-                    V[n + i] = v1 + h * (v2 + 0.5 * h * v3)
-                    V[2 * n + i] = v2 + h * v3
-                else:
-                    V[i] += h * (v1 + 0.5 * h * v2)
-                    V[n + i] = v1 + h * v2
-            else:
-                V[i] += h * v1
+def taylor_shift(V, o, n, deg, h):
+    """Carry a polynomial of degree ``deg`` (<= 3) in time forward by ``h`` s, exactly: ``V`` holds from
+    ``o`` on its ``n`` values, then their first, second and third time derivatives (``n`` each, up to
+    ``deg``). One loop per degree, so that no loop branches on it (a loop that does is vectorised with
+    masked loads and stores, which wait for the stores before them)."""
+    if deg == 1:
+        for i in range(n):
+            V[o + i] += h * V[o + n + i]
+    elif deg == 2:
+        for i in range(n):
+            v1 = V[o + n + i]
+            v2 = V[o + 2 * n + i]
+            V[o + i] += h * (v1 + 0.5 * h * v2)
+            V[o + n + i] = v1 + h * v2
+    elif deg >= 3:
+        for i in range(n):
+            v1 = V[o + n + i]
+            v2 = V[o + 2 * n + i]
+            v3 = V[o + 3 * n + i]
+            V[o + i] += h * (v1 + h * (0.5 * v2 + h * v3 / 6.0))
+            V[o + n + i] = v1 + h * (v2 + 0.5 * h * v3)
+            V[o + 2 * n + i] = v2 + h * v3
 
 
 @njit(cache=True, inline="always")
 def _shift(Fv, deg, h):
     """Carry the forcing derivatives ``F0..F_deg`` (6 each) of a polynomial piece forward by ``h`` s."""
-    taylor_shift(Fv, 6, deg, h)
+    taylor_shift(Fv, 0, 6, deg, h)
     off = 6 * (deg + 1)
     m = (Fv.shape[0] - off) // 2  # the stages' accelerations ramp with their jerks (with extra states)
     for q in range(m):
@@ -390,15 +394,29 @@ def _apply(ET, z, osc_on, t, P, c, xn):
                 xn[i] += ET[nz + 2 * a, i] * sa + ET[nz + 2 * a + 1, i] * ca
 
 
+LEAN_WIDTH = 16
+"""Elements per row of the lean step's scratch (:func:`lean_rows`): the state's 12 padded to two vectors of
+8, so that its loops run as whole vector loops (no remainder, no masked loads after a wider store)."""
+_PHI = 0  # 12 rows: row j the full step's map's column of x_j (the state's 12 rows of it)
+_NEW = 12 * LEAN_WIDTH  # the new state
+_RESP = 13 * LEAN_WIDTH  # deg + 1 rows: the forced response R_0..R_deg
+LEAN_SCRATCH = 17 * LEAN_WIDTH
+"""Length of the lean step's scratch (:func:`lean_rows`, :func:`free_step`)."""
+
+
 @njit(cache=True, inline="always")
-def forced_response(ET, Fv, deg, R):
-    """The forced part of a whole step's map and its time derivatives, ``R`` (12 (deg + 1),), from the
-    forcing ``Fv = F0..F_deg`` (6 each) at the step's start and the full step's map ``ET`` (N, 12).
+def lean_rows(ET, Fv, deg, L):
+    """Load the lean step's rows into the flat scratch ``L`` (:data:`LEAN_SCRATCH`,): the state's columns
+    of a whole step's map ``ET`` (N, 12) and its forced part with its time derivatives, from the forcing
+    ``Fv = F0..F_deg`` (6 each) at the step's start. Each row is :data:`LEAN_WIDTH` long (zeros past 12).
 
     A whole step maps ``x`` to ``Phi x + sum_r Gamma_r F_r(t)``, with ``Gamma_r`` the columns of ``F_r``.
     Inside one polynomial piece that forced part is itself a polynomial in the step's start ``t``, its
     ``q``-th derivative ``R_q = sum_r Gamma_r F_(q + r)`` (``F_q`` beyond ``deg`` being zero): once per
     piece, instead of ``6 (deg + 1)`` columns of the product at every step (:func:`free_step`)."""
+    for j in range(12):
+        for i in range(12):
+            L[_PHI + LEAN_WIDTH * j + i] = ET[j, i]
     for q in range(deg + 1):
         a0 = a1 = a2 = a3 = a4 = a5 = a6 = a7 = a8 = a9 = a10 = a11 = 0.0
         for r in range(deg + 1 - q):
@@ -417,37 +435,45 @@ def forced_response(ET, Fv, deg, R):
                 a9 += ET[j, 9] * f
                 a10 += ET[j, 10] * f
                 a11 += ET[j, 11] * f
-        o = 12 * q
-        R[o], R[o + 1], R[o + 2], R[o + 3], R[o + 4], R[o + 5] = a0, a1, a2, a3, a4, a5
-        R[o + 6], R[o + 7], R[o + 8], R[o + 9], R[o + 10], R[o + 11] = a6, a7, a8, a9, a10, a11
+        o = _RESP + LEAN_WIDTH * q
+        L[o], L[o + 1], L[o + 2], L[o + 3], L[o + 4], L[o + 5] = a0, a1, a2, a3, a4, a5
+        L[o + 6], L[o + 7], L[o + 8], L[o + 9], L[o + 10], L[o + 11] = a6, a7, a8, a9, a10, a11
 
 
 @njit(cache=True, inline="always")
-def free_step(ET, x, R, deg, h):
+def free_step(L, x, deg, h):
     """Advance ``x`` (12,) over one whole step of ``h`` s inside one polynomial piece, the forcing without
-    feedforward, oscillator or recorded floor: ``x <- Phi x + R_0`` through the state's columns of the full
-    step's map ``ET`` (N, 12) and the carried forced response ``R`` (:func:`forced_response`), whose
-    derivatives then move on by their exact Taylor shift. 144 multiply-adds in twelve register
-    accumulators instead of ``12 N``; equal to the product with the forcing's columns to round-off."""
-    a0, a1, a2, a3, a4, a5 = R[0], R[1], R[2], R[3], R[4], R[5]
-    a6, a7, a8, a9, a10, a11 = R[6], R[7], R[8], R[9], R[10], R[11]
-    for j in range(12):
-        xj = x[j]
-        a0 += ET[j, 0] * xj
-        a1 += ET[j, 1] * xj
-        a2 += ET[j, 2] * xj
-        a3 += ET[j, 3] * xj
-        a4 += ET[j, 4] * xj
-        a5 += ET[j, 5] * xj
-        a6 += ET[j, 6] * xj
-        a7 += ET[j, 7] * xj
-        a8 += ET[j, 8] * xj
-        a9 += ET[j, 9] * xj
-        a10 += ET[j, 10] * xj
-        a11 += ET[j, 11] * xj
-    x[0], x[1], x[2], x[3], x[4], x[5] = a0, a1, a2, a3, a4, a5
-    x[6], x[7], x[8], x[9], x[10], x[11] = a6, a7, a8, a9, a10, a11
-    taylor_shift(R, 12, deg, h)
+    feedforward, oscillator or recorded floor: ``x <- Phi x + R_0`` through the rows of ``L`` loaded by
+    :func:`lean_rows`, whose forced response then moves on by its exact Taylor shift. 144 multiply-adds
+    instead of ``12 N``, equal to the product with the forcing's columns to round-off. The rows lie a
+    fixed distance apart in one array, so both loops run as 8-wide vector loops over the state's rows,
+    each row's sum taken in the order a scalar loop over the columns takes it."""
+    x0, x1, x2, x3, x4, x5 = x[0], x[1], x[2], x[3], x[4], x[5]
+    x6, x7, x8, x9, x10, x11 = x[6], x[7], x[8], x[9], x[10], x[11]
+    W = LEAN_WIDTH
+    for i in range(W):
+        L[_NEW + i] = (
+            L[_RESP + i]
+            + L[i] * x0
+            + L[W + i] * x1
+            + L[2 * W + i] * x2
+            + L[3 * W + i] * x3
+            + L[4 * W + i] * x4
+            + L[5 * W + i] * x5
+            + L[6 * W + i] * x6
+            + L[7 * W + i] * x7
+            + L[8 * W + i] * x8
+            + L[9 * W + i] * x9
+            + L[10 * W + i] * x10
+            + L[11 * W + i] * x11
+        )
+    # copied in the vectors' own halves (8, then 4): a load that spans two of the stores above would wait
+    # for both to complete
+    n = _NEW
+    x[0], x[1], x[2], x[3] = L[n], L[n + 1], L[n + 2], L[n + 3]
+    x[4], x[5], x[6], x[7] = L[n + 4], L[n + 5], L[n + 6], L[n + 7]
+    x[8], x[9], x[10], x[11] = L[n + 8], L[n + 9], L[n + 10], L[n + 11]
+    taylor_shift(L, _RESP, W, deg, h)
 
 
 @njit(cache=True, inline="always")

@@ -117,7 +117,7 @@ _PEAK = 6 * STRIDE  # each output's running peak
 _PREV = 7 * STRIDE  # its value at the previous output time
 _PREV_RATE = 8 * STRIDE  # and its rate there
 _FPEAK = 9 * STRIDE  # each mount axis' force peak
-_FPREV = 10 * STRIDE  # its force at the previous output time
+_FPREV = 10 * STRIDE  # its force at the previous output time, then (updated in place) now
 _LO = 11 * STRIDE  # each mount's smallest load (n)
 _HI = 12 * STRIDE  # and its largest
 _FLAG = 13 * STRIDE  # how far an output's inner Bernstein control points reach past its peak
@@ -125,11 +125,10 @@ _VIOL = 14 * STRIDE  # each point's last output time outside its settling band (
 _SETTLE = 15 * STRIDE  # and its worst settling time (p)
 _VAL = 16 * STRIDE  # each output's value now
 _RATE = 17 * STRIDE  # and its rate
-_FORCE = 18 * STRIDE  # each mount axis' force now (3 n)
-_CUBIC = 19 * STRIDE  # 4 rows: the force's cubic over the last output interval (3 n)
-_BERN = 23 * STRIDE  # 2 rows: its inner Bernstein control points (3 n)
-_KF = 25 * STRIDE  # 2 rows: each mount axis' stiffness and damping, the case's ``KF`` (3 n)
-SCRATCH = 27 * STRIDE
+_CUBIC = 18 * STRIDE  # 4 rows: the force's cubic over the last output interval (3 n)
+_BERN = 22 * STRIDE  # 2 rows: its inner Bernstein control points (3 n)
+_KF = 24 * STRIDE  # 2 rows: each mount axis' stiffness and damping, the case's ``KF`` (3 n)
+SCRATCH = 26 * STRIDE
 """Length of the observer's scratch (:func:`start`, :func:`observe`)."""
 
 
@@ -219,17 +218,18 @@ def observe(c, t, x, step, F0, tgt, rtgt, rest, ptol, B, Q, GZ):
     (C, n) the static loads (N), ``rest`` (C, K, 2) the rest intervals (s) and ``ptol`` (C, p) the points'
     settling tolerances (m) of ``engine.kernels.peaks.Peaks``. The case's map and running state live in
     rows of the flat scratch ``B`` (:data:`SCRATCH`,), each :data:`STRIDE` long (``_G`` ... ``_BERN``
-    above: the peaks, the previous values and rates, the force peaks and previous forces (3 n), the
-    smallest and largest loads (n), a flag, each point's last violation and worst settling time (p), and
-    this output time's values, rates, forces and force cubics); ``Q`` (15,) holds the last move's end, the
-    settling tolerance, the longest interpolated interval, the last output time, the rest-interval cursor
-    and count, the last output time inside a rest interval, the last violation, the sums of squares (3),
-    the number of outputs, the divergence time, and the cursor's interval's end and start (s, +inf past
-    the last), so a step inside or between rest intervals checks one number each. (:func:`start` and
-    :func:`finish` move them in and out of the accumulators.) The loops over the outputs read and write
-    rows a fixed distance apart, so they run as vector loops; the closed-form solve between output times
-    runs only where a screen flagged an output. Returns False (and keeps ``t`` as the divergence time)
-    when the state is not finite or has left any physically possible range.
+    above: the peaks, the previous values and rates, the force peaks and forces (3 n, the previous output
+    time's until the mount loop replaces them), the smallest and largest loads (n), a flag, each point's
+    last violation and worst settling time (p), and this output time's values, rates and force cubics);
+    ``Q`` (15,) holds the last move's end, the settling tolerance, the longest interpolated interval, the
+    last output time, the rest-interval cursor and count, the last output time inside a rest interval, the
+    last violation, the sums of squares (3), the number of outputs, the divergence time, and the cursor's
+    interval's end and start (s, +inf past the last), so a step inside or between rest intervals checks
+    one number each. (:func:`start` and :func:`finish` move them in and out of the accumulators.) The
+    loops over the outputs read and write rows a fixed distance apart, so they run as vector loops; the
+    closed-form solve between output times runs only where a screen flagged an output. Returns False (and
+    keeps ``t`` as the divergence time) when the state is not finite or has left any physically possible
+    range.
     """
     ok = True
     for i in range(3):
@@ -310,7 +310,6 @@ def observe(c, t, x, step, F0, tgt, rtgt, rest, ptol, B, Q, GZ):
         p1 = B[_VAL + q]
         m1 = B[_RATE + q]
         f = -kk * p1 - cr * m1
-        B[_FORCE + q] = f
         c1 = h * m0
         c2 = 3.0 * (p1 - p0) - h * (2.0 * m0 + m1)
         c3 = 2.0 * (p0 - p1) + h * (m0 + m1)
@@ -319,6 +318,7 @@ def observe(c, t, x, step, F0, tgt, rtgt, rest, ptol, B, Q, GZ):
         a2 = -kk * c2 - cc * (3.0 * c3)
         a3 = -kk * c3
         e0 = B[_FPREV + q] - a0
+        B[_FPREV + q] = f  # the force now: the next output time's previous one
         e1 = f - (a0 + a1 + a2 + a3)
         a0 += e0
         a1 += e1 - e0
@@ -351,7 +351,7 @@ def observe(c, t, x, step, F0, tgt, rtgt, rest, ptol, B, Q, GZ):
     for j in range(n):
         r = 3 * j + 2
         f0j = F0[c, j]
-        load = f0j + B[_FORCE + r]
+        load = f0j + B[_FPREV + r]
         lo = min(B[_LO + j], load)
         hi = max(B[_HI + j], load)
         b1, b2 = B[_BERN + r], B[_BERN + STRIDE + r]
@@ -364,8 +364,6 @@ def observe(c, t, x, step, F0, tgt, rtgt, rest, ptol, B, Q, GZ):
     for r in range(m8):
         B[_PREV + r] = B[_VAL + r]
         B[_PREV_RATE + r] = B[_RATE + r]
-    for r in range(nf8):
-        B[_FPREV + r] = B[_FORCE + r]
     # RMS of the c.g. displacement, settling of the c.g. and the points after the last move
     for i in range(3):
         Q[8 + i] += x[i] * x[i]

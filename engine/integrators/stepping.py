@@ -28,7 +28,7 @@ from numba import njit
 
 from isolab.engine.integrators import euler, exact, output_map, rk4
 from isolab.engine.kernels.excitation import advance_pieces, next_breakpoint
-from isolab.engine.kernels.params import FIDELITIES, LTI, NONLINEAR, Params, Work
+from isolab.engine.kernels.params import FIDELITIES, LTI, NONLINEAR, Params, Work, borrowed
 from isolab.engine.kernels.peaks import Peaks, observe, observe_nonlinear
 from isolab.engine.kernels.structs import kernel_struct
 from isolab.engine.results import FAILED, OK, UNSTABLE
@@ -71,7 +71,8 @@ def pair_driver(method: int, level: int) -> Any:
         # with no feedforward actuator: chosen per case, so that a case's result does not depend on the
         # other cases of its batch (the lean path equals the general one to round-off, not bit for bit)
         lean = P.ft.shape[0] == 0 and nx == 12
-        R = np.zeros(12 * (deg + 1))  # exact: the lean path's carried forced response (exact.free_step)
+        # exact: the lean step's rows, the state's map and the piece's forced response (exact.lean_rows)
+        L = np.zeros(exact.LEAN_SCRATCH if method == EXACT else 0)
         carried = False
         Bmap = np.zeros(output_map.SCRATCH if m > 0 else 0)  # the output map's rows (output_map.observe)
         Qmap = np.zeros(15)
@@ -83,6 +84,12 @@ def pair_driver(method: int, level: int) -> Any:
         g, pbase = P.g, P.pbase
         swt = np.zeros_like(W.sw)  # the lean step's stages' state at the time of a slope
         first = np.int64(0)  # the first output step, typed as the later ``k + 1``: one compiled observe
+        # the arrays the exact method's lean step and the output map read at every step, as views whose
+        # references numba does not count (``engine.kernels.params.borrowed``): made once here, so that no
+        # step counts one (an atomic add and subtract per array and step, dearer than the step itself)
+        b = borrowed
+        xv, Lv, evv, Bv, Qv, GZv = b(x), b(L), b(ev), b(Bmap), b(Qmap), b(GZ)
+        F0v, tgtv, rtgtv, restv, ptolv = b(F0), b(tgt), b(rtgt), b(rest), b(ptol)
         for c in range(C):
             if status[c] != OK:
                 continue
@@ -107,12 +114,12 @@ def pair_driver(method: int, level: int) -> Any:
             if method == RK4 and level == NONLINEAR:  # the lean step's arrays, once per case
                 V = rk4.nonlinear_views(P, c, W, x, S, idx, swt)
             if linear:
-                output_map.observe(c, 0.0, x, 0, F0, tgt, rtgt, rest, ptol, Bmap, Qmap, GZ)
+                output_map.observe(c, 0.0, xv, 0, F0v, tgtv, rtgtv, restv, ptolv, Bv, Qv, GZv)
             elif level == NONLINEAR:
                 observe_nonlinear(P, c, 0.0, x, W, O, first)
             else:
                 observe(P, c, level, 0.0, x, W, O, first)
-            ET = full[c if method == EXACT else 0]
+            ET = b(full[c if method == EXACT else 0])
             for k in range(n_steps[c]):
                 t0 = k * h
                 t1 = (k + 1) * h
@@ -123,12 +130,12 @@ def pair_driver(method: int, level: int) -> Any:
                         advance_pieces(P, c, ta, idx, tol)
                         piece_end = next_breakpoint(P, c, idx, np.inf, tol)
                     if method == EXACT:
-                        tb = exact.next_split(ev, c, passed, t1, tol)
+                        tb = exact.next_split(evv, c, passed, t1, tol)
                         if lean_c and tb == t1 and ta == t0 and not fresh:
                             if not carried:  # the piece's forced response, from the forcing at t0
-                                exact.forced_response(ET, Fv, deg, R)
+                                exact.lean_rows(ET, Fv, deg, Lv)
                                 carried = True
-                            exact.free_step(ET, x, R, deg, t1 - t0)
+                            exact.free_step(Lv, xv, deg, t1 - t0)
                             ok = True
                         else:
                             carried = False  # exact.step builds the forcing anew wherever it uses it
@@ -170,7 +177,7 @@ def pair_driver(method: int, level: int) -> Any:
                     status[c] = FAILED
                     break
                 if linear:
-                    seen = output_map.observe(c, t1, x, k + 1, F0, tgt, rtgt, rest, ptol, Bmap, Qmap, GZ)
+                    seen = output_map.observe(c, t1, xv, k + 1, F0v, tgtv, rtgtv, restv, ptolv, Bv, Qv, GZv)
                 elif level == NONLINEAR:
                     seen = observe_nonlinear(P, c, t1, x, W, O, k + 1)
                 else:
