@@ -35,7 +35,7 @@ SCRATCH_ROWS = 5
 """State-sized rows of scratch a step needs: the stage state and the four slopes."""
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def step(P, c, level, t, h, x, S, idx, W):
     """One RK4 step of ``h`` s from ``t`` (s) on the pieces ``idx``, ``x`` in place; ``S`` (5, nx)
     scratch. Returns False when a mass matrix is singular.
@@ -181,7 +181,7 @@ def _nonlinear_slope(c, ts, check, xs, k, idx, key, tc, cc, cs, cm, sw, swt, R, 
     return key[3] != 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def step_lti(P, c, t, h, x, S, idx, W):
     """:func:`step` at the LTI level (each slope through ``engine.kernels.dynamics.derivative``)."""
     nx = x.shape[0]
@@ -208,9 +208,9 @@ def _combine(level, h, x, k1, k2, k3, k4):
     for i in range(x.shape[0]):
         x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
     if level == NONLINEAR:
-        n = np.sqrt(x[3] ** 2 + x[4] ** 2 + x[5] ** 2 + x[6] ** 2)
+        r = 1.0 / np.sqrt(x[3] ** 2 + x[4] ** 2 + x[5] ** 2 + x[6] ** 2)
         for i in range(3, 7):
-            x[i] /= n
+            x[i] *= r
 
 
 def step_matrix(A: np.ndarray, h: np.ndarray) -> np.ndarray:

@@ -42,7 +42,9 @@ def pair_driver(method: int, level: int) -> Any:
     (``engine.kernels.params``): a numba kernel ``drive(P, dt, n_steps, O, W, status, full, ev, sub_b,
     sub_a, deg, osc, outmap)``."""
 
-    @njit(cache=True, nogil=True)
+    fast = {"contract"} if method == RK4 and level == NONLINEAR else False
+
+    @njit(cache=True, nogil=True, fastmath=fast)
     def drive(P, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap):
         """Integrate every case ``c`` whose ``status[c]`` is OK over ``n_steps[c]`` steps of ``dt[c]`` s.
 

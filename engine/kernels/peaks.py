@@ -203,7 +203,7 @@ def finish_settling(O: Peaks, t_end: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def observe(P, c, level, t, x, W, O, step):
     """Update case ``c``'s peaks with the state ``x`` (12 + nz,) of a linear level (``level``: ``LTI`` or
     ``LTV``) at time ``t`` (s), output sample ``step``: the general observer of a case under floor motion,
@@ -412,7 +412,7 @@ def observe(P, c, level, t, x, W, O, step):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath={"contract"})
 def observe_nonlinear(P, c, t, x, W, O, step):
     """:func:`observe` at the nonlinear level, the same arithmetic on arrays bound once as views whose
     references numba does not count (``engine.kernels.params.borrowed``), each mount's force computed in
