@@ -114,7 +114,6 @@ def nonlinear_views(P, c, W, x, S, idx, swt):
         b(swt),
         b(W.R),
         b(W.F),
-        b(W.acc),
     )
 
 
@@ -128,22 +127,22 @@ def step_nonlinear(c, t, h, V, g, pbase):
     subtract, dearer than the arithmetic here) for every array bound, sliced or passed on, and for the
     structs a kernel takes; on views made once per case a step counts none. The driver inlines the step: a
     called step counts its arguments' references at every call, which costs what the views save."""
-    x, S, idx, key, tc, cc, cs, cm, sw, swt, R, F, acc = V
+    x, S, idx, key, tc, cc, cs, cm, sw, swt, R, F = V
     xs, k1, k2, k3, k4 = S[0], S[1], S[2], S[3], S[4]
     nx = x.shape[0]
     for i in range(nx):
         xs[i] = x[i]
-    ok = _nonlinear_slope(c, t, True, xs, k1, idx, key, tc, cc, cs, cm, sw, swt, R, F, acc, g, pbase)
+    ok = _nonlinear_slope(c, t, True, xs, k1, idx, key, tc, cc, cs, cm, sw, swt, R, F, g, pbase)
     tm = t + 0.5 * h
     for i in range(nx):
         xs[i] = x[i] + 0.5 * h * k1[i]
-    ok &= _nonlinear_slope(c, tm, True, xs, k2, idx, key, tc, cc, cs, cm, sw, swt, R, F, acc, g, pbase)
+    ok &= _nonlinear_slope(c, tm, True, xs, k2, idx, key, tc, cc, cs, cm, sw, swt, R, F, g, pbase)
     for i in range(nx):
         xs[i] = x[i] + 0.5 * h * k2[i]
-    ok &= _nonlinear_slope(c, tm, False, xs, k3, idx, key, tc, cc, cs, cm, sw, swt, R, F, acc, g, pbase)
+    ok &= _nonlinear_slope(c, tm, False, xs, k3, idx, key, tc, cc, cs, cm, sw, swt, R, F, g, pbase)
     for i in range(nx):
         xs[i] = x[i] + h * k3[i]
-    ok &= _nonlinear_slope(c, t + h, True, xs, k4, idx, key, tc, cc, cs, cm, sw, swt, R, F, acc, g, pbase)
+    ok &= _nonlinear_slope(c, t + h, True, xs, k4, idx, key, tc, cc, cs, cm, sw, swt, R, F, g, pbase)
     if not ok:
         return False
     _combine(NONLINEAR, h, x, k1, k2, k3, k4)
@@ -151,7 +150,7 @@ def step_nonlinear(c, t, h, V, g, pbase):
 
 
 @njit(cache=True, inline="always")
-def _nonlinear_slope(c, ts, check, xs, k, idx, key, tc, cc, cs, cm, sw, swt, R, F, acc, g, pbase):
+def _nonlinear_slope(c, ts, check, xs, k, idx, key, tc, cc, cs, cm, sw, swt, R, F, g, pbase):
     """One slope ``k`` of the nonlinear level at ``ts`` (s) and the stage state ``xs``; the time-only terms
     made those of ``ts`` first where ``check`` (the middle slopes share them). Returns whether the mass
     matrix is positive definite.
@@ -168,7 +167,7 @@ def _nonlinear_slope(c, ts, check, xs, k, idx, key, tc, cc, cs, cm, sw, swt, R, 
                 for q in range(sw.shape[1]):
                     sw[i, q] = swt[i, q]
             set_key(c, NONLINEAR, ts, moving_terms(NONLINEAR, g, cc, cs, cm, sw, tc), idx, key)
-    nonlinear_acc(xs, tc, cc, cm, R, F, acc, g, pbase)
+    nonlinear_acc(xs, tc, cc, cm, R, F, k[7:], g, pbase)  # the accelerations straight into the slope
     q0, q1, q2, q3 = xs[3], xs[4], xs[5], xs[6]
     w0, w1, w2 = xs[10], xs[11], xs[12]
     k[0], k[1], k[2] = xs[7], xs[8], xs[9]
@@ -176,8 +175,6 @@ def _nonlinear_slope(c, ts, check, xs, k, idx, key, tc, cc, cs, cm, sw, swt, R, 
     k[4] = 0.5 * (q0 * w0 + q2 * w2 - q3 * w1)
     k[5] = 0.5 * (q0 * w1 - q1 * w2 + q3 * w0)
     k[6] = 0.5 * (q0 * w2 + q1 * w1 - q2 * w0)
-    for i in range(6):
-        k[7 + i] = acc[i]
     return key[3] != 0.0
 
 

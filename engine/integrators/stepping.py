@@ -42,6 +42,10 @@ def pair_driver(method: int, level: int) -> Any:
     (``engine.kernels.params``): a numba kernel ``drive(P, dt, n_steps, O, W, status, full, ev, sub_b,
     sub_a, deg, osc, outmap)``."""
 
+    # the nonlinear level's RK4 driver fuses each multiply with the add that takes it (LLVM's ``contract``:
+    # one rounding instead of two, no reordering, NaN and infinity as they are) in its inlined step; every
+    # kernel it calls without inlining states its own ``fastmath``, which numba would otherwise take from
+    # the first caller that compiles it, and cache so
     fast = {"contract"} if method == RK4 and level == NONLINEAR else False
 
     @njit(cache=True, nogil=True, fastmath=fast)

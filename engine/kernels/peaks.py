@@ -416,7 +416,8 @@ def observe(P, c, level, t, x, W, O, step):
 def observe_nonlinear(P, c, t, x, W, O, step):
     """:func:`observe` at the nonlinear level, the same arithmetic on arrays bound once as views whose
     references numba does not count (``engine.kernels.params.borrowed``), each mount's force computed in
-    the mount loop (``engine.kernels.mounts.mount_force``)."""
+    the mount loop (``engine.kernels.mounts.mount_force``), each multiply fused with the add that takes it
+    (``fastmath={"contract"}``, as in the nonlinear level's RK4 driver)."""
     b = borrowed
     x, R, xf, vf, F = b(x), b(W.R), b(W.xf), b(W.vf), b(W.F)
     famp, fomega, fphase = b(P.famp), b(P.fomega), b(P.fphase)
