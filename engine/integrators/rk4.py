@@ -43,9 +43,9 @@ def step(P, c, level, t, h, x, S, idx, W):
     At the time-varying levels the terms that depend on time only are evaluated at ``t``, ``t + h/2`` and
     ``t + h`` (``engine.kernels.cached_terms.time_terms``; those at ``t`` are usually still there from the
     previous step's end), and the slopes read them through arrays bound once per step. The time-varying
-    levels only: :func:`step_lti` steps the LTI level, and :func:`step_nonlinear` the nonlinear level when
-    the batch has no recorded floor motion or feedforward actuators (:func:`lean_nonlinear`; the driver
-    calls the one that applies, so numba compiles only those of its level)."""
+    levels only: :func:`step_lti` steps the LTI level, and :func:`step_nonlinear` the nonlinear level for a
+    case without recorded floor motion or feedforward actuators (:func:`lean_nonlinear`; the driver calls
+    the one that applies, so numba compiles only those of its level)."""
     nx = x.shape[0]
     xs = S[0]
     # The workspace's arrays bound once, and only functions that call no other (whose own references
@@ -86,10 +86,23 @@ def step(P, c, level, t, h, x, S, idx, W):
 
 
 @njit(cache=True, inline="always")
-def lean_nonlinear(P):
-    """Whether the batch ``P`` steps at the nonlinear level through :func:`step_nonlinear`: no recorded floor
-    motion and no feedforward actuators (those take :func:`step`)."""
-    return not (P.ffon or P.ft.shape[0] > 0)
+def lean_nonlinear(P, c):
+    """Whether case ``c`` of the batch ``P`` steps at the nonlinear level through :func:`step_nonlinear`: no
+    floor motion recorded for it and no feedforward actuator of its own (a recorded floor of zeros and
+    actuators without gain are none; the others take :func:`step`). Chosen per case, so that a case's
+    results do not depend on the other cases of its batch: the lean step fuses its multiply-adds, so it
+    equals the general step to round-off, not bit for bit."""
+    if P.ffon:
+        ffg = P.ffg
+        for j in range(ffg.shape[1]):
+            if ffg[c, j] != 0.0:
+                return False
+    fd = P.fd
+    for dd in range(fd.shape[1]):
+        for i in range(fd.shape[2]):
+            if fd[c, dd, i] != 0.0:
+                return False
+    return True
 
 
 @njit(cache=True, inline="always")
