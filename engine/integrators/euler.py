@@ -24,7 +24,7 @@ GUARDED = True
 """An explicit fixed-step method: the stability guard sizes its step."""
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def step(P, c, level, t, h, x, idx, W):
     """One semi-implicit Euler step of ``h`` s from ``t`` (s) on the pieces ``idx``, ``x`` in place.
 

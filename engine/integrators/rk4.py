@@ -35,7 +35,7 @@ SCRATCH_ROWS = 5
 """State-sized rows of scratch a step needs: the stage state and the four slopes."""
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def step(P, c, level, t, h, x, S, idx, W):
     """One RK4 step of ``h`` s from ``t`` (s) on the pieces ``idx``, ``x`` in place; ``S`` (5, nx)
     scratch. Returns False when a mass matrix is singular.
@@ -43,9 +43,9 @@ def step(P, c, level, t, h, x, S, idx, W):
     At the time-varying levels the terms that depend on time only are evaluated at ``t``, ``t + h/2`` and
     ``t + h`` (``engine.kernels.cached_terms.time_terms``; those at ``t`` are usually still there from the
     previous step's end), and the slopes read them through arrays bound once per step. The time-varying
-    levels only: :func:`step_lti` steps the LTI level, and :func:`step_nonlinear` the nonlinear level when
-    the batch has no recorded floor motion or feedforward actuators (:func:`lean_nonlinear`; the driver
-    calls the one that applies, so numba compiles only those of its level)."""
+    levels only: :func:`step_lti` steps the LTI level, and :func:`step_nonlinear` the nonlinear level for a
+    case without recorded floor motion or feedforward actuators (:func:`lean_nonlinear`; the driver calls
+    the one that applies, so numba compiles only those of its level)."""
     nx = x.shape[0]
     xs = S[0]
     # The workspace's arrays bound once, and only functions that call no other (whose own references
@@ -86,10 +86,23 @@ def step(P, c, level, t, h, x, S, idx, W):
 
 
 @njit(cache=True, inline="always")
-def lean_nonlinear(P):
-    """Whether the batch ``P`` steps at the nonlinear level through :func:`step_nonlinear`: no recorded floor
-    motion and no feedforward actuators (those take :func:`step`)."""
-    return not (P.ffon or P.ft.shape[0] > 0)
+def lean_nonlinear(P, c):
+    """Whether case ``c`` of the batch ``P`` steps at the nonlinear level through :func:`step_nonlinear`: no
+    floor motion recorded for it and no feedforward actuator of its own (a recorded floor of zeros and
+    actuators without gain are none; the others take :func:`step`). Chosen per case, so that a case's
+    results do not depend on the other cases of its batch: the lean step fuses its multiply-adds, so it
+    equals the general step to round-off, not bit for bit."""
+    if P.ffon:
+        ffg = P.ffg
+        for j in range(ffg.shape[1]):
+            if ffg[c, j] != 0.0:
+                return False
+    fd = P.fd
+    for dd in range(fd.shape[1]):
+        for i in range(fd.shape[2]):
+            if fd[c, dd, i] != 0.0:
+                return False
+    return True
 
 
 @njit(cache=True, inline="always")
@@ -114,7 +127,6 @@ def nonlinear_views(P, c, W, x, S, idx, swt):
         b(swt),
         b(W.R),
         b(W.F),
-        b(W.acc),
     )
 
 
@@ -128,22 +140,22 @@ def step_nonlinear(c, t, h, V, g, pbase):
     subtract, dearer than the arithmetic here) for every array bound, sliced or passed on, and for the
     structs a kernel takes; on views made once per case a step counts none. The driver inlines the step: a
     called step counts its arguments' references at every call, which costs what the views save."""
-    x, S, idx, key, tc, cc, cs, cm, sw, swt, R, F, acc = V
+    x, S, idx, key, tc, cc, cs, cm, sw, swt, R, F = V
     xs, k1, k2, k3, k4 = S[0], S[1], S[2], S[3], S[4]
     nx = x.shape[0]
     for i in range(nx):
         xs[i] = x[i]
-    ok = _nonlinear_slope(c, t, True, xs, k1, idx, key, tc, cc, cs, cm, sw, swt, R, F, acc, g, pbase)
+    ok = _nonlinear_slope(c, t, True, xs, k1, idx, key, tc, cc, cs, cm, sw, swt, R, F, g, pbase)
     tm = t + 0.5 * h
     for i in range(nx):
         xs[i] = x[i] + 0.5 * h * k1[i]
-    ok &= _nonlinear_slope(c, tm, True, xs, k2, idx, key, tc, cc, cs, cm, sw, swt, R, F, acc, g, pbase)
+    ok &= _nonlinear_slope(c, tm, True, xs, k2, idx, key, tc, cc, cs, cm, sw, swt, R, F, g, pbase)
     for i in range(nx):
         xs[i] = x[i] + 0.5 * h * k2[i]
-    ok &= _nonlinear_slope(c, tm, False, xs, k3, idx, key, tc, cc, cs, cm, sw, swt, R, F, acc, g, pbase)
+    ok &= _nonlinear_slope(c, tm, False, xs, k3, idx, key, tc, cc, cs, cm, sw, swt, R, F, g, pbase)
     for i in range(nx):
         xs[i] = x[i] + h * k3[i]
-    ok &= _nonlinear_slope(c, t + h, True, xs, k4, idx, key, tc, cc, cs, cm, sw, swt, R, F, acc, g, pbase)
+    ok &= _nonlinear_slope(c, t + h, True, xs, k4, idx, key, tc, cc, cs, cm, sw, swt, R, F, g, pbase)
     if not ok:
         return False
     _combine(NONLINEAR, h, x, k1, k2, k3, k4)
@@ -151,7 +163,7 @@ def step_nonlinear(c, t, h, V, g, pbase):
 
 
 @njit(cache=True, inline="always")
-def _nonlinear_slope(c, ts, check, xs, k, idx, key, tc, cc, cs, cm, sw, swt, R, F, acc, g, pbase):
+def _nonlinear_slope(c, ts, check, xs, k, idx, key, tc, cc, cs, cm, sw, swt, R, F, g, pbase):
     """One slope ``k`` of the nonlinear level at ``ts`` (s) and the stage state ``xs``; the time-only terms
     made those of ``ts`` first where ``check`` (the middle slopes share them). Returns whether the mass
     matrix is positive definite.
@@ -168,7 +180,7 @@ def _nonlinear_slope(c, ts, check, xs, k, idx, key, tc, cc, cs, cm, sw, swt, R, 
                 for q in range(sw.shape[1]):
                     sw[i, q] = swt[i, q]
             set_key(c, NONLINEAR, ts, moving_terms(NONLINEAR, g, cc, cs, cm, sw, tc), idx, key)
-    nonlinear_acc(xs, tc, cc, cm, R, F, acc, g, pbase)
+    nonlinear_acc(xs, tc, cc, cm, R, F, k[7:], g, pbase)  # the accelerations straight into the slope
     q0, q1, q2, q3 = xs[3], xs[4], xs[5], xs[6]
     w0, w1, w2 = xs[10], xs[11], xs[12]
     k[0], k[1], k[2] = xs[7], xs[8], xs[9]
@@ -176,12 +188,10 @@ def _nonlinear_slope(c, ts, check, xs, k, idx, key, tc, cc, cs, cm, sw, swt, R, 
     k[4] = 0.5 * (q0 * w0 + q2 * w2 - q3 * w1)
     k[5] = 0.5 * (q0 * w1 - q1 * w2 + q3 * w0)
     k[6] = 0.5 * (q0 * w2 + q1 * w1 - q2 * w0)
-    for i in range(6):
-        k[7 + i] = acc[i]
     return key[3] != 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def step_lti(P, c, t, h, x, S, idx, W):
     """:func:`step` at the LTI level (each slope through ``engine.kernels.dynamics.derivative``)."""
     nx = x.shape[0]
@@ -208,9 +218,9 @@ def _combine(level, h, x, k1, k2, k3, k4):
     for i in range(x.shape[0]):
         x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
     if level == NONLINEAR:
-        n = np.sqrt(x[3] ** 2 + x[4] ** 2 + x[5] ** 2 + x[6] ** 2)
+        r = 1.0 / np.sqrt(x[3] ** 2 + x[4] ** 2 + x[5] ** 2 + x[6] ** 2)
         for i in range(3, 7):
-            x[i] /= n
+            x[i] *= r
 
 
 def step_matrix(A: np.ndarray, h: np.ndarray) -> np.ndarray:

@@ -42,7 +42,13 @@ def pair_driver(method: int, level: int) -> Any:
     (``engine.kernels.params``): a numba kernel ``drive(P, dt, n_steps, O, W, status, full, ev, sub_b,
     sub_a, deg, osc, outmap)``."""
 
-    @njit(cache=True, nogil=True)
+    # the nonlinear level's RK4 driver fuses each multiply with the add that takes it (LLVM's ``contract``:
+    # one rounding instead of two, no reordering, NaN and infinity as they are) in its inlined step; every
+    # kernel it calls without inlining states its own ``fastmath``, which numba would otherwise take from
+    # the first caller that compiles it, and cache so
+    fast = {"contract"} if method == RK4 and level == NONLINEAR else False
+
+    @njit(cache=True, nogil=True, fastmath=fast)
     def drive(P, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap):
         """Integrate every case ``c`` whose ``status[c]`` is OK over ``n_steps[c]`` steps of ``dt[c]`` s.
 
@@ -77,10 +83,10 @@ def pair_driver(method: int, level: int) -> Any:
         Bmap = np.zeros(output_map.SCRATCH if m > 0 else 0)  # the output map's rows (output_map.observe)
         Qmap = np.zeros(15)
         F0, rest, ptol = P.f0, O.rest, O.point_tol
-        # RK4 at the nonlinear level without a recorded floor or feedforward actuators
-        # (``rk4.lean_nonlinear``): the lean step, inlined here on views of the case's arrays made once per
-        # case (``rk4.nonlinear_views``), so that no step counts a reference
-        lean_nl = method == RK4 and level == NONLINEAR and rk4.lean_nonlinear(P)
+        # RK4 at the nonlinear level for a case without a recorded floor or feedforward actuators
+        # (``rk4.lean_nonlinear``, chosen per case): the lean step, inlined here on views of the case's
+        # arrays made once per case (``rk4.nonlinear_views``), so that no step counts a reference
+        lean_nl = False
         g, pbase = P.g, P.pbase
         swt = np.zeros_like(W.sw)  # the lean step's stages' state at the time of a slope
         first = np.int64(0)  # the first output step, typed as the later ``k + 1``: one compiled observe
@@ -113,6 +119,7 @@ def pair_driver(method: int, level: int) -> Any:
             piece_end = -np.inf  # the earliest start of a stage's next piece, s
             if method == RK4 and level == NONLINEAR:  # the lean step's arrays, once per case
                 V = rk4.nonlinear_views(P, c, W, x, S, idx, swt)
+                lean_nl = rk4.lean_nonlinear(P, c)
             if linear:
                 output_map.observe(c, 0.0, xv, 0, F0v, tgtv, rtgtv, restv, ptolv, Bv, Qv, GZv)
             elif level == NONLINEAR:

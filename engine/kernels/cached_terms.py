@@ -57,7 +57,7 @@ rotary mass of base and stages ``J`` (kg m^2) and the Cholesky factor (lower) of
 complement ``J - [SR]x^T [SR]x / m_tot`` (sqrt(kg) m)."""
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def _pack_case(P, c, W):
     """Pack case ``c``'s parameters into ``W.cc``, ``W.cs``, ``W.cm`` and its LTV mount operator into
     ``W.cK`` (12, 6): row ``k`` is the generalised force of :func:`linear_mounts` for the unit state
@@ -118,7 +118,7 @@ def _pack_case(P, c, W):
     cc[0] = c
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def moving_terms(level, g, cc, cs, cm, sw, tc):
     """The time-only terms of the LTV and nonlinear levels in ``tc`` from the stages' state ``sw`` and the
     floor (rows ``TC_XF``, ``TC_VF``) and feedforward (``TC_SFA``, ``TC_DFA``) rows already in ``tc``. Returns
@@ -236,7 +236,7 @@ def moving_terms(level, g, cc, cs, cm, sw, tc):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def _lti_terms(P, c, W):
     """The LTI level's accelerations due to the known inputs, ``M^-1 f`` (m/s^2, rad/s^2), into the rows
     ``TC_BT``, ``TC_BR`` of ``W.tc``, from the stages, floor and feedforward state in ``W``."""
@@ -258,7 +258,7 @@ def _lti_terms(P, c, W):
         W.tc[TC_BT + i // 3, i % 3] = s
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def stages_and_floor(t, idx, cc, cs, sw, tc):
     """First part of evaluating the time-only terms of the LTV and nonlinear levels at ``t`` (s) on the
     pieces ``idx`` (:func:`time_terms`): the stages' positions (m), velocities (m/s) and accelerations
@@ -313,7 +313,7 @@ def extra_inputs(ffon, cc):
     return ffon or cc[CC_NF] > 0
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def recorded_and_feedforward(P, c, t, idx, W, cm, tc):
     """Add the recorded floor motion and the feedforward actuators' forces and moments at ``t`` (s) to
     ``tc`` (after :func:`stages_and_floor`)."""
@@ -350,7 +350,7 @@ def stages_unchanged(c, level, key, swt, sw):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def key_holds(c, level, t, idx, key):
     """Whether the time-only terms with the key ``key`` (``W.key``) are those of case ``c`` and ``level``
     at ``t`` (s) on the pieces ``idx``."""
@@ -362,7 +362,7 @@ def key_holds(c, level, t, idx, key):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def set_key(c, level, t, ok, idx, key):
     """Key the time-only terms just evaluated (see :func:`key_holds`); ``ok``: their mass matrix is
     positive definite. Returns ``ok``."""
@@ -375,7 +375,7 @@ def set_key(c, level, t, ok, idx, key):
     return ok
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def pack_case(P, c, W, cc):
     """Make the workspace's per-case terms (``W.cc`` bound as ``cc``, ``W.cs``, ``W.cm``, ``W.cK``) those
     of case ``c``."""
@@ -383,7 +383,7 @@ def pack_case(P, c, W, cc):
         _pack_case(P, c, W)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def time_terms(P, c, level, t, idx, W):
     """Make the workspace's time-only terms (``W.tc``) those of case ``c`` at ``t`` (s) on the pieces
     ``idx`` for ``level`` (and its per-case terms those of case ``c``): kept when its key says so, else

@@ -46,12 +46,11 @@ from isolab.engine.kernels.cached_terms import (
     TC_XF,
     time_terms,
 )
-from isolab.engine.kernels.mounts import mount_offset
 from isolab.engine.kernels.params import LTI, LTV, NONLINEAR
 from isolab.engine.kernels.rotations import cross, quat_matrix
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def _solve_schur(tc, q0, q1, q2):
     """``S^-1 q`` with the Cholesky factor of the Schur complement ``S`` and its reciprocal diagonal in
     ``tc``."""
@@ -64,7 +63,7 @@ def _solve_schur(tc, q0, q1, q2):
     return z0, z1, z2
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def accel_lti(P, c, x, W):
     """Accelerations ``W.acc`` (6,) of the LTI level: ``A21 x + A22 v + M^-1 f`` with the stages and the
     floor as known inputs (``M^-1 f`` from :func:`time_terms`). Always True."""
@@ -77,7 +76,7 @@ def accel_lti(P, c, x, W):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def accel_ltv(P, c, x, W):
     """Accelerations ``W.acc`` (6,) of the LTV level: small rotations, mass matrix and weight moments
     following the stages' travel, Coriolis terms of the stages (time-only terms from
@@ -139,7 +138,7 @@ def ltv_acc(x, tc, K, cc, g, ffon, gstiff, acc):
     acc[5] = a2
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def accel_nonlinear(P, c, x, W):
     """Accelerations ``W.acc`` (6,) of the nonlinear level: finite rotation (quaternion), the preload
     turning with the base, the gyroscopic term and the stages' full relative kinematics (time-only terms
@@ -159,16 +158,22 @@ def nonlinear_acc(x, tc, cc, cm, R, F, acc, g, pbase):
     w0, w1, w2 = x[10], x[11], x[12]
     x0, x1, x2 = tc[TC_XF, 0], tc[TC_XF, 1], tc[TC_XF, 2]
     y0, y1, y2 = tc[TC_VF, 0], tc[TC_VF, 1], tc[TC_VF, 2]
+    # the base's rate turned to the floor frame: a point's velocity about the c.g. R (w x d) is (R w) x (R d)
+    W0 = R[0, 0] * w0 + R[0, 1] * w1 + R[0, 2] * w2
+    W1 = R[1, 0] * w0 + R[1, 1] * w1 + R[1, 2] * w2
+    W2 = R[2, 0] * w0 + R[2, 1] * w1 + R[2, 2] * w2
     f0 = f1 = f2 = 0.0
     r0 = r1 = r2 = 0.0
+    M0 = M1 = M2 = 0.0  # the mounts' moment about the c.g. in the floor frame, turned to the body below
     # isolators (``isolator_forces``): force (floor frame) and moment (body frame) with the vertical preload
     for j in range(cm.shape[0]):
         d0, d1, d2 = cm[j, CM_D], cm[j, CM_D + 1], cm[j, CM_D + 2]
-        o0, o1, o2 = mount_offset(NONLINEAR, x, R, d0, d1, d2)
-        b0, b1, b2 = cross(w0, w1, w2, d0, d1, d2)
-        q0 = R[0, 0] * b0 + R[0, 1] * b1 + R[0, 2] * b2
-        q1 = R[1, 0] * b0 + R[1, 1] * b1 + R[1, 2] * b2
-        q2 = R[2, 0] * b0 + R[2, 1] * b1 + R[2, 2] * b2
+        # the mount's arm R d in the floor frame, and ``mount_offset``'s (R - I) d
+        a0 = R[0, 0] * d0 + R[0, 1] * d1 + R[0, 2] * d2
+        a1 = R[1, 0] * d0 + R[1, 1] * d1 + R[1, 2] * d2
+        a2 = R[2, 0] * d0 + R[2, 1] * d1 + R[2, 2] * d2
+        o0, o1, o2 = a0 - d0, a1 - d1, a2 - d2
+        q0, q1, q2 = cross(W0, W1, W2, a0, a1, a2)
         rel = 1.0 - cm[j, CM_SKY]
         if cm.shape[1] > CM_Q:  # the mount's own axes (``engine.kernels.mounts.oriented_force``)
             e0, e1, e2 = u0 + o0 - x0, u1 + o1 - x1, u2 + o2 - x2
@@ -194,23 +199,25 @@ def nonlinear_acc(x, tc, cc, cm, R, F, acc, g, pbase):
         f1 += F1
         f2 += F2
         p = cm[j, CM_F0]
+        # the moment d x R^T T of the mount's force T in the body is R^T ((R d) x T)
         if pbase == 1:
-            # the preload turns with the base: (0, 0, p) in the body, R (0, 0, p) in the floor frame
+            # the preload turns with the base: (0, 0, p) in the body, R (0, 0, p) in the floor frame;
+            # its moment d x (0, 0, p) stays in the body
             f0 += p * R[0, 2]
             f1 += p * R[1, 2]
             f2 += p * (R[2, 2] - 1.0)
-            G0 = R[0, 0] * F0 + R[1, 0] * F1 + R[2, 0] * F2
-            G1 = R[0, 1] * F0 + R[1, 1] * F1 + R[2, 1] * F2
-            G2 = R[0, 2] * F0 + R[1, 2] * F1 + R[2, 2] * F2 + p
+            r0 += p * d1
+            r1 -= p * d0
+            T2 = F2
         else:
             T2 = F2 + p
-            G0 = R[0, 0] * F0 + R[1, 0] * F1 + R[2, 0] * T2
-            G1 = R[0, 1] * F0 + R[1, 1] * F1 + R[2, 1] * T2
-            G2 = R[0, 2] * F0 + R[1, 2] * F1 + R[2, 2] * T2
-        m0, m1, m2 = cross(d0, d1, d2, G0, G1, G2)
-        r0 += m0
-        r1 += m1
-        r2 += m2
+        m0, m1, m2 = cross(a0, a1, a2, F0, F1, T2)
+        M0 += m0
+        M1 += m1
+        M2 += m2
+    r0 += R[0, 0] * M0 + R[1, 0] * M1 + R[2, 0] * M2
+    r1 += R[0, 1] * M0 + R[1, 1] * M1 + R[2, 1] * M2
+    r2 += R[0, 2] * M0 + R[1, 2] * M1 + R[2, 2] * M2
     if pbase == 2:
         # balanced: the preloads and the home weights cancel in every attitude; take out their moment
         # V x R^T e_z (what is left of the weights is the stages' travel, in the weight moment below)
@@ -277,7 +284,7 @@ def nonlinear_acc(x, tc, cc, cm, R, F, acc, g, pbase):
     acc[5] = a2
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def accel(P, c, level, t, x, idx, W):
     """Accelerations of the base at time ``t`` (s) and state ``x``, written to ``W.acc`` (6,).
 
@@ -299,7 +306,7 @@ def accel(P, c, level, t, x, idx, W):
     return accel_nonlinear(P, c, x, W)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def rates(level, x, acc, dx):
     """The state's time derivative ``dx`` from the state ``x`` and the accelerations ``acc`` (6,)."""
     if level == NONLINEAR:
@@ -318,7 +325,7 @@ def rates(level, x, acc, dx):
             dx[6 + i] = acc[i]
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def derivative(P, c, level, t, x, idx, W, dx):
     """Time derivative ``dx`` of the state ``x`` at ``t`` (s). Returns False on a singular mass matrix."""
     okm = accel(P, c, level, t, x, idx, W)
@@ -338,7 +345,7 @@ def stage_acceleration(P, c, q, t, idx):
     return P.pa[c, q, k] + P.pj[c, q, k] * (t - P.pt[c, q, k])
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def slot_forces(P, c, t, x, idx, acc):
     """What the extra linear states ``z = x[12:]`` add to the LTI level's accelerations ``acc`` (6,):
     ``zM z``, and ``sM s''`` where a model takes a stage's inertia off the base (``Params.sM``)."""
@@ -353,7 +360,7 @@ def slot_forces(P, c, t, x, idx, acc):
         acc[i] += s
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def slot_rates(P, c, t, x, idx, acc, dx):
     """The extra linear states' rates ``dx[12:] = zA z + zX x + zQ acc + zS s''`` at ``t`` (s): ``x`` the
     state ``[base (12), z (nz)]``, ``acc`` (6,) the base's accelerations just computed, ``s''`` each stage's

@@ -17,7 +17,7 @@ from numba import njit
 from isolab.engine.kernels.rotations import cross
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def advance_pieces(P, c, t, idx, tol):
     """Move each stage's current piece index ``idx`` (m,) forward to the piece holding time ``t`` (s).
 
@@ -31,7 +31,7 @@ def advance_pieces(P, c, t, idx, tol):
             idx[i] += 1
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def next_breakpoint(P, c, idx, t_end, tol):
     """End of the current pieces ``idx`` (m,): the earliest start of a next piece, s; ``t_end`` when none
     starts before ``t_end - tol``. Fixed-step integrators end a sub-step there, so each sub-step sees one
@@ -44,7 +44,7 @@ def next_breakpoint(P, c, idx, t_end, tol):
     return t_end if nb >= t_end - tol else nb
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def stage_state(P, c, t, idx, rho, vr, ar, jr):
     """Stage positions relative to the machine c.g. in the machine frame at time ``t`` (s).
 
@@ -82,7 +82,7 @@ def stage_state(P, c, t, idx, rho, vr, ar, jr):
                 jr[i, dd] += jr[p, dd]
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def recorded_floor(P, c, t, xf, vf):
     """Add the recorded floor displacement (m) and velocity (m/s) at ``t`` (s) to ``xf``, ``vf`` (3,).
 
@@ -111,7 +111,7 @@ def recorded_floor(P, c, t, xf, vf):
                 vf[dd] += slope
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def floor_motion(P, c, t, xf, vf):
     """Floor displacement ``xf`` (3,) m and velocity ``vf`` (3,) m/s under the isolators at ``t`` (s)."""
     famp, fomega, fphase = P.famp, P.fomega, P.fphase
@@ -128,7 +128,7 @@ def floor_motion(P, c, t, xf, vf):
     recorded_floor(P, c, t, xf, vf)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def lti_forcing(P, c, rho, ar, xf, vf, f):
     """Generalised force ``f`` (6,) N and N m of the LTI level: stages and floor as known inputs.
 

@@ -18,7 +18,7 @@ from isolab.engine.kernels.excitation import advance_pieces, stage_state
 from isolab.engine.kernels.rotations import cross
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def stage_wrench(P, c, rho, vr, ar, jr, X):
     """The stages' inertial wrench on the base with its sign reversed, and its time derivatives, from the
     stage kinematics of :func:`stage_state`: ``X[0] = [sum m a_rel, sum m rho x a_rel]`` (N, N m), ``X[k]``
@@ -83,7 +83,7 @@ def _follow(X, wc, q, wt):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def feedforward_transients(P, c, W):
     """Fill ``P.ffA[c]`` (n, B, 6): per mount and stretch between breakpoints ``P.fftb[c]``, the amplitude
     of the low-pass's free response ``e^(-wc (t - t_k))`` that joins its particular response
@@ -118,7 +118,7 @@ def feedforward_transients(P, c, W):
                     y_end[j, q] = _follow(X, wc, q, P.ffwt[c, j]) + P.ffA[c, j, k, q] * e
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def feedforward_forces(P, c, t, idx, W):
     """Actuator forces ``W.Fa`` (n, 3) N, machine axes, of the feedforward mounts at ``t`` (s), from the
     stage kinematics already in ``W`` (:func:`stage_state` at ``t`` on the pieces ``idx``).
@@ -176,7 +176,7 @@ def feedforward_forces(P, c, t, idx, W):
             W.Fa[j, a] = f
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def feedforward_generalised(P, c, t, idx, W, out, o):
     """Write the LTI level's generalised force of the feedforward actuators at ``t`` (s) to
     ``out[o:o + 6]`` (N, N m): ``[sum f_j, sum d_j x f_j]``. Evaluates the stages at ``t`` into ``W``."""

@@ -89,7 +89,7 @@ def mount_force(level, x, R, xf, vf, c, j, k, cd, sky, orient, qm, d0, d1, d2, r
     )
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def isolator_forces(P, c, level, x, R, xf, vf, F):
     """Dynamic isolator forces on the machine ``F`` (n, 3) N, floor frame, at state ``x``
     (:func:`mount_force` of each mount).
@@ -107,7 +107,7 @@ def isolator_forces(P, c, level, x, R, xf, vf, F):
         )
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def linear_mounts(P, c, x, xf, vf, R, F, out):
     """Generalised force ``out`` (6,) N, N m of the isolators at the linear levels (and the rocking moment
     of their preloads that tilt with the base, ``P.gstiff``) at state ``x`` and floor motion ``xf``, ``vf``

@@ -203,7 +203,7 @@ def finish_settling(O: Peaks, t_end: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def observe(P, c, level, t, x, W, O, step):
     """Update case ``c``'s peaks with the state ``x`` (12 + nz,) of a linear level (``level``: ``LTI`` or
     ``LTV``) at time ``t`` (s), output sample ``step``: the general observer of a case under floor motion,
@@ -412,11 +412,12 @@ def observe(P, c, level, t, x, W, O, step):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath={"contract"})
 def observe_nonlinear(P, c, t, x, W, O, step):
     """:func:`observe` at the nonlinear level, the same arithmetic on arrays bound once as views whose
     references numba does not count (``engine.kernels.params.borrowed``), each mount's force computed in
-    the mount loop (``engine.kernels.mounts.mount_force``)."""
+    the mount loop (``engine.kernels.mounts.mount_force``), each multiply fused with the add that takes it
+    (``fastmath={"contract"}``, as in the nonlinear level's RK4 driver)."""
     b = borrowed
     x, R, xf, vf, F = b(x), b(W.R), b(W.xf), b(W.vf), b(W.F)
     famp, fomega, fphase = b(P.famp), b(P.fomega), b(P.fphase)
@@ -449,12 +450,20 @@ def observe_nonlinear(P, c, t, x, W, O, step):
     slot = O.slot[c]
     qw, qx, qy, qz = x[3], x[4], x[5], x[6]
     quat_matrix(qw, qx, qy, qz, R)  # R and the rotation vector th: ``quat_to_rotvec``
-    sn = np.sqrt(qx * qx + qy * qy + qz * qz)
+    s2 = qx * qx + qy * qy + qz * qz
     sign = 1.0
     if qw < 0.0:
         qw = -qw
         sign = -1.0
-    fr = 2.0 * sign if sn < 1e-12 else sign * 2.0 * np.arctan2(sn, qw) / sn
+    if s2 < 1e-4 * qw * qw:
+        # below about 0.02 rad, 2 atan(z) / z with z = |q_xyz| / q_w by its series to z^8 (the next term is
+        # below 1e-20): neither the square root nor the arc tangent's call
+        iw = 1.0 / qw
+        z2 = s2 * iw * iw
+        fr = sign * 2.0 * iw * (1.0 - z2 * (ONE_THIRD - z2 * (0.2 - z2 * (1.0 / 7.0 - z2 * (1.0 / 9.0)))))
+    else:
+        sn = np.sqrt(s2)
+        fr = 2.0 * sign if sn < 1e-12 else sign * 2.0 * np.arctan2(sn, qw) / sn
     th = (fr * qx, fr * qy, fr * qz)
     u0, u1, u2 = x[0], x[1], x[2]
     for i in range(3):

@@ -33,7 +33,7 @@ def quat_matrix(w, x, y, z, R):
     R[2, 2] = 1 - 2 * (x * x + y * y)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def quat_to_rotvec(q, out):
     """Rotation vector (axis times angle, rad) of the unit quaternion ``q`` into ``out`` (3,)."""
     w = q[0]
@@ -52,7 +52,7 @@ def quat_to_rotvec(q, out):
     out[2] = f * q[3]
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def quat_step(q, w0, w1, w2, h):
     """Advance ``q`` in place by a constant body rate ``w`` (rad/s) over ``h`` s (exact increment)."""
     wn = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)

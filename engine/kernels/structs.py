@@ -59,17 +59,17 @@ structref.define_proxy(KernelWork, WorkType, list(Work._fields))
 structref.define_proxy(KernelPeaks, PeaksType, list(Peaks._fields))
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def _params_struct(P):
     return KernelParams(*P)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def _work_struct(W):
     return KernelWork(*W)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=False)
 def _peaks_struct(O):
     return KernelPeaks(*O)
 
