@@ -237,9 +237,11 @@ def to_dataset(
     case_dims, case_coords, order = _case_layout(design)
     case_shape = tuple(len(case_coords[d][1]) for d in case_dims) if design.kind == "grid" else (n,)
 
+    in_order = np.array_equal(order, np.arange(len(order)))  # a sampled design: no copy to lay out
+
     def lay_out(a: np.ndarray) -> np.ndarray:
         a = np.asarray(a)
-        return a[order].reshape(case_shape + a.shape[1:])
+        return (a if in_order else a[order]).reshape(case_shape + a.shape[1:])
 
     data_vars = _case_variables(result, case_dims, lay_out)
     coords: dict[str, xr.Variable] = {

@@ -19,7 +19,7 @@ Chunk size rule (:func:`choose_chunk_size`):
 4. when the whole study is too short for rules 1 and 2 together, rule 1 wins, but never with fewer chunks
    than workers (each worker still gets a share).
 5. a study with fewer than 4 chunks per worker gets a number of chunks that is a multiple of the workers,
-   of equal size (3 chunks on 2 workers would leave one worker idle for a third of the study).
+   of one size (3 chunks on 2 workers, or 4 of which one is half, leave a worker idle at the end).
 
 Studies share the cluster by a fair-share rule (:func:`run_chunks`, :class:`ReservedLane`). A run does not
 hand Dask all its chunks at once: it keeps at most ``LOW_LANE_PER_WORKER`` (2) chunks per worker in
@@ -262,8 +262,8 @@ def choose_chunk_size(n_cases: int, n_workers: int, seconds_per_case_estimate: f
     size = min(max(balanced, floor_size), ceiling_size)
     size = max(1, min(size, max(1, n // w)))  # rule 4
     n_chunks = -(-n // size)
-    if w < n_chunks < CHUNKS_PER_WORKER * w and n_chunks % w:  # rule 5
-        size = -(-n // (n_chunks + w - n_chunks % w))
+    if w < n_chunks < CHUNKS_PER_WORKER * w:  # rule 5: a multiple of the workers, of one size
+        size = -(-n // (n_chunks + (-n_chunks) % w))
     return size
 
 

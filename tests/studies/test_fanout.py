@@ -92,6 +92,7 @@ def test_plan_chunks_is_deterministic_and_covers_every_case_once() -> None:
         (100, 2, 0.5, 10),  # 50 s: 10 chunks of 5 s (the cap)
         (5, 8, 100.0, 1),  # fewer cases than workers: one case per chunk
         (10_000, 2, 0.29e-3, 2_500),  # 2.9 s: chunks of >= 1 s would be 3, one worker idle a third: 4
+        (10_000, 2, 0.352e-3, 2_500),  # 3.5 s: 4 chunks of 2,841 would end with 1,477: 4 of 2,500
         (10, 3, 0.1, 2),  # 1 s: 4 chunks of 3 on 3 workers (one works twice) -> 5 of 2
     ],
 )
