@@ -209,8 +209,7 @@ def to_dataset(
         attrs: dataset attributes, passed through (dicts and lists become JSON strings, booleans 0/1,
             None is left out). ``design`` given as a dict is merged into the design summary (e.g. the
             seed of a sampled design). Expected: title, study (the definition), engine_version, fidelity,
-            integrator, dt. ``Conventions``, ``created`` (ISO 8601 UTC) and ``history`` are filled in
-            unless given.
+            integrator, dt. ``Conventions``, ``created`` (ISO 8601 UTC), ``history`` filled unless given.
 
     Raises:
         ValueError: sizes disagree, a grid cell is missing or repeated, or a parameter name clashes with
