@@ -449,7 +449,7 @@ def observe_nonlinear(P, c, t, x, W, O, step):
     target, sumsq, nobs, last_viol, last_t = b(O.target), b(O.sumsq), b(O.nobs), b(O.last_viol), b(O.last_t)
     slot = O.slot[c]
     qw, qx, qy, qz = x[3], x[4], x[5], x[6]
-    quat_matrix(qw, qx, qy, qz, R)  # R and the rotation vector th: ``quat_to_rotvec``
+    quat_matrix(qw, qx, qy, qz, R)  # R, then the rotation vector th (axis times angle, rad)
     s2 = qx * qx + qy * qy + qz * qz
     sign = 1.0
     if qw < 0.0:

@@ -34,25 +34,6 @@ def quat_matrix(w, x, y, z, R):
 
 
 @njit(cache=True, fastmath=False)
-def quat_to_rotvec(q, out):
-    """Rotation vector (axis times angle, rad) of the unit quaternion ``q`` into ``out`` (3,)."""
-    w = q[0]
-    s = np.sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    if w < 0.0:
-        w = -w
-        sign = -1.0
-    else:
-        sign = 1.0
-    if s < 1e-12:
-        f = 2.0 * sign
-    else:
-        f = sign * 2.0 * np.arctan2(s, w) / s
-    out[0] = f * q[1]
-    out[1] = f * q[2]
-    out[2] = f * q[3]
-
-
-@njit(cache=True, fastmath=False)
 def quat_step(q, w0, w1, w2, h):
     """Advance ``q`` in place by a constant body rate ``w`` (rad/s) over ``h`` s (exact increment)."""
     wn = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
