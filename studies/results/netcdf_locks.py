@@ -24,7 +24,9 @@ service reads and writes datasets from several threads."""
 def netcdf_writing() -> Iterator[None]:
     """Hold :data:`NETCDF_LOCK` while xarray writes a netCDF file here, and have xarray lock the file with a
     lock of this process, not the cluster's (see the module docstring): writes under it compute any Dask
-    array in this thread, never on a cluster this process may be part of."""
+    array in this thread, never on a cluster this process may be part of. The Dask setting it makes is the
+    process's while the write lasts (Dask's settings are not per thread); no isolab process computes a Dask
+    collection on a cluster (studies go out as futures, which do not read it)."""
     try:
         import dask
     except ImportError:  # no Dask: xarray's lock is this process's already
