@@ -15,6 +15,7 @@ version first compiles, :func:`tidy_kernel_caches` removes the folders of other 
 from __future__ import annotations
 
 import json
+import logging
 import os
 import re
 import shutil
@@ -128,10 +129,12 @@ def warm_kernels(pairs: Sequence[tuple[str, str]], datasets: bool = False) -> di
     return took
 
 
-def warm_datasets() -> None:
+def warm_datasets() -> bool:
     """Write a two-case dataset through the store's netCDF writer into a temporary folder: the first
     dataset a process builds and writes otherwise pays for xarray's and netCDF4's imports and their
-    first-use lookups (the array libraries xarray looks for, the backends), 0.4-0.6 s of CPU."""
+    first-use lookups (the array libraries xarray looks for, the backends), 0.4-0.6 s of CPU. Whether it
+    was written: a full temporary disk or any other failure only leaves the first study to pay that
+    (logged, not raised)."""
     import tempfile
 
     import numpy as np
@@ -146,8 +149,13 @@ def warm_datasets() -> None:
         },
         coords={"case": np.arange(2), "axis": ["x", "y", "z"]},
     )
-    with tempfile.TemporaryDirectory(prefix="isolab-warm-") as folder:
-        write_netcdf(ds, Path(folder) / "warm.nc")
+    try:
+        with tempfile.TemporaryDirectory(prefix="isolab-warm-") as folder:
+            write_netcdf(ds, Path(folder) / "warm.nc")
+    except Exception as err:  # the warm-up only saves the first study its time
+        logging.getLogger(__name__).warning("could not write a dataset at warm-up: %s", err)
+        return False
+    return True
 
 
 def warmup_plan() -> tuple[list[tuple[str, str]], bool]:

@@ -185,3 +185,16 @@ def test_a_workers_warm_up_writes_a_dataset_first_and_leaves_no_file(tmp_path, m
     )
     assert out.stdout.split() == ["[]", "True", "True"], out.stdout + out.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_dataset_warm_up_that_cannot_write_is_no_error(tmp_path, monkeypatch):
+    # a full temporary disk: the warm-up says so and goes on (the first study pays the imports instead)
+    import tempfile
+
+    from isolab.studies.run.kernel_cache import warm_datasets
+
+    def full(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(tempfile, "TemporaryDirectory", full)
+    assert warm_datasets() is False
