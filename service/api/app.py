@@ -58,8 +58,6 @@ from isolab.studies.run.fanout import LOOPBACK, local_cluster
 if TYPE_CHECKING:  # Dask is imported when the service starts: `isolab serve` answers sooner
     from distributed import Client, LocalCluster
 
-#: The interface the in-process LocalCluster listens on, its dashboard too, whatever host the API binds to.
-DASHBOARD_HOST = LOOPBACK
 #: Tasks the LocalCluster's scheduler gives a worker per thread: 1.0, none waiting in a worker's own queue.
 WORKER_SATURATION = 1.0
 #: Seconds a thread may hold the interpreter lock while another waits (Python's default is 0.005).
@@ -84,11 +82,11 @@ def free_dashboard_address(port: int | None) -> str | None:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
         probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
-            probe.bind((DASHBOARD_HOST, port))
+            probe.bind((LOOPBACK, port))
         except OSError:
-            log.info("no Dask dashboard: port %d of %s is in use", port, DASHBOARD_HOST)
+            log.info("no Dask dashboard: port %d of %s is in use", port, LOOPBACK)
             return None
-    return f"{DASHBOARD_HOST}:{port}"
+    return f"{LOOPBACK}:{port}"
 
 
 def start_dask(settings: Settings) -> tuple[Client, LocalCluster | None]:

@@ -112,8 +112,8 @@ def warm_kernels(pairs: Sequence[tuple[str, str]], datasets: bool = False) -> di
     """Run one short case of each (fidelity, integrator) pair through the chunk task, so that this process
     has imported the studies, built its engine structures and loaded (or, on an empty cache, compiled and
     saved) every kernel those pairs call: a later chunk starts computing at once. With ``datasets``, also
-    import the libraries that assemble and write a study's dataset (a worker finishes studies: its first
-    would otherwise wait 0.3-0.4 s for them). Returns seconds per pair (``"<fidelity>/<integrator>"``, and
+    write a small dataset (:func:`warm_datasets`: a worker finishes studies, and its first would otherwise
+    pay xarray's and netCDF4's first use). Returns seconds per pair (``"<fidelity>/<integrator>"``, and
     ``"datasets"``) and, under ``"pid"``, this process's id."""
     from isolab.studies.run.fanout import run_chunk
 

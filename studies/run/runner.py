@@ -215,13 +215,7 @@ def run_study(
         if not sampled:  # every chunk was done already (a resumed run)
             submit_samples(1)
         samples = sampled[0]
-        estimate: ErrorEstimate | None = None
-        if all(f.done() for f in samples[1]):
-            estimate = _error_estimate(client, run, samples, cancel)
-            if estimate is None:  # cancelled meanwhile
-                store.update(study_id, status="cancelled", finished=utc_now())
-                return study_id
-        ready = estimate
+        ready = _error_estimate(client, run, samples, cancel) if all(f.done() for f in samples[1]) else None
         future = client.submit(
             finish_study,
             str(store.root),
@@ -234,8 +228,7 @@ def run_study(
             priority=1,
             key=f"isolab-{study_id}-finish-{uuid.uuid4().hex[:8]}",
         )
-        if estimate is None:
-            estimate = _error_estimate(client, run, samples, cancel)
+        estimate = ready if ready is not None else _error_estimate(client, run, samples, cancel)
         n_failed = _wait(client, future, cancel) if estimate is not None else None
         if estimate is None or (cancel is not None and cancel.is_set()):
             client.cancel([future, *samples[1]])
