@@ -19,17 +19,15 @@ missing) and int8 with ``_FillValue`` -1 on disk, so they too can be missing (th
 
 Results that arrive in chunks (see :mod:`studies.run.fanout`) travel as plain dicts of numpy arrays
 (:func:`result_arrays`) and are put back together in case order by :func:`from_chunks`, or, for a study's
-stored dataset, read one block of chunks at a time as the file is written (:func:`streamed_dataset`: the
-same dataset, whose memory does not grow with the number of cases).
+stored dataset, read one block of chunks at a time as the file is written
+(:func:`isolab.studies.results.streaming.streamed_dataset`: the same dataset, whose memory does not grow with
+the number of cases).
 """
 
 from __future__ import annotations
 
 import datetime as _dt
 import json
-import operator
-import threading
-import uuid
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -56,9 +54,6 @@ if TYPE_CHECKING:  # xarray and dask load with the first dataset built: a single
 CONVENTIONS = "CF-1.10"
 
 _BOOL_ENCODING = {"dtype": "int8", "_FillValue": np.int8(-1)}
-BLOCK_CASES = 4096
-"""Fewest cases a block of :func:`streamed_dataset` holds (consecutive chunks are read together up to it),
-so that the file's chunks (one per block) stay large enough to compress and read well."""
 _BOOL_FLAGS = {"flag_values": np.array([0, 1], dtype=np.int8), "flag_meanings": "false true"}
 
 
@@ -231,9 +226,9 @@ def to_dataset(
             f"point_names: {n_pts} names for {np.shape(result.peak_point_displacement)[1]} "
             "points in the result"
         )
-    _check_parameter_names(design)
+    check_parameter_names(design)
 
-    case_dims, case_coords, order = _case_layout(design)
+    case_dims, case_coords, order = case_layout(design)
     case_shape = tuple(len(case_coords[d][1]) for d in case_dims) if design.kind == "grid" else (n,)
 
     in_order = np.array_equal(order, np.arange(len(order)))  # a sampled design: no copy to lay out
@@ -248,11 +243,11 @@ def to_dataset(
     }
     coords.update(_fixed_coords(isolator_names, point_names))
     ds = xr.Dataset(data_vars, coords=coords)
-    ds.attrs = _dataset_attrs(design, attrs or {})
+    ds.attrs = dataset_attrs(design, attrs or {})
     return ds
 
 
-def _check_parameter_names(design: Design) -> None:
+def check_parameter_names(design: Design) -> None:
     reserved = set(OUTPUTS) | {
         "status",
         "message",
@@ -298,166 +293,6 @@ def chunk_dataset(
         _case_variables(result, ("case",), np.asarray), coords=_fixed_coords(isolator_names, point_names)
     )
     return add_criteria(ds, criteria)
-
-
-def streamed_dataset(
-    load_chunk: Callable[[int], Mapping[str, np.ndarray]],
-    chunks: Sequence[np.ndarray],
-    design: Design,
-    *,
-    isolator_names: Sequence[str],
-    point_names: Sequence[str],
-    attrs: Mapping[str, Any] | None = None,
-    criteria: Any = None,
-) -> xr.Dataset:
-    """A study's dataset whose per-case variables are read from its chunks only when they are computed.
-
-    Equal to ``add_criteria(to_dataset(from_chunks(...), design, ...), criteria)`` (see :func:`to_dataset`,
-    :func:`studies.questions.criteria.add_criteria`), but every per-case variable is a dask array with one
-    block per
-    chunk: ``load_chunk(k)`` gives the arrays of the cases ``chunks[k]`` (as :func:`from_chunks` takes
-    them) when a block of chunk ``k`` is computed, and only the last chunk read is kept. Written with
-    :func:`studies.results.store.write_netcdf`, each chunk's slice goes into the file as it is read, so the
-    memory the write takes does not grow with the number of cases. The coordinates and attributes are
-    built at once (the parameter values of every case: 8 bytes a case per numeric parameter).
-
-    Raises:
-        ValueError: the chunks do not partition the design's cases, or a parameter name clashes with a
-            dimension or variable name. A chunk whose arrays do not fit raises when it is read.
-    """
-    import dask.array as da
-    import xarray as xr
-    from dask.highlevelgraph import HighLevelGraph
-
-    n = int(sum(len(c) for c in chunks))
-    if design.n_cases != n:
-        raise ValueError(f"chunks: {n} cases, but the design has {design.n_cases}")
-    all_idx = np.concatenate([np.asarray(c, dtype=np.int64) for c in chunks]) if chunks else np.zeros(0, int)
-    if not np.array_equal(np.sort(all_idx), np.arange(n)):
-        raise ValueError("chunks: the chunks must cover the cases 0..N-1 exactly once")
-    del all_idx
-    _check_parameter_names(design)
-    case_dims, case_coords, order = _case_layout(design)
-    case_shape = tuple(len(case_coords[d][1]) for d in case_dims) if design.kind == "grid" else (n,)
-    # case order along the blocks: the chunks' own order, put in the design's case order when they are
-    # not consecutive runs of it
-    position = np.concatenate([np.asarray(c, dtype=np.int64) for c in chunks])
-    if not np.array_equal(position, np.arange(n)):
-        order = np.argsort(position)[order]
-    groups = _block_groups([len(c) for c in chunks], BLOCK_CASES)
-    source = _ChunkSource(load_chunk, chunks, groups, isolator_names, point_names, criteria)
-    first = source.dataset(0)
-    sizes = tuple(int(sum(len(chunks[k]) for k in g)) for g in groups)
-    # the file's chunks (HDF5) along the cases are the blocks, so that each block written fills whole
-    # file chunks: none is ever held half-written (see write_netcdf)
-    aligned = all(size == sizes[0] for size in sizes[:-1]) and sizes[-1] <= sizes[0]
-    identity = np.array_equal(order, np.arange(n))
-    # one task per block reads its chunks and builds every variable's slice; each variable's block takes
-    # its own from that task, so the chunks are read once and let go once all their slices are written
-    read = f"isolab-chunk-{uuid.uuid4().hex}"
-    read_layer: dict[Any, Any] = {(read, j): (source.values, j) for j in range(len(groups))}
-    data_vars: dict[str, xr.Variable] = {}
-    for name, var in first.data_vars.items():
-        key = f"{read}-{name}"
-        inner = (0,) * (var.ndim - 1)
-        layer: dict[Any, Any] = {
-            (key, j, *inner): (operator.getitem, (read, j), str(name)) for j in range(len(groups))
-        }
-        graph = HighLevelGraph({read: read_layer, key: layer}, {read: set(), key: {read}})
-        blocks = da.Array(
-            graph,
-            key,
-            chunks=(sizes, *((s,) for s in var.shape[1:])),
-            dtype=var.dtype,
-            meta=np.empty((0,) * var.ndim, dtype=var.dtype),
-        )
-        if not identity:
-            blocks = blocks[order]
-        encoding = dict(var.encoding)
-        if case_shape == (n,):
-            laid = blocks if identity and aligned else blocks.rechunk({0: sizes[0]})
-            if var.dtype.kind != "U":
-                encoding["chunksizes"] = (sizes[0], *var.shape[1:])
-        elif case_shape:  # a grid: whole rows of its first dimension per block
-            row = int(np.prod(case_shape[1:]))
-            rows = max(1, sizes[0] // row)
-            laid = blocks.reshape(case_shape + var.shape[1:]).rechunk({0: rows})
-            if var.dtype.kind != "U":
-                encoding["chunksizes"] = (rows, *case_shape[1:], *var.shape[1:])
-        else:  # no varied parameter: one case
-            laid = blocks.reshape(var.shape[1:])
-        out = xr.Variable(case_dims + var.dims[1:], laid, attrs=dict(var.attrs))
-        out.encoding = encoding
-        data_vars[str(name)] = out
-    coords: dict[str, xr.Variable] = {
-        name: xr.Variable(dims, values, attrs=a) for name, (dims, values, a) in case_coords.items()
-    }
-    coords.update({str(k): v.variable for k, v in first.coords.items()})
-    ds = xr.Dataset(data_vars, coords=coords)
-    ds.attrs = _dataset_attrs(design, attrs or {})
-    if "criteria" in first.attrs:
-        ds.attrs["criteria"] = first.attrs["criteria"]
-    return ds
-
-
-class _ChunkSource:
-    """Where a streamed dataset's blocks come from: :func:`chunk_dataset` of one chunk, the last one built
-    kept (a chunk's blocks of every variable are asked for one after another)."""
-
-    def __init__(
-        self,
-        load_chunk: Callable[[int], Mapping[str, np.ndarray]],
-        chunks: Sequence[np.ndarray],
-        groups: Sequence[Sequence[int]],
-        isolator_names: Sequence[str],
-        point_names: Sequence[str],
-        criteria: Any,
-    ):
-        self.load_chunk, self.chunks, self.groups, self.criteria = load_chunk, chunks, groups, criteria
-        self.isolator_names, self.point_names = list(isolator_names), list(point_names)
-        self.built = 0  # chunk datasets built so far (each reads its chunk)
-        self._last: tuple[int, xr.Dataset] | None = None
-        self._lock = threading.Lock()
-
-    def dataset(self, k: int) -> xr.Dataset:
-        with self._lock:
-            if self._last is None or self._last[0] != k:
-                self._last = None  # let the previous chunk go before reading the next
-                ds = chunk_dataset(
-                    self.load_chunk(k),
-                    self.chunks[k],
-                    isolator_names=self.isolator_names,
-                    point_names=self.point_names,
-                    criteria=self.criteria,
-                    chunk_index=k,
-                )
-                self._last = (k, ds)
-                self.built += 1
-            return self._last[1]
-
-    def values(self, j: int) -> dict[str, np.ndarray]:
-        """Block ``j``'s slice of every variable (its chunks, in order): name -> array (case first)."""
-        parts = [
-            {str(name): np.asarray(v.values) for name, v in self.dataset(k).data_vars.items()}
-            for k in self.groups[j]
-        ]
-        if len(parts) == 1:
-            return parts[0]
-        return {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
-
-
-def _block_groups(sizes: Sequence[int], least: int) -> list[list[int]]:
-    """Consecutive chunks (their sizes given) grouped into blocks of at least ``least`` cases (the last
-    block may be smaller), chunk indices per block."""
-    groups: list[list[int]] = []
-    count = 0
-    for k, size in enumerate(sizes):
-        if not groups or count >= least:
-            groups.append([])
-            count = 0
-        groups[-1].append(k)
-        count += int(size)
-    return groups
 
 
 def _case_variables(
@@ -538,7 +373,7 @@ def _fixed_coords(isolator_names: Sequence[str], point_names: Sequence[str]) -> 
     return coords
 
 
-def _case_layout(design: Design):
+def case_layout(design: Design):
     """Dimensions, coordinates and case order of the design.
 
     Returns (case_dims, coords, order): ``coords`` maps a coordinate name to (dims, values, attrs);
@@ -608,7 +443,7 @@ def _labels(values: np.ndarray) -> np.ndarray:
     return values.astype(np.float64)
 
 
-def _dataset_attrs(design: Design, attrs: Mapping[str, Any]) -> dict[str, Any]:
+def dataset_attrs(design: Design, attrs: Mapping[str, Any]) -> dict[str, Any]:
     created = _dt.datetime.now(_dt.UTC).replace(microsecond=0).isoformat().replace("+00:00", "Z")
     summary = design_summary(design)
     given = dict(attrs)

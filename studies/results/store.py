@@ -222,23 +222,22 @@ def _put_reserve(root: Path) -> bool:
     return True
 
 
-STREAM_CHUNK_CACHE_BYTES = 1 << 20
-"""Chunk cache (bytes per variable) of the netCDF library while a streamed dataset is written: its blocks
-fill whole file chunks, so none waits there half-written (the library's default is 64 MB per variable,
-which holds a large study's every chunk until the file closes)."""
-
-
 def netcdf_encoding(ds: xr.Dataset) -> dict[str, dict[str, Any]]:
     """Per-variable netCDF encoding: NaN ``_FillValue`` on floats, int8/-1 for yes/no, zlib on the numbers
     that shrink under it (:mod:`isolab.studies.results.compression`; every streamed one).
 
-    A variable backed by a dask array (:func:`isolab.studies.results.dataset.streamed_dataset`) keeps the
-    ``chunksizes`` its encoding names (its blocks); the others get the netCDF library's default chunking."""
+    A variable backed by a dask array (:func:`isolab.studies.results.streaming.streamed_dataset`) keeps the
+    ``chunksizes`` its encoding names (its blocks) and the compression it was judged to need (``zlib``,
+    from its first values; every one that does not say); the others get the netCDF library's default
+    chunking."""
     enc: dict[str, dict[str, Any]] = {}
     for name, var in ds.variables.items():
         e: dict[str, Any] = {}
         if var.dtype.kind in "fiub" and var.ndim > 0:
-            e.update(deflate_encoding(var.values if var.chunks is None else None))
+            if var.chunks is None:
+                e.update(deflate_encoding(var.values))
+            elif var.encoding.get("zlib", True):
+                e.update(deflate_encoding(None))
             chunks = var.encoding.get("chunksizes") if var.chunks is not None else None
             if chunks is not None and len(chunks) == var.ndim and 0 < min(*chunks, *var.shape):
                 e["chunksizes"] = tuple(
@@ -257,31 +256,22 @@ def netcdf_encoding(ds: xr.Dataset) -> dict[str, dict[str, Any]]:
 def write_netcdf(ds: xr.Dataset, path: str | Path) -> Path:
     """Write ``ds`` to ``path`` atomically (see :func:`atomic_path`), with :func:`netcdf_encoding`.
 
-    Variables backed by dask arrays (:func:`isolab.studies.results.dataset.streamed_dataset`) are computed
-    here,
-    in this thread, one block at a time as they are written (never on a Dask cluster this process may be
+    A dataset with variables backed by dask arrays (:func:`isolab.studies.results.streaming.streamed_dataset`)
+    is written block after block, each computed here, in this thread
+    (:func:`isolab.studies.results.streaming.write_blocks`; never on a Dask cluster this process may be
     part of)."""
-    import netCDF4
+    from isolab.studies.results.streaming import write_blocks
 
     path = Path(path)
     encoding = netcdf_encoding(ds)
-    streamed = [str(k) for k, v in ds.variables.items() if v.chunks is not None]
-    # blocks that fill whole file chunks need no chunk cache: a small one keeps the write's memory flat
-    small_cache = bool(streamed) and all(
-        "chunksizes" in encoding[k] for k in streamed if encoding[k].get("zlib")
-    )
-    with atomic_path(path) as tmp, netcdf_writing():
-        cache = netCDF4.get_chunk_cache()
+    streamed = any(v.chunks is not None for v in ds.variables.values())
+    with atomic_path(path) as tmp:
         try:
-            if small_cache:
-                netCDF4.set_chunk_cache(STREAM_CHUNK_CACHE_BYTES, cache[1], cache[2])
             if streamed:
-                writes = ds.to_netcdf(
-                    tmp, format="NETCDF4", engine="netcdf4", encoding=encoding, compute=False
-                )
-                writes.compute(scheduler="synchronous")
+                write_blocks(ds, tmp, encoding)
             else:
-                ds.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=encoding)
+                with netcdf_writing():
+                    ds.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=encoding)
         except Exception as err:
             # netCDF-C reports a full disk as anything (EACCES, "HDF error"): ask the file system. The
             # size needed is the data uncompressed, an upper bound.
@@ -290,8 +280,6 @@ def write_netcdf(ds: xr.Dataset, path: str | Path) -> Path:
             if is_no_space(err) or 0 <= free < min(needed, RESERVE_BYTES):
                 raise _store_full(f"writing {path.name}", needed, path.parent, err) from err
             raise
-        finally:
-            netCDF4.set_chunk_cache(*cache)
     return path
 
 

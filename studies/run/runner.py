@@ -1,9 +1,10 @@
 """Running a study end to end: plan the chunks, fan them out over Dask, build the dataset, store it.
 
 Where the work runs: this process plans and follows the Dask tasks and keeps the catalog. A worker that sees
-the store saves each chunk it computes and, at the end, assembles and writes the dataset
-(:func:`finish_study`); a worker that does not (another machine, no shared volume) hands its results back
-and this process does both.
+the store saves each chunk it computes; one of them writes the dataset as the chunks land, beside the chunks
+still computing (:mod:`studies.run.landing`), or, for a study of few cases or chunks, assembles and writes
+it at the end (:func:`finish_study`); a worker that does not see the store (another machine, no shared
+volume) hands its results back and this process does both.
 
 :func:`run_study` is what the service calls for each submitted study; :func:`run_local` runs a study
 file on a private LocalCluster (the CLI and notebooks); :func:`make_client` is the default Dask client.
@@ -40,8 +41,9 @@ import numpy as np
 from isolab.studies.inputs.study import Study, study_from_json, study_labels
 from isolab.studies.questions.criteria import add_criteria
 from isolab.studies.questions.tolerances import add_reliability
-from isolab.studies.results.dataset import add_error_estimate, from_chunks, streamed_dataset, to_dataset
+from isolab.studies.results.dataset import add_error_estimate, from_chunks, to_dataset
 from isolab.studies.results.store import Store, StoreFull, copy_atomic, failures, is_no_space, utc_now
+from isolab.studies.results.streaming import streamed_dataset
 from isolab.studies.run.accuracy import (
     Choice,
     cached_choice,
@@ -72,6 +74,13 @@ from isolab.studies.run.fanout import (
     plan_chunks,
     run_chunks,
     worker_threads,
+)
+from isolab.studies.run.landing import (
+    WRITER_PRIORITY,
+    clear_stop,
+    lands,
+    stop_writer,
+    write_as_chunks_land,
 )
 from isolab.studies.run.optimisation import run_optimisation
 
@@ -181,6 +190,17 @@ def run_study(
         def submit_samples(priority: int) -> None:
             sampled.append(_submit_samples(client, run, run_json, f"isolab-{study_id}", priority))
 
+        attrs = {
+            "title": f"isolab study {study.name}",
+            "study": definition_json,
+            "study_id": study_id,
+            "design": _design_extra(study),
+            "engine_version": engine_version,
+            **choice.attrs(),
+            "auto_step": bool(sim.auto_step),
+        }
+        # the dataset is written as the chunks land (studies.run.landing), when the study has enough of them
+        writer = _start_writer(client, store, study_id, run, run_json, attrs, chunks, skip)
         report = run_chunks(
             client,
             run_json,
@@ -194,44 +214,42 @@ def run_study(
             on_dispatched=submit_samples,
         )
         if report.cancelled:
-            client.cancel([f for s in sampled for f in s[1]])
+            _stop(client, store, study_id, writer, [f for s in sampled for f in s[1]])
             store.update(study_id, status="cancelled", finished=utc_now())
             return study_id
 
-        attrs = {
-            "title": f"isolab study {study.name}",
-            "study": definition_json,
-            "study_id": study_id,
-            "design": _design_extra(study),
-            "engine_version": engine_version,
-            **choice.attrs(),
-            "auto_step": bool(sim.auto_step),
-        }
-        # the dataset is assembled and written on a worker that sees the store (the results and the netCDF
-        # compression stay out of this process, which serves requests: the load benchmark's p99 went from
-        # 70-146 ms to 46-67 ms), else here; the error estimate's sampled cases run in the run's tail: when
-        # they are done already the worker writes the dataset with the estimate, else the ones left run on
-        # the other workers meanwhile, and the estimate's figures are added to the written file after
+        # the dataset is written by a worker that sees the store as the chunks land (the landing writer),
+        # or else assembled and written on such a worker now (the results and the netCDF compression stay
+        # out of this process, which serves requests: the load benchmark's p99 went from 70-146 ms to
+        # 46-67 ms), else here; the error estimate's sampled cases run in the run's tail: when they are
+        # done already before a finish starts, it writes the dataset with the estimate, else the ones left
+        # run on the other workers meanwhile, and the estimate's figures are added to the written file after
         if not sampled:  # every chunk was done already (a resumed run)
             submit_samples(1)
         samples = sampled[0]
-        ready = _error_estimate(client, run, samples, cancel) if all(f.done() for f in samples[1]) else None
-        future = client.submit(
-            finish_study,
-            str(store.root),
-            study_id,
-            run_json,
-            json.dumps(attrs),
-            ready,
-            pure=False,
-            retries=TASK_RETRIES,
-            priority=1,
-            key=f"isolab-{study_id}-finish-{uuid.uuid4().hex[:8]}",
-        )
+        landed = _wait(client, writer, cancel) if writer is not None else None
+        ready = future = None
+        if landed is None and not (cancel is not None and cancel.is_set()):
+            if all(f.done() for f in samples[1]):
+                ready = _error_estimate(client, run, samples, cancel)
+            future = client.submit(
+                finish_study,
+                str(store.root),
+                study_id,
+                run_json,
+                json.dumps(attrs),
+                ready,
+                pure=False,
+                retries=TASK_RETRIES,
+                priority=1,
+                key=f"isolab-{study_id}-finish-{uuid.uuid4().hex[:8]}",
+            )
         estimate = ready if ready is not None else _error_estimate(client, run, samples, cancel)
-        n_failed = _wait(client, future, cancel) if estimate is not None else None
+        n_failed = landed
+        if landed is None and future is not None and estimate is not None:
+            n_failed = _wait(client, future, cancel)
         if estimate is None or (cancel is not None and cancel.is_set()):
-            client.cancel([future, *samples[1]])
+            _stop(client, store, study_id, writer, [f for f in (future,) if f is not None] + samples[1])
             store.update(study_id, status="cancelled", finished=utc_now())
             return study_id
         if n_failed is None:  # the worker does not see the store: finished here
@@ -248,6 +266,7 @@ def run_study(
         store.update(study_id, status="done", finished=utc_now(), n_done=n_cases, n_failed=int(n_failed))
         return study_id
     except BaseException as err:
+        stop_writer(store, study_id)  # a landing writer still waiting for chunks writes nothing
         text = f"{type(err).__name__}: {err}"
         if is_no_space(err):  # "no space left on device: writing <id>.nc needs about N MB, ..."
             text = str(err) if isinstance(err, StoreFull) else f"no space left on device: {text}"
@@ -275,7 +294,7 @@ def assemble_dataset(
 
     Up to ``IN_MEMORY_CASES`` cases the dataset is built whole in memory and written at once (fastest:
     0.3 s of CPU for 100,000 cases, compressing only the variables that shrink). Beyond, it is streamed
-    (:func:`studies.results.dataset.streamed_dataset`): each chunk is read when its slice is written and
+    (:func:`studies.results.streaming.streamed_dataset`): each chunk is read when its slice is written and
     let go after, so the memory this takes does not grow with the number of cases (only the statuses, 1 byte
     a case, and the parameter values, 8 bytes a case per parameter, are held), at many times the writing
     time (13 s at 100,000 cases, every variable compressed)."""
@@ -348,6 +367,42 @@ def finish_study(
     if not store.has_chunk_plan(study_id):
         return None
     return assemble_dataset(store, study_id, run_json, json.loads(attrs_json), estimate)
+
+
+def _start_writer(
+    client: Any,
+    store: Store,
+    study_id: str,
+    run: Study,
+    run_json: str,
+    attrs: dict[str, Any],
+    chunks: list[np.ndarray],
+    skip: set[int],
+) -> Any:
+    """The Dask future of the study's landing writer (:func:`studies.run.landing.write_as_chunks_land`),
+    or None when the dataset is better written after the run: a study of too few cases or chunks left to
+    compute to write any while others compute, or one whose dataset needs every case at once (the
+    tolerance analysis of a ``monte_carlo`` design)."""
+    if run.spreads or not lands([len(c) for k, c in enumerate(chunks) if k not in skip]):
+        return None
+    clear_stop(store, study_id)  # a stop left by a cancelled run of this study
+    return client.submit(
+        write_as_chunks_land,
+        str(store.root),
+        study_id,
+        run_json,
+        json.dumps(attrs),
+        pure=False,
+        retries=TASK_RETRIES,
+        priority=WRITER_PRIORITY,
+        key=f"isolab-{study_id}-writer-{uuid.uuid4().hex[:8]}",
+    )
+
+
+def _stop(client: Any, store: Store, study_id: str, writer: Any, futures: list[Any]) -> None:
+    """Cancel a run's outstanding ``futures`` and its landing ``writer`` (which writes nothing)."""
+    stop_writer(store, study_id)
+    client.cancel([*futures, *([writer] if writer is not None else [])])
 
 
 def _wait(client: Any, future: Any, cancel: threading.Event | None) -> Any:

@@ -21,10 +21,10 @@ from isolab.studies.results.dataset import (
     failed_arrays,
     from_chunks,
     result_arrays,
-    streamed_dataset,
     to_dataset,
 )
 from isolab.studies.results.store import Store, failures, write_netcdf
+from isolab.studies.results.streaming import streamed_dataset
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_dataset import ISOLATORS, POINTS, fake_result, grid_design  # noqa: E402
@@ -267,7 +267,8 @@ _ASSEMBLE = textwrap.dedent(
     import numpy as np
     sys.path.insert(0, {tests!r})
     from test_streamed_dataset import CRITERIA, ATTRS, ESTIMATE, ISOLATORS, POINTS, sampled_design
-    from isolab.studies.results.dataset import add_error_estimate, streamed_dataset
+    from isolab.studies.results.dataset import add_error_estimate
+    from isolab.studies.results.streaming import streamed_dataset
     from isolab.studies.results.store import Store, write_netcdf
 
     def rss():
