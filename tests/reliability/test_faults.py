@@ -102,16 +102,17 @@ def test_a_worker_killed_mid_chunk_is_replaced_and_the_study_completes(app_clien
 
 
 class KillOnFinish(WorkerPlugin):
-    """Kills its worker process (SIGKILL) when the worker starts a study's finishing task, once: the marker
-    file says it happened (the nanny's new worker gets the plugin too, and must let the rerun through)."""
+    """Kills its worker process (SIGKILL) when the worker starts a study's finishing task (or the task of
+    ``kind``: ``"writer"``, the one that writes the dataset as the chunks land), once: the marker file says
+    it happened (the nanny's new worker gets the plugin too, and must let the rerun through)."""
 
     name = "kill-on-finish"
 
-    def __init__(self, marker: str):
-        self.marker = marker
+    def __init__(self, marker: str, kind: str = "finish"):
+        self.marker, self.kind = marker, kind
 
     def transition(self, key, start, finish, **kwargs) -> None:
-        if finish == "executing" and "-finish-" in str(key) and not os.path.exists(self.marker):
+        if finish == "executing" and f"-{self.kind}-" in str(key) and not os.path.exists(self.marker):
             Path(self.marker).write_text(str(key))
             os.kill(os.getpid(), signal.SIGKILL)
 
@@ -184,6 +185,33 @@ COMBINATIONS_NO_MOUNT_CAN_CARRY = {
     ],
     "design": {"type": "lhs", "samples": 200_001},
 }
+
+
+def test_a_worker_killed_as_it_starts_writing_a_study_as_its_chunks_land_is_replaced(
+    app_client, tmp_path: Path
+) -> None:
+    # 2,400 cases in several chunks: the dataset is written as they land, by a task on one worker; kill that
+    # worker as the task starts (the chunks it ran go elsewhere, the writer starts again on another)
+    app, http, data = app_client
+    dask = app.state.dask
+    marker = tmp_path / "killed"
+    dask.register_plugin(KillOnFinish(str(marker), "writer"))
+    try:
+        definition = {
+            **long_chunks(),
+            "name": "landing-fault",
+            "scene": quick_scene(duration="0.5 s", dt="1 ms", fidelity="lti", integrator="exact"),
+            "design": {"type": "lhs", "samples": 2400, "seed": 11},
+        }
+        sid = http.post("/studies", json=definition).json()["id"]
+        info = wait_finished(http, sid, timeout=120)
+    finally:
+        dask.unregister_worker_plugin(KillOnFinish.name)
+    assert marker.read_text().startswith(f"isolab-{sid}-writer-")  # the kill happened, in that task
+    assert info["status"] == "done", info
+    assert info["progress"] == {"done": 2400, "total": 2400, "failed": 0}
+    check_every_case_once(Store(data).open_dataset(sid), definition, [0, 1200, 2399])
+    assert not Store(data).chunk_dir(sid).exists()
 
 
 def test_combinations_no_mount_can_carry_are_refused_at_submission(app_client) -> None:
