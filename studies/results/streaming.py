@@ -222,7 +222,9 @@ def write_blocks(ds: xr.Dataset, path: str | Path, encoding: Mapping[str, Mappin
         sources, targets = writer.sources, writer.targets
         for j in range(max((s.numblocks[0] for s in sources), default=0)):
             held = [i for i, s in enumerate(sources) if j < s.numblocks[0]]
-            values = dask.compute(*[sources[i].blocks[j] for i in held], scheduler="synchronous")
+            values = dask.compute(
+                *[sources[i].blocks[j] for i in held], scheduler="synchronous", optimize_graph=False
+            )
             with netcdf_writing():
                 for i, value in zip(held, values, strict=True):
                     start = int(sum(sources[i].chunks[0][:j]))
