@@ -84,6 +84,7 @@ class JobQueue:
         self._pending: list[str] = []  # queued ids, in order, not yet taken by a worker thread
         self._running: dict[str, threading.Event] = {}  # id -> its cancel event
         self._finished: dict[str, threading.Event] = {}  # id -> set when its run returns
+        self._listeners: dict[str, list[Callable[[], None]]] = {}  # id -> called when its run returns
         self._user_cancelled: set[str] = set()
         self._threads: list[threading.Thread] = []
         self._stopping = False
@@ -190,6 +191,25 @@ class JobQueue:
         finished.wait(wait)
         return True
 
+    def on_end(self, study_id: str, callback: Callable[[], None]) -> Callable[[], None] | None:
+        """Have ``callback()`` called, in the study's thread, when the run of ``study_id`` returns; None (and
+        no call) when the study is neither queued nor running. Returns a function that takes the callback
+        back (a study cancelled while queued never runs: its callbacks are only taken back)."""
+        with self._lock:
+            if study_id not in self._pending and study_id not in self._running:
+                return None
+            self._listeners.setdefault(study_id, []).append(callback)
+
+        def forget() -> None:
+            with self._lock:
+                calls = self._listeners.get(study_id, [])
+                if callback in calls:
+                    calls.remove(callback)
+                if not calls:
+                    self._listeners.pop(study_id, None)
+
+        return forget
+
     def is_active(self, study_id: str) -> bool:
         """The study is queued or running in this queue."""
         with self._lock:
@@ -230,6 +250,12 @@ class JobQueue:
                     self._running.pop(study_id, None)
                     self._finished.pop(study_id).set()
                     self._user_cancelled.discard(study_id)
+                    listeners = self._listeners.pop(study_id, [])
+                for call in listeners:
+                    try:
+                        call()
+                    except Exception:  # a waiting request's loop closed meanwhile
+                        log.debug("study %s: a listener to its end failed", study_id, exc_info=True)
 
     def _remove_if_deleted(self, study_id: str) -> None:
         """Remove what a study deleted while it ran wrote after its deletion (chunks, a dataset)."""

@@ -161,3 +161,20 @@ def test_a_client_that_goes_away_while_waiting_is_let_go_within_half_a_second(he
     assert time.monotonic() - gone_at < GONE_STEP_S + 0.3
     held.end_after(0.0)
     assert anyio.run(wait_for_end, held.jobs, study_id, 5.0) is True
+
+
+def test_the_end_of_a_run_calls_its_listeners_once_and_a_taken_back_one_never(held: HeldStudies) -> None:
+    study_id = held.new_study()
+    called: list[str] = []
+    assert held.jobs.on_end("0" * 32, lambda: called.append("never")) is None  # not queued nor running
+    held.jobs.on_end(study_id, lambda: called.append("kept"))
+    forget = held.jobs.on_end(study_id, lambda: called.append("taken back"))
+    assert forget is not None
+    forget()
+    t0 = time.monotonic()
+    held.end_after(0.0)
+    while not called and time.monotonic() - t0 < 10:
+        time.sleep(0.01)
+    time.sleep(0.1)
+    assert called == ["kept"] and held.store.get(study_id)["status"] == "done"
+    assert held.jobs.on_end(study_id, lambda: called.append("late")) is None

@@ -8,12 +8,13 @@ catalog and files are :class:`isolab.studies.results.store.Store`, running is
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import re
 import time
 from datetime import UTC, datetime
 from typing import Annotated, Any
 
-import anyio
 from anyio import to_thread
 from fastapi import APIRouter, Body, HTTPException, Query, Request, Response
 from fastapi import Path as PathParam
@@ -241,29 +242,33 @@ def list_studies(
 
 MAX_WAIT_S = 30.0
 """Longest a status request may wait for its study to end (``GET /studies/{id}?wait=``), s."""
-WAIT_STEP_S = 0.02
-"""How often a waiting status request looks whether its study has ended, s (in memory, no catalog read)."""
 GONE_STEP_S = 0.5
-"""How often it looks whether its client has gone away, s (the costlier look: asking the connection)."""
+"""How often a waiting status request looks whether its client has gone away, s (asking the connection);
+the study's end itself wakes it at once (:meth:`~isolab.service.api.jobs.JobQueue.on_end`)."""
 
 
 async def wait_for_end(jobs: JobQueue, study_id: str, seconds: float, request: Request | None = None) -> bool:
     """Wait up to ``seconds`` (s) while the study is queued or running in ``jobs``; True when it is not
     (any more), False at the bound or when the client of ``request`` has gone away (looked at every
-    :data:`GONE_STEP_S`)."""
-    now = time.monotonic()
-    deadline, ask = now + seconds, now
-    while jobs.is_active(study_id):
-        now = time.monotonic()
-        left = deadline - now
-        if left <= 0:
-            return False
-        if request is not None and now >= ask:
-            if await request.is_disconnected():
+    :data:`GONE_STEP_S`). The end of the study's run wakes the wait at once, without polling."""
+    loop = asyncio.get_running_loop()
+    ended = asyncio.Event()
+    forget = jobs.on_end(study_id, lambda: loop.call_soon_threadsafe(ended.set))
+    if forget is None:
+        return True
+    try:
+        deadline = time.monotonic() + seconds
+        while jobs.is_active(study_id):
+            left = deadline - time.monotonic()
+            if left <= 0:
                 return False
-            ask = now + GONE_STEP_S
-        await anyio.sleep(min(WAIT_STEP_S, left))
-    return True
+            if request is not None and await request.is_disconnected():
+                return False
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(ended.wait(), min(GONE_STEP_S, left))
+        return True
+    finally:
+        forget()
 
 
 def study_detail(store: Store, study_id: str, kernels: KernelWarmup | None) -> StudyDetail:
