@@ -1,8 +1,18 @@
-"""``python -m benchmarks [pairs|kernels|accuracy|endtoend|million|first_study|startup|mount_states] ...``: run the benchmarks and print their figures."""
+"""``python -m benchmarks [pairs|kernels|accuracy|endtoend|million|first_study|startup|mount_states|reruns] ...``: run the benchmarks and print their figures."""
 
 import sys
 
-from benchmarks import accuracy, endtoend, first_study, kernels, million, mount_states, pairs, startup
+from benchmarks import (
+    accuracy,
+    endtoend,
+    first_study,
+    kernels,
+    million,
+    mount_states,
+    pairs,
+    reruns,
+    startup,
+)
 
 COMMANDS = {
     "pairs": pairs.main,
@@ -13,6 +23,7 @@ COMMANDS = {
     "first_study": first_study.main,
     "startup": startup.main,
     "mount_states": mount_states.main,
+    "reruns": reruns.main,
 }
 
 if __name__ == "__main__":

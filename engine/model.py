@@ -224,6 +224,14 @@ def _rest_feedforward(b: SceneBatch, f: np.ndarray) -> np.ndarray | None:
     return np.clip(share, -lim, lim)
 
 
+def vector_cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a x b`` of vectors (..., 3), broadcast: ``np.cross``'s products and differences, bit for bit,
+    without its axis handling (the static equilibrium's Newton iteration takes about a hundred)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
 def rotation_matrices(phi: np.ndarray) -> np.ndarray:
     """Rotation matrices (C, 3, 3) of the rotation vectors ``phi`` (C, 3), rad (Rodrigues' formula)."""
     phi = np.asarray(phi, dtype=float)
@@ -235,13 +243,19 @@ def rotation_matrices(phi: np.ndarray) -> np.ndarray:
     return np.eye(3) + s1 * S + s2 * (S @ S)
 
 
-def static_residual(b: SceneBatch, rho: np.ndarray, q: np.ndarray, share: np.ndarray | None) -> np.ndarray:
+def static_residual(
+    b: SceneBatch,
+    rho: np.ndarray,
+    q: np.ndarray,
+    share: np.ndarray | None,
+    preloads: np.ndarray | None = None,
+) -> np.ndarray:
     """The nonlinear level's generalised force at rest (C, 6): the net force on the base (floor frame, N)
     and moment about its c.g. (body frame, N m), with the c.g. displaced by ``q[:, :3]`` (m), the base
     turned by the rotation vector ``q[:, 3:]`` (rad), the stages parked at ``rho`` (C, m, 3) and the mounts'
     actuators at rest pushing ``share`` (C, n, 3) (or None). Zero at the static equilibrium. The same forces
     as the nonlinear kernel's (``engine.kernels.dynamics.nonlinear_acc``) with every rate zero and no floor
-    motion."""
+    motion. ``preloads`` (C, n), N, is :func:`preload` of ``b``, when the caller has it."""
     d, _, _ = relative_geometry(b)
     R = rotation_matrices(q[:, 3:])
     off = np.einsum("cij,cnj->cni", R, d) - d
@@ -250,7 +264,7 @@ def static_residual(b: SceneBatch, rho: np.ndarray, q: np.ndarray, share: np.nda
         F = -np.einsum("cnij,cnj->cni", isolator_tensor(b, b.iso_k), u)
     else:
         F = -b.iso_k * u
-    p = preload(b)  # (C, n)
+    p = preload(b) if preloads is None else preloads  # (C, n)
     force = F.sum(axis=1)
     if b.preload_with_base:
         force += (p[..., None] * (R[:, None, :, 2] - np.array([0.0, 0.0, 1.0]))).sum(axis=1)
@@ -260,17 +274,17 @@ def static_residual(b: SceneBatch, rho: np.ndarray, q: np.ndarray, share: np.nda
         T = F.copy()
         T[..., 2] += p
         G = np.einsum("cji,cnj->cni", R, T)
-    moment = np.cross(d, G).sum(axis=1)
+    moment = vector_cross(d, G).sum(axis=1)
     SR = np.einsum("cm,cmi->ci", b.stage_mass, rho)
     if b.preload_balanced:
         # the preloads and the home weights cancel in every attitude: take out their moment V x R^T e_z
         _, rho_h, _ = relative_geometry(b)
         V = np.einsum("cn,cni->ci", p, d) - b.g * np.einsum("cm,cmi->ci", b.stage_mass, rho_h)
-        moment -= np.cross(V, R[:, 2, :])
-    moment += np.cross(SR, -b.g * R[:, 2, :])  # the stages' weight, R^T (0, 0, -g) in the body
+        moment -= vector_cross(V, R[:, 2, :])
+    moment += vector_cross(SR, -b.g * R[:, 2, :])  # the stages' weight, R^T (0, 0, -g) in the body
     if share is not None:
         force += np.einsum("cij,cj->ci", R, share.sum(axis=1))
-        moment += np.cross(d, share).sum(axis=1)
+        moment += vector_cross(d, share).sum(axis=1)
     return np.concatenate([force, moment], axis=1)
 
 
@@ -284,15 +298,18 @@ def static_equilibrium(
     q = np.array(q0, dtype=float)
     C = q.shape[0]
     done = np.zeros(C, dtype=bool)
+    # the residual at q and at its twelve central-difference neighbours in one call: 13 copies of the
+    # batch, one after the other (each case's arithmetic is the same as alone)
+    every = np.tile(np.arange(C), 13)
+    b13, rho13, p13 = b.take(every), rho[every], preload(b)[every]
+    share13 = None if share is None else share[every]
+    e = 1e-6 * np.eye(6)[:, None, :]  # (6, 1, 6): coordinate k moved by 1e-6
+    qs = np.empty((13, C, 6))
     for _ in range(30):
-        r = static_residual(b, rho, q, share)
-        J = np.empty((C, 6, 6))
-        for k in range(6):
-            e = np.zeros(6)
-            e[k] = 1e-6
-            J[:, :, k] = (
-                static_residual(b, rho, q + e, share) - static_residual(b, rho, q - e, share)
-            ) / 2e-6
+        qs[0], qs[1::2], qs[2::2] = q, q + e, q - e
+        rs = static_residual(b13, rho13, qs.reshape(13 * C, 6), share13, p13).reshape(13, C, 6)
+        r = rs[0]
+        J = np.moveaxis((rs[1::2] - rs[2::2]) / 2e-6, 0, 2)  # (C, 6, 6): column k from coordinate k
         try:
             step = np.linalg.solve(J, -r[..., None])[..., 0]
         except np.linalg.LinAlgError:
