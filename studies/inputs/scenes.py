@@ -30,7 +30,7 @@ from isolab.engine.scene import GRAVITY, SceneBatch, SceneError
 from isolab.studies.inputs.block import MAX_TRAVEL, beyond_travel, block_properties, travel_bound
 from isolab.studies.inputs.isolators import (
     CollinearIsolatorsError,
-    Feedforward,
+    IsolatorPreset,
     damping_from_ratio,
     load_share,
     stiffness_from_frequency,
@@ -38,7 +38,10 @@ from isolab.studies.inputs.isolators import (
 from isolab.studies.inputs.mount_physics import (
     apply_mount_physics,
     axis_damping_ratios,
+    first_set,
     levelling_valves,
+    mount_feedforward,
+    mount_figures,
     mount_states,
     valve_signature,
     valve_time,
@@ -51,8 +54,10 @@ from isolab.studies.inputs.schema import (
     AUTO_DURATION_MARGIN,
     Block,
     Floor,
+    Isolators,
     Layout,
     MoveSegment,
+    PresetName,
     RecordedFloor,
     ScanProfile,
     Scene,
@@ -73,7 +78,6 @@ from isolab.studies.inputs.schema.scene_paths import (
     MACHINE_CG,
     MACHINE_INERTIA_DIAGONAL,
     MACHINE_MASS,
-    MOUNT_FIGURES,
     SIMULATION_DURATION,
     SIMULATION_SETTLE_TOLERANCE,
     floor_sine,
@@ -132,12 +136,16 @@ def shape_signature(scene: Scene) -> tuple:
 
 
 class _Cases:
-    """Reads a leaf of ``C`` cases: the override array if there is one, else the scenes' own values."""
+    """Reads a leaf of ``C`` cases: the override array if there is one, else the scenes' own values.
+
+    The scenes are one scene shared by every case (a study's group) or one scene per case: a scene's own
+    value is read once per scene and broadcast over the cases, not once per case."""
 
     def __init__(self, scenes: Sequence[Scene], overrides: Mapping[str, np.ndarray], n_cases: int):
         self.scenes = scenes
         self.overrides = overrides
         self.c = n_cases
+        self.presets: dict[tuple[int, str], IsolatorPreset] = {}
 
     def get(self, path: str, read: Callable[[Scene], float | None]) -> np.ndarray:
         """(C,) values; NaN where a scene leaves an optional input unset."""
@@ -159,18 +167,21 @@ class _Cases:
             columns.append(self.get(f"{path}.{i}", component))
         return np.stack(columns, axis=-1)
 
-    def each(self, read: Callable[[Scene], object]) -> list:
-        """A non-numeric input of each case (no overrides)."""
-        vals = [read(s) for s in self.scenes]
-        return vals * self.c if len(vals) == 1 else vals
+    def preset(self, iso: Isolators, name: PresetName) -> IsolatorPreset:
+        """``iso.preset_of(name)``, worked out once per batch and group."""
+        key = (id(iso), name)
+        if key not in self.presets:
+            self.presets[key] = iso.preset_of(name)
+        return self.presets[key]
 
+    def per_scene(self, read: Callable[[Scene], object]) -> list:
+        """An input of each scene (no overrides): one value shared by every case, or one per case."""
+        return [read(s) for s in self.scenes]
 
-def _first_set(*arrays: np.ndarray) -> np.ndarray:
-    """Element-wise the first non-NaN of ``arrays`` (NaN where all are NaN)."""
-    out = np.array(arrays[-1], dtype=np.float64, copy=True)
-    for a in reversed(arrays[:-1]):
-        out = np.where(np.isnan(a), out, a)
-    return out
+    def array(self, read: Callable[[Scene], object]) -> np.ndarray:
+        """(C, ...) a fresh float array of an input of each case (no overrides), read once per scene."""
+        values = np.array(self.per_scene(read), dtype=np.float64)
+        return np.repeat(values, self.c, axis=0) if len(self.scenes) == 1 else values
 
 
 def _fail(field: str, reason: str, bad: np.ndarray, c: int) -> None:
@@ -196,7 +207,7 @@ def _machine(cases: _Cases) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndar
     mass = cases.get(MACHINE_MASS, lambda s: s.machine.mass)
     cg = cases.vec(MACHINE_CG, lambda s: s.machine.cg)
     if m0.inertia is not None:
-        inertia = np.array(cases.each(lambda s: s.machine.inertia), dtype=np.float64).reshape(c, 3, 3)
+        inertia = cases.array(lambda s: s.machine.inertia).reshape(c, 3, 3)
     else:
         diag = cases.vec(MACHINE_INERTIA_DIAGONAL, lambda s: s.machine.inertia_diagonal)
         srt = np.sort(diag, axis=-1)
@@ -211,159 +222,95 @@ def _machine(cases: _Cases) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndar
     return np.asarray(mass, dtype=np.float64), inertia, cg, None
 
 
-def _mount_values(cases: _Cases, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Per case and mount: f_vertical, f_horizontal (Hz), zeta and sky-hook flag, from overrides, the
-    mount's own preset, the group's overrides and the group's preset, in that order."""
-    c = cases.c
-    group_preset = cases.each(lambda s: s.isolators.preset_of(s.isolators.preset))
-    listed = cases.scenes[0].isolators.mounts is not None
-    out = {}
-    for key in MOUNT_FIGURES:
-
-        def group_figure(s: Scene, key: str = key) -> float | None:
-            return getattr(s.isolators, key)
-
-        group = cases.get(isolator_group(key), group_figure)
-        base = np.array([getattr(p, key) for p in group_preset])
-        cols = []
-        for j in range(n):
-            if listed:
-
-                def own_figure(s: Scene, j: int = j, key: str = key) -> float | None:
-                    return getattr(s.isolators.listed[j], key)
-
-                def own_preset_figure(s: Scene, j: int = j, key: str = key) -> float:
-                    preset = s.isolators.listed[j].preset
-                    return np.nan if preset is None else getattr(s.isolators.preset_of(preset), key)
-
-                own = cases.get(f"{mount(j)}.{key}", own_figure)
-                own_preset = np.array(cases.each(own_preset_figure), dtype=np.float64)
-                cols.append(_first_set(own, own_preset, group, base))
-            else:
-                cols.append(_first_set(group, base))
-        out[key] = np.stack(cols, axis=-1).reshape(c, n)
-    sky = np.zeros((c, n), dtype=bool)
-    for j in range(n):
-
-        def flag(s: Scene, j: int = j) -> bool:
-            iso = s.isolators
-            if listed:
-                mt = iso.listed[j]
-                if mt.skyhook is not None:
-                    return mt.skyhook
-                if mt.preset is not None:
-                    return iso.preset_of(mt.preset).skyhook
-            return iso.skyhook if iso.skyhook is not None else iso.preset_of(iso.preset).skyhook
-
-        sky[:, j] = cases.each(flag)
-    return out["f_vertical"], out["f_horizontal"], out["zeta"], sky
-
-
-def _mount_feedforward(cases: _Cases, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Per case and mount: feedforward gain (1), bandwidth (Hz), actuator force limit (N, inf: none) and
-    whether the weight shift is fed forward too (bool).
-
-    The feedforward comes as a whole from the mount's own, its own preset's, the group's or the group
-    preset's, in that order; none gives gain 0. (Not a design parameter: a study varies it through
-    ``isolators.preset``.)
-    """
-    listed = cases.scenes[0].isolators.mounts is not None
-
-    def resolved(s: Scene, j: int) -> Feedforward | None:
-        iso = s.isolators
-        if listed:
-            mt = iso.listed[j]
-            if mt.feedforward is not None:
-                return mt.feedforward.figures()
-            if mt.preset is not None:
-                return iso.preset_of(mt.preset).feedforward
-        if iso.feedforward is not None:
-            return iso.feedforward.figures()
-        return iso.preset_of(iso.preset).feedforward
-
-    keys = ("gain", "bandwidth", "force_limit")
-    off = {"gain": 0.0, "bandwidth": 0.0, "force_limit": np.inf}
-    out = {k: np.zeros((cases.c, n)) for k in keys}
-    weight = np.zeros((cases.c, n), dtype=bool)
-    for j in range(n):
-
-        def of_mount(s: Scene, j: int = j) -> Feedforward | None:
-            return resolved(s, j)
-
-        ff = cases.each(of_mount)
-        for key in keys:
-            out[key][:, j] = [off[key] if f is None else getattr(f, key) for f in ff]
-        weight[:, j] = [f is not None and f.weight for f in ff]
-    return out["gain"], out["bandwidth"], out["force_limit"], weight
-
-
 def _profiles(cases: _Cases, modes: Modes | None = None) -> profiles.Pieces:
-    """Every stage's profile (C, m, K); a shaper tuned to a mode waits for ``modes`` (scene_modes)."""
+    """Every stage's profile (C, m, K); a shaper tuned to a mode waits for ``modes`` (scene_modes).
+
+    A profile that no case varies (one scene, no override of it, no shaper tuned to the cases' modes) is
+    worked out once and broadcast over the cases; an error in it is reported as the cases' own."""
     c = cases.c
-    stages = cases.scenes[0].stages
+    one_case = _Cases(cases.scenes, {}, 1)
     pieces = []
-    for i, st in enumerate(stages):
-        p = stage_profile(st.name)
-        prof = st.profile
-
-        def get(key: str, p: str = p, i: int = i) -> np.ndarray:
-            return cases.get(f"{p}.{key}", lambda s: getattr(s.stages[i].profile, key))
-
+    for i, st in enumerate(cases.scenes[0].stages):
+        prefix = f"{stage_profile(st.name)}."
+        shared = (
+            len(cases.scenes) == 1
+            and not any(path.startswith(prefix) for path in cases.overrides)
+            and (st.profile.shaper is None or st.profile.shaper.mode is None)
+        )
         try:
-            if isinstance(prof, TrapezoidProfile):
-                pc = profiles.trapezoid(
-                    get("travel"), get("velocity"), get("acceleration"), start=get("start")
-                )
-            elif isinstance(prof, SCurveProfile):
-                pc = profiles.scurve(
-                    get("travel"), get("velocity"), get("acceleration"), get("jerk"), start=get("start")
-                )
-            elif isinstance(prof, ScanProfile):
-                jerk = get("jerk") if prof.jerk is not None or f"{p}.jerk" in cases.overrides else None
-                pc = profiles.scan(
-                    get("travel"),
-                    get("velocity"),
-                    get("acceleration"),
-                    jerk,
-                    dwell=get("dwell"),
-                    repeats=prof.repeats,
-                    start=get("start"),
-                )
-            else:
-                segs = []
-                for k, seg in enumerate(prof.segments):
-                    q = profile_segment(st.name, k)
-
-                    def sget(key: str, q: str = q, k: int = k, i: int = i) -> np.ndarray:
-                        # the batch's scenes share one shape: this stage's profile is a sequence in each
-                        return cases.get(
-                            f"{q}.{key}",
-                            lambda s: getattr(cast(SequenceProfile, s.stages[i].profile).segments[k], key),
-                        )
-
-                    if isinstance(seg, MoveSegment):
-                        d = {"move": sget("move"), "v_max": sget("velocity"), "a_max": sget("acceleration")}
-                        if seg.jerk is not None or f"{q}.jerk" in cases.overrides:
-                            d["j_max"] = sget("jerk")
-                        segs.append(d)
-                    else:
-                        segs.append({"dwell": sget("dwell")})
-                pc = profiles.sequence(segs, start=get("start"))
-            if prof.shaper is not None:
-                pc = shaped_profile(pc, i, c, cases.get, cases.each, modes)
-        except SceneError as err:
-            names = {"v_max": "velocity", "a_max": "acceleration", "j_max": "jerk", "distance": "travel"}
-            field = err.field
-            for old, new in names.items():
-                field = field.replace(old, new)
-            raise SceneError(f"{stage_entry(i)}.profile.{field}", err.reason) from None
-        if pc.t.shape[0] != c:
-            pc = profiles.Pieces(*(np.broadcast_to(x, (c, x.shape[1])) for x in pc))
+            pc = _stage_pieces(one_case if shared else cases, i, modes)
+        except SceneError:
+            if not shared:
+                raise
+            pc = _stage_pieces(cases, i, modes)  # raises the error as the cases give it
         pieces.append(pc)
     if not pieces:
         z = np.zeros((c, 0, 1))
         return profiles.Pieces(z, z, z, z, z)
-    return profiles.stack(pieces)
+    if c > 1 and all(pc.t.shape[0] == 1 for pc in pieces):
+        return profiles.Pieces(*(np.broadcast_to(x, (c, *x.shape[1:])) for x in profiles.stack(pieces)))
+    return profiles.stack(
+        [profiles.Pieces(*(np.broadcast_to(x, (c, x.shape[1])) for x in pc)) for pc in pieces]
+    )
+
+
+def _stage_pieces(cases: _Cases, i: int, modes: Modes | None) -> profiles.Pieces:
+    """Stage ``i``'s profile over ``cases`` (C, K)."""
+    c = cases.c
+    st = cases.scenes[0].stages[i]
+    p = stage_profile(st.name)
+    prof = st.profile
+
+    def get(key: str) -> np.ndarray:
+        return cases.get(f"{p}.{key}", lambda s: getattr(s.stages[i].profile, key))
+
+    try:
+        if isinstance(prof, TrapezoidProfile):
+            pc = profiles.trapezoid(get("travel"), get("velocity"), get("acceleration"), start=get("start"))
+        elif isinstance(prof, SCurveProfile):
+            pc = profiles.scurve(
+                get("travel"), get("velocity"), get("acceleration"), get("jerk"), start=get("start")
+            )
+        elif isinstance(prof, ScanProfile):
+            jerk = get("jerk") if prof.jerk is not None or f"{p}.jerk" in cases.overrides else None
+            pc = profiles.scan(
+                get("travel"),
+                get("velocity"),
+                get("acceleration"),
+                jerk,
+                dwell=get("dwell"),
+                repeats=prof.repeats,
+                start=get("start"),
+            )
+        else:
+            segs = []
+            for k, seg in enumerate(prof.segments):
+                q = profile_segment(st.name, k)
+
+                def sget(key: str, q: str = q, k: int = k) -> np.ndarray:
+                    # the batch's scenes share one shape: this stage's profile is a sequence in each
+                    return cases.get(
+                        f"{q}.{key}",
+                        lambda s: getattr(cast(SequenceProfile, s.stages[i].profile).segments[k], key),
+                    )
+
+                if isinstance(seg, MoveSegment):
+                    d = {"move": sget("move"), "v_max": sget("velocity"), "a_max": sget("acceleration")}
+                    if seg.jerk is not None or f"{q}.jerk" in cases.overrides:
+                        d["j_max"] = sget("jerk")
+                    segs.append(d)
+                else:
+                    segs.append({"dwell": sget("dwell")})
+            pc = profiles.sequence(segs, start=get("start"))
+        if prof.shaper is not None:
+            pc = shaped_profile(pc, i, c, cases.get, cases.per_scene, modes)
+    except SceneError as err:
+        names = {"v_max": "velocity", "a_max": "acceleration", "j_max": "jerk", "distance": "travel"}
+        field = err.field
+        for old, new in names.items():
+            field = field.replace(old, new)
+        raise SceneError(f"{stage_entry(i)}.profile.{field}", err.reason) from None
+    return pc
 
 
 def build_batch(
@@ -429,9 +376,7 @@ def build_batch(
 
         stage_mass[:, i] = cases.get(f"{stage(name)}.mass", moving_mass)
         stage_home[:, i] = cases.vec(f"{stage(name)}.home", home)
-    stage_axis = np.array(cases.each(lambda s: [st.axis for st in s.stages]), dtype=np.float64).reshape(
-        c, m, 3
-    )
+    stage_axis = cases.array(lambda s: [st.axis for st in s.stages]).reshape(c, m, 3)
     stage_parent = np.array(
         [-1 if st.parent is None else names.index(st.parent) for st in s0.stages], dtype=np.int64
     )
@@ -473,8 +418,8 @@ def build_batch(
     except CollinearIsolatorsError as err:
         raise SceneError(ISOLATORS, str(err).removeprefix(f"{ISOLATORS}: ")) from None
 
-    f_v, f_h, zeta, skyhook = _mount_values(cases, n)
-    ff_gain, ff_bandwidth, ff_limit, ff_weight = _mount_feedforward(cases, n)
+    f_v, f_h, zeta, skyhook = mount_figures(cases, n)
+    ff_gain, ff_bandwidth, ff_limit, ff_weight = mount_feedforward(cases, n)
     k_explicit = np.full((c, n, 3), np.nan)
     c_explicit = np.full((c, n, 3), np.nan)
     for a, axis in enumerate(AXES):
@@ -508,10 +453,10 @@ def build_batch(
             "mounts or give explicit k" + (f" (case {case})" if c > 1 else ""),
         )
     safe_load = np.where(load > 0.0, load, 0.0)[..., None]
-    groups = cases.each(lambda s: s.isolators)
+    groups = cases.per_scene(lambda s: s.isolators)  # one shared by every case, or one per case
     zeta_axes = axis_damping_ratios(groups, zeta, isolator_group("zeta") in cases.overrides)
-    iso_k = _first_set(k_explicit, stiffness_from_frequency(safe_load, freq, g))
-    iso_c = _first_set(c_explicit, damping_from_ratio(iso_k, safe_load, zeta_axes, g))
+    iso_k = first_set(k_explicit, stiffness_from_frequency(safe_load, freq, g))
+    iso_c = first_set(c_explicit, damping_from_ratio(iso_k, safe_load, zeta_axes, g))
     iso_k, iso_c, iso_frame = apply_mount_physics(groups, load, iso_k, iso_c, k_explicit, c_explicit, g)
     _fail(
         ISOLATORS,
@@ -566,11 +511,11 @@ def build_batch(
         def recorded(s: Scene) -> RecordedFloor:
             return cast(RecordedFloor, cast(Floor, s.floor).recorded)
 
-        samples = np.array(cases.each(lambda s: recorded(s).displacement.samples()), dtype=np.float64)
+        samples = cases.array(lambda s: recorded(s).displacement.samples())
         floor_t = np.arange(samples.shape[-1]) * rec.dt
         floor_disp = samples.reshape(c, 3, -1)
     # the floor spectrum: one-third-octave band velocity per axis, and per mount (studies.questions.floor)
-    floor_spectra = spectrum_fields(cases.each, iso_pos, cg)
+    floor_spectra = spectrum_fields(cases.per_scene, iso_pos, cg)
 
     # simulation
     def sim(s: Scene) -> Simulation:

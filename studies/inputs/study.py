@@ -234,16 +234,15 @@ class Study(InputModel):
         d = self.design()
         cat = [i for i, t in enumerate(self._targets) if t.categorical]
         cont = [i for i, t in enumerate(self._targets) if not t.categorical]
+        groups = {(): np.arange(idx.size)}  # without a categorical parameter, one group of every case
         if cat:
             keys = list(zip(*(d.values[d.names[i]][idx].tolist() for i in cat), strict=True))
-        else:
-            keys = [()] * idx.size
-        groups: dict[tuple, list[int]] = {}
-        for k, key in enumerate(keys):
-            groups.setdefault(key, []).append(k)
+            positions: dict[tuple, list[int]] = {}
+            for k, key in enumerate(keys):
+                positions.setdefault(key, []).append(k)
+            groups = {key: np.asarray(p) for key, p in positions.items()}
         parts, order = [], []
-        for key, positions in groups.items():
-            pos = np.asarray(positions)
+        for key, pos in groups.items():
             scene = self._group_scene(key, cat)
             overrides = {}
             for i in cont:
