@@ -156,7 +156,11 @@ class _Cases:
         return np.broadcast_to(arr, (self.c,)) if arr.size == 1 else arr
 
     def vec(self, path: str, read: Callable[[Scene], Sequence[float] | None]) -> np.ndarray:
-        """(C, 3) vector leaf, components ``path.0 .. path.2``."""
+        """(C, 3) vector leaf, components ``path.0 .. path.2`` (a fresh array)."""
+        if not any(f"{path}.{i}" in self.overrides for i in range(3)):  # the scenes' own: one read each
+            rows = [read(s) for s in self.scenes]
+            values = np.array([[np.nan] * 3 if v is None else [float(v[i]) for i in range(3)] for v in rows])
+            return np.repeat(values, self.c, axis=0) if len(rows) == 1 else values
         columns = []
         for i in range(3):
 
