@@ -230,7 +230,8 @@ def _profiles(cases: _Cases, modes: Modes | None = None) -> profiles.Pieces:
     """Every stage's profile (C, m, K); a shaper tuned to a mode waits for ``modes`` (scene_modes).
 
     A profile that no case varies (one scene, no override of it, no shaper tuned to the cases' modes) is
-    worked out once and broadcast over the cases; an error in it is reported as the cases' own."""
+    worked out once (an error in it is reported as the cases' own) and broadcast over the cases; when no
+    case varies any, they come as (1, m, K), to be broadcast by the caller."""
     c = cases.c
     one_case = _Cases(cases.scenes, {}, 1)
     pieces = []
@@ -251,8 +252,8 @@ def _profiles(cases: _Cases, modes: Modes | None = None) -> profiles.Pieces:
     if not pieces:
         z = np.zeros((c, 0, 1))
         return profiles.Pieces(z, z, z, z, z)
-    if c > 1 and all(pc.t.shape[0] == 1 for pc in pieces):
-        return profiles.Pieces(*(np.broadcast_to(x, (c, *x.shape[1:])) for x in profiles.stack(pieces)))
+    if all(pc.t.shape[0] == 1 for pc in pieces):
+        return profiles.stack(pieces)
     return profiles.stack(
         [profiles.Pieces(*(np.broadcast_to(x, (c, x.shape[1])) for x in pc)) for pc in pieces]
     )
@@ -472,7 +473,7 @@ def build_batch(
     # motion (a shaper tuned to a mode is applied below, once the modes are known: it only delays motion)
     pieces = _profiles(cases)
     if m:
-        reach = np.abs(pieces.s).max(axis=-1)  # (C, m): farthest from home (moves are monotonic in a piece)
+        reach = np.abs(pieces.s).max(axis=-1)  # (C or 1, m): farthest from home (monotonic in a piece)
         bound = travel_bound(stage_axis, block_size[:, None, :] if block_size is not None else None)
         over = beyond_travel(reach, bound)
         if over.any():
@@ -547,6 +548,9 @@ def build_batch(
             if name in w:
                 point_tol[slice(None) if len(scenes) == 1 else i, j] = w[name]
 
+    def per_case(x: np.ndarray) -> np.ndarray:  # a fresh (C, ...) array of what one case gives alone
+        return np.ascontiguousarray(x) if x.shape[0] == c else np.repeat(x, c, axis=0)
+
     batch = SceneBatch(
         mass=np.array(mass, dtype=np.float64),
         inertia=inertia,
@@ -560,11 +564,11 @@ def build_batch(
         stage_home=stage_home,
         stage_axis=stage_axis,
         stage_parent=stage_parent,
-        prof_t=np.ascontiguousarray(pieces.t),
-        prof_s=np.ascontiguousarray(pieces.s),
-        prof_v=np.ascontiguousarray(pieces.v),
-        prof_a=np.ascontiguousarray(pieces.a),
-        prof_j=np.ascontiguousarray(pieces.j),
+        prof_t=per_case(pieces.t),
+        prof_s=per_case(pieces.s),
+        prof_v=per_case(pieces.v),
+        prof_a=per_case(pieces.a),
+        prof_j=per_case(pieces.j),
         points=points,
         floor_amp=np.array(floor_amp, dtype=np.float64),
         floor_freq=np.array(floor_freq, dtype=np.float64),
@@ -589,9 +593,9 @@ def build_batch(
     batch = levelling_valves(batch, cases)  # air mounts' levelling valves
     if any(tuned_to_modes(s) for s in scenes):  # tuned to the modes of the scene as assembled
         pieces = _profiles(cases, scene_modes(batch))
-        at = profiles.Pieces(*(np.ascontiguousarray(x) for x in pieces))
+        at = profiles.Pieces(*(per_case(x) for x in pieces))
         batch = replace(batch, prof_t=at.t, prof_s=at.s, prof_v=at.v, prof_a=at.a, prof_j=at.j)
-    last_move = profiles.end_time(pieces).max(axis=-1) if m else np.zeros(c)
+    last_move = np.broadcast_to(profiles.end_time(pieces).max(axis=-1), (c,)) if m else np.zeros(c)
     auto = np.isnan(duration)
     if auto.any():
         decay = slowest_decay_time(batch.take(np.flatnonzero(auto)))
