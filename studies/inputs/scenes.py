@@ -230,8 +230,8 @@ def _profiles(cases: _Cases, modes: Modes | None = None) -> profiles.Pieces:
     """Every stage's profile (C, m, K); a shaper tuned to a mode waits for ``modes`` (scene_modes).
 
     A profile that no case varies (one scene, no override of it, no shaper tuned to the cases' modes) is
-    worked out once (an error in it is reported as the cases' own) and broadcast over the cases; when no
-    case varies any, they come as (1, m, K), to be broadcast by the caller."""
+    worked out for one case (:func:`_shared_pieces`) and broadcast over the cases; when no case varies
+    any, they come as (1, m, K), to be broadcast by the caller."""
     c = cases.c
     one_case = _Cases(cases.scenes, {}, 1)
     pieces = []
@@ -242,13 +242,7 @@ def _profiles(cases: _Cases, modes: Modes | None = None) -> profiles.Pieces:
             and not any(path.startswith(prefix) for path in cases.overrides)
             and (st.profile.shaper is None or st.profile.shaper.mode is None)
         )
-        try:
-            pc = _stage_pieces(one_case if shared else cases, i, modes)
-        except SceneError:
-            if not shared:
-                raise
-            pc = _stage_pieces(cases, i, modes)  # raises the error as the cases give it
-        pieces.append(pc)
+        pieces.append(_shared_pieces(cases, one_case, i) if shared else _stage_pieces(cases, i, modes))
     if not pieces:
         z = np.zeros((c, 0, 1))
         return profiles.Pieces(z, z, z, z, z)
@@ -257,6 +251,28 @@ def _profiles(cases: _Cases, modes: Modes | None = None) -> profiles.Pieces:
     return profiles.stack(
         [profiles.Pieces(*(np.broadcast_to(x, (c, x.shape[1])) for x in pc)) for pc in pieces]
     )
+
+
+SHARED_PROFILES_KEPT = 256
+"""How many profiles no case varies a process keeps, by their figures (:func:`_shared_pieces`)."""
+_shared_profiles: dict[str, profiles.Pieces] = {}
+
+
+def _shared_pieces(cases: _Cases, one_case: _Cases, i: int) -> profiles.Pieces:
+    """Stage ``i``'s profile that no case varies (1, K), worked out once per process for its figures: the
+    batches of a study's group share it. Read-only; an error is reported as the cases give it."""
+    key = cases.scenes[0].stages[i].profile.model_dump_json()
+    if key not in _shared_profiles:
+        try:
+            pc = _stage_pieces(one_case, i, None)
+        except SceneError:
+            return _stage_pieces(cases, i, None)  # raises the error with the cases' own wording
+        for x in pc:
+            x.setflags(write=False)
+        if len(_shared_profiles) >= SHARED_PROFILES_KEPT:
+            _shared_profiles.clear()
+        _shared_profiles[key] = pc
+    return _shared_profiles[key]
 
 
 def _stage_pieces(cases: _Cases, i: int, modes: Modes | None) -> profiles.Pieces:
