@@ -262,7 +262,8 @@ def _shared_pieces(cases: _Cases, one_case: _Cases, i: int) -> profiles.Pieces:
     """Stage ``i``'s profile that no case varies (1, K), worked out once per process for its figures: the
     batches of a study's group share it. Read-only; an error is reported as the cases give it."""
     key = cases.scenes[0].stages[i].profile.model_dump_json()
-    if key not in _shared_profiles:
+    pc = _shared_profiles.get(key)  # one look: another thread may clear the store meanwhile
+    if pc is None:
         try:
             pc = _stage_pieces(one_case, i, None)
         except SceneError:
@@ -272,7 +273,7 @@ def _shared_pieces(cases: _Cases, one_case: _Cases, i: int) -> profiles.Pieces:
         if len(_shared_profiles) >= SHARED_PROFILES_KEPT:
             _shared_profiles.clear()
         _shared_profiles[key] = pc
-    return _shared_profiles[key]
+    return pc
 
 
 def _stage_pieces(cases: _Cases, i: int, modes: Modes | None) -> profiles.Pieces:
