@@ -1,6 +1,7 @@
-"""Mounts from their physics: air springs (stiffness from pressure, area and volume; an orifice's
-relaxation) and mounts on their own axes, applied to a batch's stiffness and damping arrays; air mounts'
-levelling valves, applied to a batch's valve arrays.
+"""Mounts from their physics: each mount's figures from its presets (natural frequencies, damping ratio,
+sky-hook, feedforward: :func:`mount_figures`, :func:`mount_feedforward`), air springs (stiffness from
+pressure, area and volume; an orifice's relaxation) and mounts on their own axes, applied to a batch's
+stiffness and damping arrays; air mounts' levelling valves, applied to a batch's valve arrays.
 
 A scene that gives no ``air``, no ``orientation`` and no ``levelling`` block keeps its arrays untouched;
 one without an orifice of ``model: zener`` and without ``elastomer`` has no mount with internal states
@@ -19,8 +20,16 @@ from isolab.engine import mount_laws
 from isolab.engine.linear_states.levelling import MAX_VALVES
 from isolab.engine.scene import SceneBatch, SceneError
 from isolab.studies.inputs.catalogues import AXIS_DAMPING
+from isolab.studies.inputs.isolators import Feedforward, IsolatorPreset
+from isolab.studies.inputs.schema.fields import PresetName
 from isolab.studies.inputs.schema.mounts import AirSpring, Elastomer, Isolators, Levelling, Orientation
-from isolab.studies.inputs.schema.scene_paths import ISOLATORS, LEVELLING, mount
+from isolab.studies.inputs.schema.scene_paths import (
+    ISOLATORS,
+    LEVELLING,
+    MOUNT_FIGURES,
+    isolator_group,
+    mount,
+)
 
 if TYPE_CHECKING:
     from isolab.studies.inputs.precision.base_flexibility import CaseValues
@@ -36,10 +45,15 @@ def _own_or_group(
     return getattr(iso, key), f"{ISOLATORS}.{key}"
 
 
+def _group_of_case(groups: Sequence[Isolators], c: int) -> Isolators:
+    """Case ``c``'s isolators of a batch's ``groups``: one shared by every case, or one per case."""
+    return groups[0] if len(groups) == 1 else groups[c]
+
+
 def any_mount_has(groups: Sequence[Isolators], n: int, key: str) -> bool:
     """Whether a mount ``0 <= j < n`` of any case has a ``key`` block, its own or its group's (what
-    :func:`_own_or_group` finds): one look per distinct group (the cases of a batch mostly share one),
-    not per case and mount."""
+    :func:`_own_or_group` finds): one look per distinct group (``groups``: the batch's isolators, one
+    shared by every case or one per case), not per case and mount."""
     distinct = {id(iso): iso for iso in groups}.values()
     return n > 0 and any(
         getattr(iso, key) is not None or any(getattr(m, key) is not None for m in iso.listed[:n])
@@ -51,15 +65,16 @@ def axis_damping_ratios(groups: Sequence[Isolators], zeta: np.ndarray, varied: b
     """(C, n, 3) damping ratio per mount and own axis, 1: ``zeta`` (C, n) on every axis, but where a
     listed mount, or the group below a listed mount's own ``zeta`` or preset, gives ``zeta_horizontal``
     (x, y) or ``zeta_vertical`` (z), that. ``varied``: a study varies ``isolators.zeta``, which then sets
-    every axis of the group. ``groups``: each case's isolators (one per case)."""
+    every axis of the group. ``groups``: the batch's isolators, one shared by every case or one per
+    case."""
     out = np.repeat(zeta[..., None], 3, axis=-1)
     distinct = {id(iso): iso for iso in groups}.values()  # the cases of a batch mostly share one group
     if all(getattr(b, key) is None for iso in distinct for b in (iso, *iso.listed) for key in AXIS_DAMPING):
         return out  # no ratio per direction: zeta on every axis
     for key, axes in (("zeta_horizontal", [0, 1]), ("zeta_vertical", [2])):
         for j in range(zeta.shape[1]):
-            ratio = np.full(zeta.shape[0], np.nan)
-            for c, iso in enumerate(groups):
+            ratio = np.full(len(groups), np.nan)  # per group, broadcast over the cases below
+            for g, iso in enumerate(groups):
                 value = None if varied else getattr(iso, key)
                 if iso.listed:
                     mt = iso.listed[j]
@@ -67,7 +82,7 @@ def axis_damping_ratios(groups: Sequence[Isolators], zeta: np.ndarray, varied: b
                         value = getattr(mt, key)
                     elif mt.zeta is not None or mt.preset is not None:
                         value = None
-                ratio[c] = np.nan if value is None else float(value)
+                ratio[g] = np.nan if value is None else float(value)
             for a in axes:
                 out[:, j, a] = np.where(np.isnan(ratio), out[:, j, a], ratio)
     return out
@@ -89,7 +104,8 @@ def apply_mount_physics(
     ``p = load / A`` (``load`` (C, n) N the static load); with an orifice, z stiffness and damping are the
     standard linear solid's at the mount's own vertical natural frequency
     (``engine.mount_laws.equivalent_viscous``). Explicit ``k``/``c`` of the z axis (``k_explicit``,
-    ``c_explicit``, NaN where not given) still win.
+    ``c_explicit``, NaN where not given) still win. ``groups``: the batch's isolators, one shared by every
+    case or one per case.
 
     Raises:
         SceneError: naming the air block when its static load is not positive or needs more than its
@@ -102,7 +118,8 @@ def apply_mount_physics(
         return iso_k, iso_c, None
     iso_k, iso_c = iso_k.copy(), iso_c.copy()
     frame = np.broadcast_to(np.eye(3), (C, n, 3, 3)).copy()
-    for c, iso in enumerate(groups):
+    for c in range(C):
+        iso = _group_of_case(groups, c)
         for j in range(n):
             turn, _ = _own_or_group(iso, j, "orientation")
             if isinstance(turn, Orientation):
@@ -162,7 +179,117 @@ def apply_mount_physics(
 class IsolatorGroups(Protocol):
     """How the batch builder reads the isolator block of every case."""
 
-    def each(self, read: Callable[[Any], object]) -> list: ...
+    def per_scene(self, read: Callable[[Any], object]) -> list: ...
+
+
+class MountCases(IsolatorGroups, Protocol):
+    """How the batch builder reads the mounts' inputs of ``c`` cases: a leaf (its overrides first), an
+    input of each scene, a preset's figures."""
+
+    scenes: Any
+    c: int
+
+    def get(self, path: str, read: Any) -> np.ndarray: ...
+
+    def preset(self, iso: Isolators, name: PresetName) -> IsolatorPreset: ...
+
+
+def first_set(*arrays: np.ndarray) -> np.ndarray:
+    """Element-wise the first non-NaN of ``arrays`` (NaN where all are NaN)."""
+    out = np.array(arrays[-1], dtype=np.float64, copy=True)
+    for a in reversed(arrays[:-1]):
+        out = np.where(np.isnan(a), out, a)
+    return out
+
+
+def mount_figures(cases: MountCases, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per case and mount: f_vertical, f_horizontal (Hz), zeta and sky-hook flag, from overrides, the
+    mount's own preset, the group's overrides and the group's preset, in that order (a layout's mounts
+    share the group's: worked out once)."""
+    c = cases.c
+    group_preset = cases.per_scene(lambda s: cases.preset(s.isolators, s.isolators.preset))
+    listed = cases.scenes[0].isolators.mounts is not None
+    out = {}
+    for key in MOUNT_FIGURES:
+
+        def group_figure(s: Any, key: str = key) -> float | None:
+            return getattr(s.isolators, key)
+
+        group = cases.get(isolator_group(key), group_figure)
+        base = np.array([getattr(p, key) for p in group_preset])
+        if not listed:
+            out[key] = np.stack([first_set(group, base)] * n, axis=-1).reshape(c, n)
+            continue
+        cols = []
+        for j in range(n):
+
+            def own_figure(s: Any, j: int = j, key: str = key) -> float | None:
+                return getattr(s.isolators.listed[j], key)
+
+            def own_preset_figure(s: Any, j: int = j, key: str = key) -> float:
+                preset = s.isolators.listed[j].preset
+                return np.nan if preset is None else getattr(cases.preset(s.isolators, preset), key)
+
+            own = cases.get(f"{mount(j)}.{key}", own_figure)
+            own_preset = np.array(cases.per_scene(own_preset_figure), dtype=np.float64)
+            cols.append(first_set(own, own_preset, group, base))
+        out[key] = np.stack(cols, axis=-1).reshape(c, n)
+    sky = np.zeros((c, n), dtype=bool)
+    for j in range(n if listed else 1):
+
+        def flag(s: Any, j: int = j) -> bool:
+            iso = s.isolators
+            if listed:
+                mt = iso.listed[j]
+                if mt.skyhook is not None:
+                    return mt.skyhook
+                if mt.preset is not None:
+                    return cases.preset(iso, mt.preset).skyhook
+            return iso.skyhook if iso.skyhook is not None else cases.preset(iso, iso.preset).skyhook
+
+        mounts = j if listed else slice(None)  # a layout's: every mount
+        sky[:, mounts] = np.reshape(cases.per_scene(flag), (-1,) if listed else (-1, 1))
+    return out["f_vertical"], out["f_horizontal"], out["zeta"], sky
+
+
+def mount_feedforward(cases: MountCases, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per case and mount: feedforward gain (1), bandwidth (Hz), actuator force limit (N, inf: none) and
+    whether the weight shift is fed forward too (bool).
+
+    The feedforward comes as a whole from the mount's own, its own preset's, the group's or the group
+    preset's, in that order; none gives gain 0 (a layout's mounts share the group's: worked out once).
+    (Not a design parameter: a study varies it through ``isolators.preset``.)
+    """
+    listed = cases.scenes[0].isolators.mounts is not None
+
+    def resolved(s: Any, j: int) -> Feedforward | None:
+        iso = s.isolators
+        if listed:
+            mt = iso.listed[j]
+            if mt.feedforward is not None:
+                return mt.feedforward.figures()
+            if mt.preset is not None:
+                return cases.preset(iso, mt.preset).feedforward
+        if iso.feedforward is not None:
+            return iso.feedforward.figures()
+        return cases.preset(iso, iso.preset).feedforward
+
+    keys = ("gain", "bandwidth", "force_limit")
+    off = {"gain": 0.0, "bandwidth": 0.0, "force_limit": np.inf}
+    out = {k: np.zeros((cases.c, n)) for k in keys}
+    weight = np.zeros((cases.c, n), dtype=bool)
+    for j in range(n if listed else 1):
+
+        def of_mount(s: Any, j: int = j) -> Feedforward | None:
+            return resolved(s, j)
+
+        ff = cases.per_scene(of_mount)
+        mounts = j if listed else slice(None)  # a layout's: every mount
+        column = (-1,) if listed else (-1, 1)
+        for key in keys:
+            out[key][:, mounts] = np.reshape([off[key] if f is None else getattr(f, key) for f in ff], column)
+        weight[:, mounts] = np.reshape([f is not None and f.weight for f in ff], column)
+    return out["gain"], out["bandwidth"], out["force_limit"], weight
 
 
 def elastomer_ladder(spec: Elastomer) -> tuple[np.ndarray, np.ndarray]:
@@ -200,14 +327,15 @@ def mount_states(
     Raises:
         SceneError: naming the mount's block when it is both an air spring with states and an elastomer.
     """
-    groups = cases.each(lambda s: s.isolators)
+    groups = cases.per_scene(lambda s: s.isolators)
     C, n = load.shape
     if not (any_mount_has(groups, n, "air") or any_mount_has(groups, n, "elastomer")):
         return batch  # no mount with internal states
     rows: list[tuple[int, int, int, np.ndarray, np.ndarray]] = []  # (case, mount, axis, k_b, tau_b)
     iso_k = np.array(batch.iso_k, dtype=float)
     iso_c = np.array(batch.iso_c, dtype=float)
-    for c, iso in enumerate(groups):
+    for c in range(C):
+        iso = _group_of_case(groups, c)
         for j in range(n):
             spring, _ = _own_or_group(iso, j, "air")
             rubber, where = _own_or_group(iso, j, "elastomer")

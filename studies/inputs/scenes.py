@@ -30,7 +30,7 @@ from isolab.engine.scene import GRAVITY, SceneBatch, SceneError
 from isolab.studies.inputs.block import MAX_TRAVEL, beyond_travel, block_properties, travel_bound
 from isolab.studies.inputs.isolators import (
     CollinearIsolatorsError,
-    Feedforward,
+    IsolatorPreset,
     damping_from_ratio,
     load_share,
     stiffness_from_frequency,
@@ -38,7 +38,10 @@ from isolab.studies.inputs.isolators import (
 from isolab.studies.inputs.mount_physics import (
     apply_mount_physics,
     axis_damping_ratios,
+    first_set,
     levelling_valves,
+    mount_feedforward,
+    mount_figures,
     mount_states,
     valve_signature,
     valve_time,
@@ -51,8 +54,10 @@ from isolab.studies.inputs.schema import (
     AUTO_DURATION_MARGIN,
     Block,
     Floor,
+    Isolators,
     Layout,
     MoveSegment,
+    PresetName,
     RecordedFloor,
     ScanProfile,
     Scene,
@@ -73,7 +78,6 @@ from isolab.studies.inputs.schema.scene_paths import (
     MACHINE_CG,
     MACHINE_INERTIA_DIAGONAL,
     MACHINE_MASS,
-    MOUNT_FIGURES,
     SIMULATION_DURATION,
     SIMULATION_SETTLE_TOLERANCE,
     floor_sine,
@@ -132,12 +136,16 @@ def shape_signature(scene: Scene) -> tuple:
 
 
 class _Cases:
-    """Reads a leaf of ``C`` cases: the override array if there is one, else the scenes' own values."""
+    """Reads a leaf of ``C`` cases: the override array if there is one, else the scenes' own values.
+
+    The scenes are one scene shared by every case (a study's group) or one scene per case: a scene's own
+    value is read once per scene and broadcast over the cases, not once per case."""
 
     def __init__(self, scenes: Sequence[Scene], overrides: Mapping[str, np.ndarray], n_cases: int):
         self.scenes = scenes
         self.overrides = overrides
         self.c = n_cases
+        self.presets: dict[tuple[int, str], IsolatorPreset] = {}
 
     def get(self, path: str, read: Callable[[Scene], float | None]) -> np.ndarray:
         """(C,) values; NaN where a scene leaves an optional input unset."""
@@ -148,7 +156,11 @@ class _Cases:
         return np.broadcast_to(arr, (self.c,)) if arr.size == 1 else arr
 
     def vec(self, path: str, read: Callable[[Scene], Sequence[float] | None]) -> np.ndarray:
-        """(C, 3) vector leaf, components ``path.0 .. path.2``."""
+        """(C, 3) vector leaf, components ``path.0 .. path.2`` (a fresh array)."""
+        if not any(f"{path}.{i}" in self.overrides for i in range(3)):  # the scenes' own: one read each
+            rows = [read(s) for s in self.scenes]
+            values = np.array([[np.nan] * 3 if v is None else [float(v[i]) for i in range(3)] for v in rows])
+            return np.repeat(values, self.c, axis=0) if len(rows) == 1 else values
         columns = []
         for i in range(3):
 
@@ -159,18 +171,21 @@ class _Cases:
             columns.append(self.get(f"{path}.{i}", component))
         return np.stack(columns, axis=-1)
 
-    def each(self, read: Callable[[Scene], object]) -> list:
-        """A non-numeric input of each case (no overrides)."""
-        vals = [read(s) for s in self.scenes]
-        return vals * self.c if len(vals) == 1 else vals
+    def preset(self, iso: Isolators, name: PresetName) -> IsolatorPreset:
+        """``iso.preset_of(name)``, worked out once per batch and group."""
+        key = (id(iso), name)
+        if key not in self.presets:
+            self.presets[key] = iso.preset_of(name)
+        return self.presets[key]
 
+    def per_scene(self, read: Callable[[Scene], object]) -> list:
+        """An input of each scene (no overrides): one value shared by every case, or one per case."""
+        return [read(s) for s in self.scenes]
 
-def _first_set(*arrays: np.ndarray) -> np.ndarray:
-    """Element-wise the first non-NaN of ``arrays`` (NaN where all are NaN)."""
-    out = np.array(arrays[-1], dtype=np.float64, copy=True)
-    for a in reversed(arrays[:-1]):
-        out = np.where(np.isnan(a), out, a)
-    return out
+    def array(self, read: Callable[[Scene], object]) -> np.ndarray:
+        """(C, ...) a fresh float array of an input of each case (no overrides), read once per scene."""
+        values = np.array(self.per_scene(read), dtype=np.float64)
+        return np.repeat(values, self.c, axis=0) if len(self.scenes) == 1 else values
 
 
 def _fail(field: str, reason: str, bad: np.ndarray, c: int) -> None:
@@ -196,7 +211,7 @@ def _machine(cases: _Cases) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndar
     mass = cases.get(MACHINE_MASS, lambda s: s.machine.mass)
     cg = cases.vec(MACHINE_CG, lambda s: s.machine.cg)
     if m0.inertia is not None:
-        inertia = np.array(cases.each(lambda s: s.machine.inertia), dtype=np.float64).reshape(c, 3, 3)
+        inertia = cases.array(lambda s: s.machine.inertia).reshape(c, 3, 3)
     else:
         diag = cases.vec(MACHINE_INERTIA_DIAGONAL, lambda s: s.machine.inertia_diagonal)
         srt = np.sort(diag, axis=-1)
@@ -211,159 +226,113 @@ def _machine(cases: _Cases) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndar
     return np.asarray(mass, dtype=np.float64), inertia, cg, None
 
 
-def _mount_values(cases: _Cases, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Per case and mount: f_vertical, f_horizontal (Hz), zeta and sky-hook flag, from overrides, the
-    mount's own preset, the group's overrides and the group's preset, in that order."""
-    c = cases.c
-    group_preset = cases.each(lambda s: s.isolators.preset_of(s.isolators.preset))
-    listed = cases.scenes[0].isolators.mounts is not None
-    out = {}
-    for key in MOUNT_FIGURES:
-
-        def group_figure(s: Scene, key: str = key) -> float | None:
-            return getattr(s.isolators, key)
-
-        group = cases.get(isolator_group(key), group_figure)
-        base = np.array([getattr(p, key) for p in group_preset])
-        cols = []
-        for j in range(n):
-            if listed:
-
-                def own_figure(s: Scene, j: int = j, key: str = key) -> float | None:
-                    return getattr(s.isolators.listed[j], key)
-
-                def own_preset_figure(s: Scene, j: int = j, key: str = key) -> float:
-                    preset = s.isolators.listed[j].preset
-                    return np.nan if preset is None else getattr(s.isolators.preset_of(preset), key)
-
-                own = cases.get(f"{mount(j)}.{key}", own_figure)
-                own_preset = np.array(cases.each(own_preset_figure), dtype=np.float64)
-                cols.append(_first_set(own, own_preset, group, base))
-            else:
-                cols.append(_first_set(group, base))
-        out[key] = np.stack(cols, axis=-1).reshape(c, n)
-    sky = np.zeros((c, n), dtype=bool)
-    for j in range(n):
-
-        def flag(s: Scene, j: int = j) -> bool:
-            iso = s.isolators
-            if listed:
-                mt = iso.listed[j]
-                if mt.skyhook is not None:
-                    return mt.skyhook
-                if mt.preset is not None:
-                    return iso.preset_of(mt.preset).skyhook
-            return iso.skyhook if iso.skyhook is not None else iso.preset_of(iso.preset).skyhook
-
-        sky[:, j] = cases.each(flag)
-    return out["f_vertical"], out["f_horizontal"], out["zeta"], sky
-
-
-def _mount_feedforward(cases: _Cases, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Per case and mount: feedforward gain (1), bandwidth (Hz), actuator force limit (N, inf: none) and
-    whether the weight shift is fed forward too (bool).
-
-    The feedforward comes as a whole from the mount's own, its own preset's, the group's or the group
-    preset's, in that order; none gives gain 0. (Not a design parameter: a study varies it through
-    ``isolators.preset``.)
-    """
-    listed = cases.scenes[0].isolators.mounts is not None
-
-    def resolved(s: Scene, j: int) -> Feedforward | None:
-        iso = s.isolators
-        if listed:
-            mt = iso.listed[j]
-            if mt.feedforward is not None:
-                return mt.feedforward.figures()
-            if mt.preset is not None:
-                return iso.preset_of(mt.preset).feedforward
-        if iso.feedforward is not None:
-            return iso.feedforward.figures()
-        return iso.preset_of(iso.preset).feedforward
-
-    keys = ("gain", "bandwidth", "force_limit")
-    off = {"gain": 0.0, "bandwidth": 0.0, "force_limit": np.inf}
-    out = {k: np.zeros((cases.c, n)) for k in keys}
-    weight = np.zeros((cases.c, n), dtype=bool)
-    for j in range(n):
-
-        def of_mount(s: Scene, j: int = j) -> Feedforward | None:
-            return resolved(s, j)
-
-        ff = cases.each(of_mount)
-        for key in keys:
-            out[key][:, j] = [off[key] if f is None else getattr(f, key) for f in ff]
-        weight[:, j] = [f is not None and f.weight for f in ff]
-    return out["gain"], out["bandwidth"], out["force_limit"], weight
-
-
 def _profiles(cases: _Cases, modes: Modes | None = None) -> profiles.Pieces:
-    """Every stage's profile (C, m, K); a shaper tuned to a mode waits for ``modes`` (scene_modes)."""
+    """Every stage's profile (C, m, K); a shaper tuned to a mode waits for ``modes`` (scene_modes).
+
+    A profile that no case varies (one scene, no override of it, no shaper tuned to the cases' modes) is
+    worked out for one case (:func:`_shared_pieces`) and broadcast over the cases; when no case varies
+    any, they come as (1, m, K), to be broadcast by the caller."""
     c = cases.c
-    stages = cases.scenes[0].stages
+    one_case = _Cases(cases.scenes, {}, 1)
     pieces = []
-    for i, st in enumerate(stages):
-        p = stage_profile(st.name)
-        prof = st.profile
-
-        def get(key: str, p: str = p, i: int = i) -> np.ndarray:
-            return cases.get(f"{p}.{key}", lambda s: getattr(s.stages[i].profile, key))
-
-        try:
-            if isinstance(prof, TrapezoidProfile):
-                pc = profiles.trapezoid(
-                    get("travel"), get("velocity"), get("acceleration"), start=get("start")
-                )
-            elif isinstance(prof, SCurveProfile):
-                pc = profiles.scurve(
-                    get("travel"), get("velocity"), get("acceleration"), get("jerk"), start=get("start")
-                )
-            elif isinstance(prof, ScanProfile):
-                jerk = get("jerk") if prof.jerk is not None or f"{p}.jerk" in cases.overrides else None
-                pc = profiles.scan(
-                    get("travel"),
-                    get("velocity"),
-                    get("acceleration"),
-                    jerk,
-                    dwell=get("dwell"),
-                    repeats=prof.repeats,
-                    start=get("start"),
-                )
-            else:
-                segs = []
-                for k, seg in enumerate(prof.segments):
-                    q = profile_segment(st.name, k)
-
-                    def sget(key: str, q: str = q, k: int = k, i: int = i) -> np.ndarray:
-                        # the batch's scenes share one shape: this stage's profile is a sequence in each
-                        return cases.get(
-                            f"{q}.{key}",
-                            lambda s: getattr(cast(SequenceProfile, s.stages[i].profile).segments[k], key),
-                        )
-
-                    if isinstance(seg, MoveSegment):
-                        d = {"move": sget("move"), "v_max": sget("velocity"), "a_max": sget("acceleration")}
-                        if seg.jerk is not None or f"{q}.jerk" in cases.overrides:
-                            d["j_max"] = sget("jerk")
-                        segs.append(d)
-                    else:
-                        segs.append({"dwell": sget("dwell")})
-                pc = profiles.sequence(segs, start=get("start"))
-            if prof.shaper is not None:
-                pc = shaped_profile(pc, i, c, cases.get, cases.each, modes)
-        except SceneError as err:
-            names = {"v_max": "velocity", "a_max": "acceleration", "j_max": "jerk", "distance": "travel"}
-            field = err.field
-            for old, new in names.items():
-                field = field.replace(old, new)
-            raise SceneError(f"{stage_entry(i)}.profile.{field}", err.reason) from None
-        if pc.t.shape[0] != c:
-            pc = profiles.Pieces(*(np.broadcast_to(x, (c, x.shape[1])) for x in pc))
-        pieces.append(pc)
+    for i, st in enumerate(cases.scenes[0].stages):
+        prefix = f"{stage_profile(st.name)}."
+        shared = (
+            len(cases.scenes) == 1
+            and not any(path.startswith(prefix) for path in cases.overrides)
+            and (st.profile.shaper is None or st.profile.shaper.mode is None)
+        )
+        pieces.append(_shared_pieces(cases, one_case, i) if shared else _stage_pieces(cases, i, modes))
     if not pieces:
         z = np.zeros((c, 0, 1))
         return profiles.Pieces(z, z, z, z, z)
-    return profiles.stack(pieces)
+    if all(pc.t.shape[0] == 1 for pc in pieces):
+        return profiles.stack(pieces)
+    return profiles.stack(
+        [profiles.Pieces(*(np.broadcast_to(x, (c, x.shape[1])) for x in pc)) for pc in pieces]
+    )
+
+
+SHARED_PROFILES_KEPT = 256
+"""How many profiles no case varies a process keeps, by their figures (:func:`_shared_pieces`)."""
+_shared_profiles: dict[str, profiles.Pieces] = {}
+
+
+def _shared_pieces(cases: _Cases, one_case: _Cases, i: int) -> profiles.Pieces:
+    """Stage ``i``'s profile that no case varies (1, K), worked out once per process for its figures: the
+    batches of a study's group share it. Read-only; an error is reported as the cases give it."""
+    key = cases.scenes[0].stages[i].profile.model_dump_json()
+    pc = _shared_profiles.get(key)  # one look: another thread may clear the store meanwhile
+    if pc is None:
+        try:
+            pc = _stage_pieces(one_case, i, None)
+        except SceneError:
+            return _stage_pieces(cases, i, None)  # raises the error with the cases' own wording
+        for x in pc:
+            x.setflags(write=False)
+        if len(_shared_profiles) >= SHARED_PROFILES_KEPT:
+            _shared_profiles.clear()
+        _shared_profiles[key] = pc
+    return pc
+
+
+def _stage_pieces(cases: _Cases, i: int, modes: Modes | None) -> profiles.Pieces:
+    """Stage ``i``'s profile over ``cases`` (C, K)."""
+    c = cases.c
+    st = cases.scenes[0].stages[i]
+    p = stage_profile(st.name)
+    prof = st.profile
+
+    def get(key: str) -> np.ndarray:
+        return cases.get(f"{p}.{key}", lambda s: getattr(s.stages[i].profile, key))
+
+    try:
+        if isinstance(prof, TrapezoidProfile):
+            pc = profiles.trapezoid(get("travel"), get("velocity"), get("acceleration"), start=get("start"))
+        elif isinstance(prof, SCurveProfile):
+            pc = profiles.scurve(
+                get("travel"), get("velocity"), get("acceleration"), get("jerk"), start=get("start")
+            )
+        elif isinstance(prof, ScanProfile):
+            jerk = get("jerk") if prof.jerk is not None or f"{p}.jerk" in cases.overrides else None
+            pc = profiles.scan(
+                get("travel"),
+                get("velocity"),
+                get("acceleration"),
+                jerk,
+                dwell=get("dwell"),
+                repeats=prof.repeats,
+                start=get("start"),
+            )
+        else:
+            segs = []
+            for k, seg in enumerate(prof.segments):
+                q = profile_segment(st.name, k)
+
+                def sget(key: str, q: str = q, k: int = k) -> np.ndarray:
+                    # the batch's scenes share one shape: this stage's profile is a sequence in each
+                    return cases.get(
+                        f"{q}.{key}",
+                        lambda s: getattr(cast(SequenceProfile, s.stages[i].profile).segments[k], key),
+                    )
+
+                if isinstance(seg, MoveSegment):
+                    d = {"move": sget("move"), "v_max": sget("velocity"), "a_max": sget("acceleration")}
+                    if seg.jerk is not None or f"{q}.jerk" in cases.overrides:
+                        d["j_max"] = sget("jerk")
+                    segs.append(d)
+                else:
+                    segs.append({"dwell": sget("dwell")})
+            pc = profiles.sequence(segs, start=get("start"))
+        if prof.shaper is not None:
+            pc = shaped_profile(pc, i, c, cases.get, cases.per_scene, modes)
+    except SceneError as err:
+        names = {"v_max": "velocity", "a_max": "acceleration", "j_max": "jerk", "distance": "travel"}
+        field = err.field
+        for old, new in names.items():
+            field = field.replace(old, new)
+        raise SceneError(f"{stage_entry(i)}.profile.{field}", err.reason) from None
+    return pc
 
 
 def build_batch(
@@ -429,9 +398,7 @@ def build_batch(
 
         stage_mass[:, i] = cases.get(f"{stage(name)}.mass", moving_mass)
         stage_home[:, i] = cases.vec(f"{stage(name)}.home", home)
-    stage_axis = np.array(cases.each(lambda s: [st.axis for st in s.stages]), dtype=np.float64).reshape(
-        c, m, 3
-    )
+    stage_axis = cases.array(lambda s: [st.axis for st in s.stages]).reshape(c, m, 3)
     stage_parent = np.array(
         [-1 if st.parent is None else names.index(st.parent) for st in s0.stages], dtype=np.int64
     )
@@ -473,8 +440,8 @@ def build_batch(
     except CollinearIsolatorsError as err:
         raise SceneError(ISOLATORS, str(err).removeprefix(f"{ISOLATORS}: ")) from None
 
-    f_v, f_h, zeta, skyhook = _mount_values(cases, n)
-    ff_gain, ff_bandwidth, ff_limit, ff_weight = _mount_feedforward(cases, n)
+    f_v, f_h, zeta, skyhook = mount_figures(cases, n)
+    ff_gain, ff_bandwidth, ff_limit, ff_weight = mount_feedforward(cases, n)
     k_explicit = np.full((c, n, 3), np.nan)
     c_explicit = np.full((c, n, 3), np.nan)
     for a, axis in enumerate(AXES):
@@ -508,10 +475,10 @@ def build_batch(
             "mounts or give explicit k" + (f" (case {case})" if c > 1 else ""),
         )
     safe_load = np.where(load > 0.0, load, 0.0)[..., None]
-    groups = cases.each(lambda s: s.isolators)
+    groups = cases.per_scene(lambda s: s.isolators)  # one shared by every case, or one per case
     zeta_axes = axis_damping_ratios(groups, zeta, isolator_group("zeta") in cases.overrides)
-    iso_k = _first_set(k_explicit, stiffness_from_frequency(safe_load, freq, g))
-    iso_c = _first_set(c_explicit, damping_from_ratio(iso_k, safe_load, zeta_axes, g))
+    iso_k = first_set(k_explicit, stiffness_from_frequency(safe_load, freq, g))
+    iso_c = first_set(c_explicit, damping_from_ratio(iso_k, safe_load, zeta_axes, g))
     iso_k, iso_c, iso_frame = apply_mount_physics(groups, load, iso_k, iso_c, k_explicit, c_explicit, g)
     _fail(
         ISOLATORS,
@@ -523,7 +490,7 @@ def build_batch(
     # motion (a shaper tuned to a mode is applied below, once the modes are known: it only delays motion)
     pieces = _profiles(cases)
     if m:
-        reach = np.abs(pieces.s).max(axis=-1)  # (C, m): farthest from home (moves are monotonic in a piece)
+        reach = np.abs(pieces.s).max(axis=-1)  # (C or 1, m): farthest from home (monotonic in a piece)
         bound = travel_bound(stage_axis, block_size[:, None, :] if block_size is not None else None)
         over = beyond_travel(reach, bound)
         if over.any():
@@ -566,11 +533,11 @@ def build_batch(
         def recorded(s: Scene) -> RecordedFloor:
             return cast(RecordedFloor, cast(Floor, s.floor).recorded)
 
-        samples = np.array(cases.each(lambda s: recorded(s).displacement.samples()), dtype=np.float64)
+        samples = cases.array(lambda s: recorded(s).displacement.samples())
         floor_t = np.arange(samples.shape[-1]) * rec.dt
         floor_disp = samples.reshape(c, 3, -1)
     # the floor spectrum: one-third-octave band velocity per axis, and per mount (studies.questions.floor)
-    floor_spectra = spectrum_fields(cases.each, iso_pos, cg)
+    floor_spectra = spectrum_fields(cases.per_scene, iso_pos, cg)
 
     # simulation
     def sim(s: Scene) -> Simulation:
@@ -598,6 +565,9 @@ def build_batch(
             if name in w:
                 point_tol[slice(None) if len(scenes) == 1 else i, j] = w[name]
 
+    def per_case(x: np.ndarray) -> np.ndarray:  # a fresh (C, ...) array of what one case gives alone
+        return np.ascontiguousarray(x) if x.shape[0] == c else np.repeat(x, c, axis=0)
+
     batch = SceneBatch(
         mass=np.array(mass, dtype=np.float64),
         inertia=inertia,
@@ -611,11 +581,11 @@ def build_batch(
         stage_home=stage_home,
         stage_axis=stage_axis,
         stage_parent=stage_parent,
-        prof_t=np.ascontiguousarray(pieces.t),
-        prof_s=np.ascontiguousarray(pieces.s),
-        prof_v=np.ascontiguousarray(pieces.v),
-        prof_a=np.ascontiguousarray(pieces.a),
-        prof_j=np.ascontiguousarray(pieces.j),
+        prof_t=per_case(pieces.t),
+        prof_s=per_case(pieces.s),
+        prof_v=per_case(pieces.v),
+        prof_a=per_case(pieces.a),
+        prof_j=per_case(pieces.j),
         points=points,
         floor_amp=np.array(floor_amp, dtype=np.float64),
         floor_freq=np.array(floor_freq, dtype=np.float64),
@@ -640,9 +610,9 @@ def build_batch(
     batch = levelling_valves(batch, cases)  # air mounts' levelling valves
     if any(tuned_to_modes(s) for s in scenes):  # tuned to the modes of the scene as assembled
         pieces = _profiles(cases, scene_modes(batch))
-        at = profiles.Pieces(*(np.ascontiguousarray(x) for x in pieces))
+        at = profiles.Pieces(*(per_case(x) for x in pieces))
         batch = replace(batch, prof_t=at.t, prof_s=at.s, prof_v=at.v, prof_a=at.a, prof_j=at.j)
-    last_move = profiles.end_time(pieces).max(axis=-1) if m else np.zeros(c)
+    last_move = np.broadcast_to(profiles.end_time(pieces).max(axis=-1), (c,)) if m else np.zeros(c)
     auto = np.isnan(duration)
     if auto.any():
         decay = slowest_decay_time(batch.take(np.flatnonzero(auto)))

@@ -29,8 +29,8 @@ from isolab.studies.inputs.schema.stages import SHAPER_MODES, ShaperSpec
 CaseValues = Callable[[str, Callable[[Scene], float | None]], np.ndarray]
 """Reads one numeric input of every case by its path: the study's value where it varies it, else the
 scene's (NaN where unset); ``(C,)`` or a scalar broadcast."""
-EachCase = Callable[[Callable[[Scene], object]], list]
-"""Reads one input of each case's scene (a list of ``C``)."""
+PerScene = Callable[[Callable[[Scene], object]], list]
+"""Reads one input of each of the batch's scenes: a list of one, shared by every case, or of ``C``."""
 
 
 def tuned_to_modes(scene: Scene) -> bool:
@@ -98,12 +98,12 @@ def shaped_profile(
     stage: int,
     n_cases: int,
     get: CaseValues,
-    each: EachCase,
+    per_scene: PerScene,
     modes: modal.Modes | None = None,
 ) -> profiles.Pieces:
     """Stage ``stage``'s profile ``pc`` through its input shaper, tuned in each of the ``n_cases`` cases.
 
-    ``get`` and ``each`` read the cases' inputs (:data:`CaseValues`, :data:`EachCase`). A shaper tuned to
+    ``get`` and ``per_scene`` read the cases' inputs (:data:`CaseValues`, :data:`PerScene`). A shaper tuned to
     a mode takes its frequency and damping ratio from ``modes`` (:func:`scene_modes` of the batch); without
     them such a profile is returned unshaped, to be shaped once they are known. A case that tips keeps
     its profile's motion (an identity shaper: the same pieces as the others).
@@ -117,11 +117,15 @@ def shaped_profile(
     def spec(s: Scene) -> ShaperSpec:  # the batch's scenes share one shape: each of them has the shaper
         return cast(ShaperSpec, s.stages[stage].profile.shaper)
 
-    kinds = each(lambda s: spec(s).type)
-    tuned = each(lambda s: spec(s).mode)
+    def on_cases(flags: list[bool]) -> np.ndarray:
+        """(C,) bool of flags per scene."""
+        return np.broadcast_to(np.array(flags, dtype=bool), (c,))
+
+    kinds = per_scene(lambda s: spec(s).type)
+    tuned = per_scene(lambda s: spec(s).mode)
     if modes is None and any(m is not None for m in tuned):
         return pc
-    q = profile_shaper(each(lambda s: s.stages[stage].name)[0])
+    q = profile_shaper(per_scene(lambda s: s.stages[stage].name)[0])
 
     def figure(key: str) -> np.ndarray:
         return np.broadcast_to(get(f"{q}.{key}", lambda s: getattr(spec(s), key)), (c,))
@@ -130,7 +134,7 @@ def shaped_profile(
     z[np.isnan(z)] = 0.0  # an undamped mode unless the damping is given (or the mode's, below)
     identity = np.zeros(c, dtype=bool)
     for mode in {m for m in tuned if m is not None}:
-        on = np.array([m == mode for m in tuned])
+        on = on_cases([m == mode for m in tuned])
         fm, zm, usable = mode_tuning(mode, cast(modal.Modes, modes), on)
         f[usable], z[usable] = fm[usable], zm[usable]
         identity |= on & ~usable
@@ -138,7 +142,7 @@ def shaped_profile(
     a = np.zeros((c, profiles.SHAPER_IMPULSES))
     a[identity, 0] = 1.0
     for kind in set(kinds):
-        on = np.array([k == kind for k in kinds]) & ~identity
+        on = on_cases([k == kind for k in kinds]) & ~identity
         if on.any():
             t[on], a[on] = profiles.shaper_impulses(kind, f[on], z[on])
     return profiles.shape(profiles.Pieces(*(np.broadcast_to(x, (c, x.shape[1])) for x in pc)), t, a)

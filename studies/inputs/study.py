@@ -54,6 +54,11 @@ _EXTREME_CHECK_LEVELS = 16
 DRY_RUN_LIMIT = 200_000
 """Studies of at most this many cases have every case built when they are validated."""
 DRY_RUN_CHUNK = 10_000
+"""Cases a bad case is looked for among at once when a study is validated: the error reported is the one
+a batch of them gives."""
+DRY_RUN_BLOCK = 2_000
+"""Cases built at once while a chunk is checked (a batch this size stays in the processor's caches: about
+1.2 us a case against 1.9 for a whole chunk)."""
 REPRESENTATIVE_CASES = 64
 """Most cases whose modes are computed when a study is checked (:meth:`Study._check_statics`)."""
 
@@ -234,16 +239,15 @@ class Study(InputModel):
         d = self.design()
         cat = [i for i, t in enumerate(self._targets) if t.categorical]
         cont = [i for i, t in enumerate(self._targets) if not t.categorical]
+        groups = {(): np.arange(idx.size)}  # without a categorical parameter, one group of every case
         if cat:
             keys = list(zip(*(d.values[d.names[i]][idx].tolist() for i in cat), strict=True))
-        else:
-            keys = [()] * idx.size
-        groups: dict[tuple, list[int]] = {}
-        for k, key in enumerate(keys):
-            groups.setdefault(key, []).append(k)
+            positions: dict[tuple, list[int]] = {}
+            for k, key in enumerate(keys):
+                positions.setdefault(key, []).append(k)
+            groups = {key: np.asarray(p) for key, p in positions.items()}
         parts, order = [], []
-        for key, positions in groups.items():
-            pos = np.asarray(positions)
+        for key, pos in groups.items():
             scene = self._group_scene(key, cat)
             overrides = {}
             for i in cont:
@@ -304,7 +308,13 @@ class Study(InputModel):
         if n > DRY_RUN_LIMIT:
             return
         for start in range(0, n, DRY_RUN_CHUNK):
-            self.batch(np.arange(start, min(n, start + DRY_RUN_CHUNK)))
+            chunk = np.arange(start, min(n, start + DRY_RUN_CHUNK))
+            try:
+                for first in range(0, chunk.size, DRY_RUN_BLOCK):
+                    self.batch(chunk[first : first + DRY_RUN_BLOCK])
+            except ValueError:
+                self.batch(chunk)  # the chunk's own error: the one a batch of all its cases gives
+                raise
 
     def representative_cases(self) -> np.ndarray:
         """A few cases that span the study (at most :data:`REPRESENTATIVE_CASES`): for a grid, the corners

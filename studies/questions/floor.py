@@ -215,19 +215,24 @@ def scene_mount_band_velocity(scene: Any, n_mounts: int) -> np.ndarray:
 
 
 def spectrum_fields(
-    each: Callable[[Callable[[Any], object]], list], iso_pos: np.ndarray, cg: np.ndarray
+    per_scene: Callable[[Callable[[Any], object]], list], iso_pos: np.ndarray, cg: np.ndarray
 ) -> dict:
     """The floor-spectrum fields of an ``engine.scene.SceneBatch`` (``floor_band_velocity`` and, where a
     scene asks for them, ``floor_mount_band_velocity``, ``floor_delay`` and ``floor_coherence``).
 
-    ``each(read)`` applies ``read`` to every case's scene; ``iso_pos`` (C, n, 3) and ``cg`` (C, 3), m. A
-    travelling wave delays the floor under mount ``j`` by ``(r_j - c.g.) . e / speed`` (s).
+    ``per_scene(read)`` applies ``read`` to the batch's scenes: one shared by every case, or one per case;
+    ``iso_pos`` (C, n, 3) and ``cg`` (C, 3), m. A travelling wave delays the floor under mount ``j`` by
+    ``(r_j - c.g.) . e / speed`` (s).
     """
     c, n = iso_pos.shape[:2]
-    out: dict[str, Any] = {
-        "floor_band_velocity": np.array(each(scene_band_velocity), dtype=np.float64).reshape(c, 3, -1)
-    }
-    floors = each(lambda s: getattr(s, "floor", None))
+
+    def per_case(read: Callable[[Any], object], *shape: int) -> np.ndarray:
+        """(C, *shape) a fresh array of ``read`` of each case's scene, read once per scene."""
+        values = np.array(per_scene(read), dtype=np.float64)
+        return (np.repeat(values, c, axis=0) if values.shape[0] == 1 else values).reshape(c, *shape)
+
+    out: dict[str, Any] = {"floor_band_velocity": per_case(scene_band_velocity, 3, -1)}
+    floors = per_scene(lambda s: getattr(s, "floor", None))
     if all(f is None for f in floors):
         return out
     coherence = {getattr(f, "coherence", "correlated") if f is not None else "correlated" for f in floors}
@@ -236,17 +241,12 @@ def spectrum_fields(
             f"floor.coherence: the scenes of one batch share one coherence, got {sorted(coherence)}"
         )
     if any(getattr(f, "per_mount", None) is not None for f in floors):
-        levels = each(lambda s: scene_mount_band_velocity(s, n))
-        out["floor_mount_band_velocity"] = np.array(levels, dtype=np.float64).reshape(c, n, 3, N_BANDS)
+        out["floor_mount_band_velocity"] = per_case(lambda s: scene_mount_band_velocity(s, n), n, 3, N_BANDS)
     if any(getattr(f, "wave", None) is not None for f in floors):
-        waves = np.array(
-            each(
-                lambda s: (
-                    (s.floor.wave.speed, *s.floor.wave.direction) if s.floor.wave else (np.inf, 1.0, 0.0)
-                )
-            ),
-            dtype=np.float64,
-        ).reshape(c, 3)
+        waves = per_case(
+            lambda s: (s.floor.wave.speed, *s.floor.wave.direction) if s.floor.wave else (np.inf, 1.0, 0.0),
+            3,
+        )
         e = np.concatenate([waves[:, 1:], np.zeros((c, 1))], axis=1)
         out["floor_delay"] = np.einsum("cni,ci->cn", iso_pos - cg[:, None], e) / waves[:, :1]
     out["floor_coherence"] = coherence.pop()
