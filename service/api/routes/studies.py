@@ -253,7 +253,11 @@ async def wait_for_end(jobs: JobQueue, study_id: str, seconds: float, request: R
     :data:`GONE_STEP_S`). The end of the study's run wakes the wait at once, without polling."""
     loop = asyncio.get_running_loop()
     ended = asyncio.Event()
-    forget = jobs.on_end(study_id, lambda: loop.call_soon_threadsafe(ended.set))
+
+    def wake() -> None:  # called in the study's thread
+        loop.call_soon_threadsafe(ended.set)
+
+    forget = jobs.on_end(study_id, wake)
     if forget is None:
         return True
     try:
