@@ -13,12 +13,15 @@ already in the catalog; a few worker threads take ids in order and run them with
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import logging
 import queue
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from isolab.studies.results.catalog import CATALOG_FILE, StudyNotFound, utc_now
 from isolab.studies.results.store import Store, StudyFilter, StudyRecord
@@ -309,3 +312,44 @@ class JobQueue:
         if row["status"] in ("cancelled", "failed", "running"):
             self.store.update(study_id, status="queued", finished=None, error=None)
             log.info("study %s: interrupted by shutdown, stays queued to resume at the next start", study_id)
+
+
+class Disconnectable(Protocol):
+    """What a waiting request is asked: whether its client has gone away (a Starlette ``Request``)."""
+
+    async def is_disconnected(self) -> bool: ...
+
+
+GONE_STEP_S = 0.5
+"""How often a waiting status request looks whether its client has gone away, s (asking the connection);
+the study's end itself wakes it at once (:meth:`JobQueue.on_end`)."""
+
+
+async def wait_for_end(
+    jobs: JobQueue, study_id: str, seconds: float, request: Disconnectable | None = None
+) -> bool:
+    """Wait up to ``seconds`` (s) while the study is queued or running in ``jobs``; True when it is not
+    (any more), False at the bound or when the client of ``request`` has gone away (looked at every
+    :data:`GONE_STEP_S`). The end of the study's run wakes the wait at once, without polling."""
+    loop = asyncio.get_running_loop()
+    ended = asyncio.Event()
+
+    def wake() -> None:  # called in the study's thread
+        loop.call_soon_threadsafe(ended.set)
+
+    forget = jobs.on_end(study_id, wake)
+    if forget is None:
+        return True
+    try:
+        deadline = time.monotonic() + seconds
+        while jobs.is_active(study_id):
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return False
+            if request is not None and await request.is_disconnected():
+                return False
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(ended.wait(), min(GONE_STEP_S, left))
+        return True
+    finally:
+        forget()

@@ -17,9 +17,9 @@ import pytest
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
 
-from isolab.service.api.jobs import JobQueue
+from isolab.service.api.jobs import GONE_STEP_S, JobQueue, wait_for_end
 from isolab.service.api.routes import studies
-from isolab.service.api.routes.studies import GONE_STEP_S, MAX_WAIT_S, wait_for_end
+from isolab.service.api.routes.studies import MAX_WAIT_S
 from isolab.service.client import STATUS_WAIT_S, Client
 from isolab.studies.results.store import Store
 

@@ -8,10 +8,7 @@ catalog and files are :class:`isolab.studies.results.store.Store`, running is
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
 import re
-import time
 from datetime import UTC, datetime
 from typing import Annotated, Any
 
@@ -20,7 +17,7 @@ from fastapi import APIRouter, Body, HTTPException, Query, Request, Response
 from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, HTMLResponse
 
-from isolab.service.api.jobs import JobQueue
+from isolab.service.api.jobs import JobQueue, wait_for_end
 from isolab.service.api.kernel_warmup import KernelWarmup
 from isolab.service.api.request_limits import JsonParsedOffLoop
 from isolab.service.api.routes import (
@@ -242,37 +239,6 @@ def list_studies(
 
 MAX_WAIT_S = 30.0
 """Longest a status request may wait for its study to end (``GET /studies/{id}?wait=``), s."""
-GONE_STEP_S = 0.5
-"""How often a waiting status request looks whether its client has gone away, s (asking the connection);
-the study's end itself wakes it at once (:meth:`~isolab.service.api.jobs.JobQueue.on_end`)."""
-
-
-async def wait_for_end(jobs: JobQueue, study_id: str, seconds: float, request: Request | None = None) -> bool:
-    """Wait up to ``seconds`` (s) while the study is queued or running in ``jobs``; True when it is not
-    (any more), False at the bound or when the client of ``request`` has gone away (looked at every
-    :data:`GONE_STEP_S`). The end of the study's run wakes the wait at once, without polling."""
-    loop = asyncio.get_running_loop()
-    ended = asyncio.Event()
-
-    def wake() -> None:  # called in the study's thread
-        loop.call_soon_threadsafe(ended.set)
-
-    forget = jobs.on_end(study_id, wake)
-    if forget is None:
-        return True
-    try:
-        deadline = time.monotonic() + seconds
-        while jobs.is_active(study_id):
-            left = deadline - time.monotonic()
-            if left <= 0:
-                return False
-            if request is not None and await request.is_disconnected():
-                return False
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(ended.wait(), min(GONE_STEP_S, left))
-        return True
-    finally:
-        forget()
 
 
 def study_detail(store: Store, study_id: str, kernels: KernelWarmup | None) -> StudyDetail:
