@@ -211,7 +211,7 @@ borrowed: Any = intrinsic(_view_without_owner)
 
 
 CACHE_LINE = 64
-"""Bytes in a cache line of the processors the kernels run on (x86-64, arm64)."""
+"""Bytes in a cache line of the processors the kernels run on (x86-64)."""
 LINE_FLOATS = CACHE_LINE // 8
 """Float64 elements in a cache line."""
 
@@ -224,10 +224,10 @@ def whole_lines(n):
 
 @njit(cache=True, inline="always")
 def line_aligned_zeros(n):
-    """``n`` zeros (float64) whose first element starts a cache line (:data:`CACHE_LINE` bytes), for a
-    kernel's scratch: numba aligns what it allocates at 32 bytes only, so a vector loop over rows of a
-    scratch allocated as such spans two lines at every 64-byte load or store at every other address the
-    allocator hands out. A view of an array one line longer."""
+    """``n`` zeros (float64) whose first element starts a cache line (:data:`CACHE_LINE` bytes): a view
+    of an array one line longer. Numba aligns what it allocates at 32 bytes only, so wherever the
+    allocator hands out an address half-way into a line, every 64-byte vector load and store of a loop
+    over the rows of a scratch allocated as such spans two lines."""
     buf = np.zeros(n + LINE_FLOATS)
     address = np.int64(buf.ctypes.data)
     skip = (CACHE_LINE - address % CACHE_LINE) % CACHE_LINE // 8
