@@ -28,7 +28,16 @@ from numba import njit
 
 from isolab.engine.integrators import euler, exact, output_map, rk4
 from isolab.engine.kernels.excitation import advance_pieces, next_breakpoint
-from isolab.engine.kernels.params import FIDELITIES, LTI, NONLINEAR, Params, Work, borrowed
+from isolab.engine.kernels.params import (
+    FIDELITIES,
+    LTI,
+    NONLINEAR,
+    Params,
+    Work,
+    borrowed,
+    line_aligned_zeros,
+    whole_lines,
+)
 from isolab.engine.kernels.peaks import Peaks, observe, observe_nonlinear
 from isolab.engine.kernels.structs import kernel_struct
 from isolab.engine.results import FAILED, OK, UNSTABLE
@@ -64,24 +73,40 @@ def pair_driver(method: int, level: int) -> Any:
         C = dt.shape[0]
         nx = 13 if level == NONLINEAR else 12 + P.zA.shape[1]  # the base, then the extra linear states
         nA = 2 * P.sm.shape[1] if method == EXACT and nx > 13 else 0  # exact: the stages' accelerations
-        z = np.zeros(nx + 6 * (deg + 1) + nA)  # the state, then exact's forcing carried between steps
-        x = z[:nx]
-        Fv = z[nx:]
-        S = np.zeros((rk4.SCRATCH_ROWS, nx))  # RK4's stage state and slopes
-        xn = np.zeros(nx)  # exact: the new state
         idx = np.zeros(P.sm.shape[1], dtype=np.int64)
         G, KF, tgt, rtgt, still, GZ = outmap
         m = G.shape[2]
+        # the scratch the steps read and write at every step, carved from one block that starts a cache
+        # line, each part on lines of its own at fixed distances from the others: allocated one by one,
+        # the output map's rows spanned two cache lines at every vector load and store wherever the
+        # allocator handed out an address that was not a multiple of 64 bytes, and the parts' distances
+        # (a load waits on an earlier store to an address with the same low 12 bits) changed with the
+        # batch: up to 40 % more time per step, from one batch to the next
+        nB = output_map.SCRATCH if m > 0 else 0  # the output map's rows (output_map.observe)
+        nz = nx + 6 * (deg + 1) + nA  # the state, then exact's forcing carried between steps
+        nS = rk4.SCRATCH_ROWS * nx  # RK4's stage state and slopes
+        nL = exact.LEAN_SCRATCH if method == EXACT else 0  # exact.lean_rows
+        oz = whole_lines(nB)  # each part's start in the block, elements
+        oQ = oz + whole_lines(nz)
+        on = oQ + whole_lines(15)
+        oS = on + whole_lines(nx)
+        oL = oS + whole_lines(nS)
+        block = line_aligned_zeros(oL + nL)
+        Bmap = block[:nB]
+        z = block[oz : oz + nz]
+        x = z[:nx]
+        Fv = z[nx:]
+        Qmap = block[oQ : oQ + 15]
+        xn = block[on : on + nx]  # exact: the new state
+        S = block[oS : oS + nS].reshape((rk4.SCRATCH_ROWS, nx))
+        # exact: the lean step's rows, the state's map and the piece's forced response (exact.lean_rows)
+        L = block[oL : oL + nL]
         # exact: a whole step inside one piece with no recorded floor input or extra linear state takes the
         # lean path (exact.free_step, which advances the base's 12 rows), for a case under no sine floor and
         # with no feedforward actuator: chosen per case, so that a case's result does not depend on the
         # other cases of its batch (the lean path equals the general one to round-off, not bit for bit)
         lean = P.ft.shape[0] == 0 and nx == 12
-        # exact: the lean step's rows, the state's map and the piece's forced response (exact.lean_rows)
-        L = np.zeros(exact.LEAN_SCRATCH if method == EXACT else 0)
         carried = False
-        Bmap = np.zeros(output_map.SCRATCH if m > 0 else 0)  # the output map's rows (output_map.observe)
-        Qmap = np.zeros(15)
         F0, rest, ptol = P.f0, O.rest, O.point_tol
         # RK4 at the nonlinear level for a case without a recorded floor or feedforward actuators
         # (``rk4.lean_nonlinear``, chosen per case): the lean step, inlined here on views of the case's

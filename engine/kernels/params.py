@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import Any, NamedTuple
 
 import numpy as np
+from numba import njit
 from numba.core import types
 from numba.extending import intrinsic
 
@@ -207,3 +208,27 @@ def _view_without_owner(typingctx: Any, array: types.Array) -> Any:
 
 borrowed: Any = intrinsic(_view_without_owner)
 """A view of a numba array whose references are not counted (:func:`_view_without_owner`); kernels only."""
+
+
+CACHE_LINE = 64
+"""Bytes in a cache line of the processors the kernels run on (x86-64)."""
+LINE_FLOATS = CACHE_LINE // 8
+"""Float64 elements in a cache line."""
+
+
+@njit(cache=True, inline="always")
+def whole_lines(n):
+    """``n`` elements (float64) rounded up to whole cache lines (:data:`LINE_FLOATS`)."""
+    return (n + LINE_FLOATS - 1) // LINE_FLOATS * LINE_FLOATS
+
+
+@njit(cache=True, inline="always")
+def line_aligned_zeros(n):
+    """``n`` zeros (float64) whose first element starts a cache line (:data:`CACHE_LINE` bytes): a view
+    of an array one line longer. Numba aligns what it allocates at 32 bytes only, so wherever the
+    allocator hands out an address half-way into a line, every 64-byte vector load and store of a loop
+    over the rows of a scratch allocated as such spans two lines."""
+    buf = np.zeros(n + LINE_FLOATS)
+    address = np.int64(buf.ctypes.data)
+    skip = (CACHE_LINE - address % CACHE_LINE) % CACHE_LINE // 8
+    return buf[skip : skip + n]
