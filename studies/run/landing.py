@@ -21,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import os
 import time
 from collections.abc import Callable, Mapping
 
@@ -47,11 +48,23 @@ WRITER_PRIORITY = 3
 starts with the run; it leaves its worker's thread pool at once, so it holds no chunk back."""
 
 
+LANDING_CASES = 50_000
+"""Fewest cases left to compute for which a study's dataset is written as they land (``ISOLAB_LANDING_CASES``
+in the environment overrides it). Writing block by block takes about twice the CPU of writing the dataset
+whole (0.13 against 0.07 s at 10,000 cases; 0.4 s against 0.3-0.5 at 100,000): where every core runs a
+worker, that CPU is taken from the chunks, and a 10,000-case study took 1.71-1.84 s with it against
+1.62-1.81 s without (two workers on two cores), while at 100,000 cases the two were within noise (15.6-15.7
+against 15.6-16.0 s) and the landing writer kept the workers' memory flat (0.46 against 0.59 GB). Where
+the machine has cores beside the workers', the writing is free and the finish (0.8 s at 100,000 cases)
+leaves the critical path."""
+
+
 def lands(chunk_sizes: list[int]) -> bool:
     """Whether a study whose chunks left to compute have ``chunk_sizes`` cases has its dataset written as
-    they land: when at least two blocks of :data:`LANDING_BLOCK_CASES` cases, in two chunks or more, are
-    left (else writing it after the run costs no more)."""
-    return len(chunk_sizes) >= 2 and sum(chunk_sizes) >= 2 * LANDING_BLOCK_CASES
+    they land: when two chunks or more and at least :data:`LANDING_CASES` cases are left (else writing it
+    after the run costs no more)."""
+    least = int(os.environ.get("ISOLAB_LANDING_CASES", LANDING_CASES))
+    return len(chunk_sizes) >= 2 and sum(chunk_sizes) >= least
 
 
 class WriterStopped(Exception):

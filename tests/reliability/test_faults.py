@@ -188,13 +188,14 @@ COMBINATIONS_NO_MOUNT_CAN_CARRY = {
 
 
 def test_a_worker_killed_as_it_starts_writing_a_study_as_its_chunks_land_is_replaced(
-    app_client, tmp_path: Path
+    app_client, tmp_path: Path, monkeypatch
 ) -> None:
     # 2,400 cases in several chunks: the dataset is written as they land, by a task on one worker; kill that
     # worker as the task starts (the chunks it ran go elsewhere, the writer starts again on another)
     app, http, data = app_client
     dask = app.state.dask
     marker = tmp_path / "killed"
+    monkeypatch.setenv("ISOLAB_LANDING_CASES", "2400")  # read by the runner, in this process
     dask.register_plugin(KillOnFinish(str(marker), "writer"))
     try:
         definition = {

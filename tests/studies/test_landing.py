@@ -19,7 +19,7 @@ from isolab.studies.results.store import Store
 from isolab.studies.run import landing, runner
 from isolab.studies.run.fanout import local_cluster, plan_chunks, run_chunk
 from isolab.studies.run.landing import (
-    LANDING_BLOCK_CASES,
+    LANDING_CASES,
     WriterStopped,
     lands,
     stop_writer,
@@ -66,11 +66,12 @@ def new_store(root: Path, run_json: str, chunks: list[np.ndarray]) -> tuple[Stor
     return store, sid
 
 
-def test_a_study_of_enough_cases_in_two_chunks_or_more_lands() -> None:
-    assert lands([LANDING_BLOCK_CASES, LANDING_BLOCK_CASES])
-    assert lands([600] * 4) and not lands([600] * 3)  # 1,800 cases: less than two blocks
-    assert not lands([10 * LANDING_BLOCK_CASES])  # one chunk: nothing computes beside its writing
+def test_a_study_of_enough_cases_in_two_chunks_or_more_lands(monkeypatch) -> None:
+    assert lands([LANDING_CASES // 2] * 2) and not lands([LANDING_CASES // 4] * 3)
+    assert not lands([10 * LANDING_CASES])  # one chunk: nothing computes beside its writing
     assert not lands([])
+    monkeypatch.setenv("ISOLAB_LANDING_CASES", "2400")
+    assert lands([600] * 4) and not lands([600] * 3)
 
 
 def test_a_chunk_is_read_once_it_is_saved_and_a_stop_ends_the_wait(tmp_path: Path, saved) -> None:
@@ -163,9 +164,12 @@ def test_a_stopped_writer_writes_nothing(tmp_path: Path, saved) -> None:
 # ----------------------------------------------------------------------------------- on a cluster
 @pytest.fixture(scope="module")
 def client():
-    with local_cluster(2) as cluster:
-        with Client(cluster) as c:
-            yield c
+    # a study of N_CASES is written as it lands (the runner decides; the workers only write)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("ISOLAB_LANDING_CASES", str(N_CASES))
+        with local_cluster(2) as cluster:
+            with Client(cluster) as c:
+                yield c
 
 
 @pytest.mark.slow  # a cluster of its own
