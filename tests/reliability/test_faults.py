@@ -117,6 +117,22 @@ class KillOnFinish(WorkerPlugin):
             os.kill(os.getpid(), signal.SIGKILL)
 
 
+def run_killing(app, http, tmp_path: Path, kind: str, definition: dict) -> tuple[str, dict]:
+    """Run ``definition`` on the app with the worker that starts the study's task of ``kind`` killed as it
+    starts it (:class:`KillOnFinish`); the study's id and its final status, which must be done."""
+    dask = app.state.dask
+    marker = tmp_path / "killed"
+    dask.register_plugin(KillOnFinish(str(marker), kind))
+    try:
+        sid = http.post("/studies", json=definition).json()["id"]
+        info = wait_finished(http, sid, timeout=120)
+    finally:
+        dask.unregister_worker_plugin(KillOnFinish.name)
+    assert marker.read_text().startswith(f"isolab-{sid}-{kind}-")  # the kill happened, in that task
+    assert info["status"] == "done", info
+    return sid, info
+
+
 def test_a_worker_killed_as_it_finishes_a_study_is_replaced_and_the_study_completes(
     app_client, tmp_path: Path
 ) -> None:
@@ -124,16 +140,8 @@ def test_a_worker_killed_as_it_finishes_a_study_is_replaced_and_the_study_comple
     app, http, data = app_client
     dask = app.state.dask
     before = set(dask.run(os.getpid).values())
-    marker = tmp_path / "killed"
-    dask.register_plugin(KillOnFinish(str(marker)))
-    try:
-        definition = long_chunks()
-        sid = http.post("/studies", json=definition).json()["id"]
-        info = wait_finished(http, sid, timeout=120)
-    finally:
-        dask.unregister_worker_plugin(KillOnFinish.name)
-    assert marker.read_text().startswith(f"isolab-{sid}-finish-")  # the kill happened, in that task
-    assert info["status"] == "done", info
+    definition = long_chunks()
+    sid, info = run_killing(app, http, tmp_path, "finish", definition)
     assert info["progress"] == {"done": N, "total": N, "failed": 0}
     after = set(dask.run(os.getpid).values())
     assert len(after) == 2 and len(after - before) == 1  # the nanny replaced the killed worker
@@ -193,23 +201,14 @@ def test_a_worker_killed_as_it_starts_writing_a_study_as_its_chunks_land_is_repl
     # 2,400 cases in several chunks: the dataset is written as they land, by a task on one worker; kill that
     # worker as the task starts (the chunks it ran go elsewhere, the writer starts again on another)
     app, http, data = app_client
-    dask = app.state.dask
-    marker = tmp_path / "killed"
     monkeypatch.setenv("ISOLAB_LANDING_CASES", "2400")  # read by the runner, in this process
-    dask.register_plugin(KillOnFinish(str(marker), "writer"))
-    try:
-        definition = {
-            **long_chunks(),
-            "name": "landing-fault",
-            "scene": quick_scene(duration="0.5 s", dt="1 ms", fidelity="lti", integrator="exact"),
-            "design": {"type": "lhs", "samples": 2400, "seed": 11},
-        }
-        sid = http.post("/studies", json=definition).json()["id"]
-        info = wait_finished(http, sid, timeout=120)
-    finally:
-        dask.unregister_worker_plugin(KillOnFinish.name)
-    assert marker.read_text().startswith(f"isolab-{sid}-writer-")  # the kill happened, in that task
-    assert info["status"] == "done", info
+    definition = {
+        **long_chunks(),
+        "name": "landing-fault",
+        "scene": quick_scene(duration="0.5 s", dt="1 ms", fidelity="lti", integrator="exact"),
+        "design": {"type": "lhs", "samples": 2400, "seed": 11},
+    }
+    sid, info = run_killing(app, http, tmp_path, "writer", definition)
     assert info["progress"] == {"done": 2400, "total": 2400, "failed": 0}
     check_every_case_once(Store(data).open_dataset(sid), definition, [0, 1200, 2399])
     assert not Store(data).chunk_dir(sid).exists()
