@@ -14,6 +14,7 @@ from __future__ import annotations
 import operator
 import threading
 import uuid
+import weakref
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -32,6 +33,11 @@ STREAM_CHUNK_CACHE_BYTES = 1 << 20
 """Chunk cache (bytes per variable) of the netCDF library while a streamed dataset is written: its blocks
 fill whole file chunks, so none waits there half-written (the library's default is 64 MB per variable,
 which holds a large study's every chunk until the file closes)."""
+BLOCKS_KEY = "isolab_blocks"
+"""The encoding key under which a streamed dataset's variables name their block source (see
+:func:`write_blocks`); never written to a file (the store writes the encodings it builds itself)."""
+_SOURCES: weakref.WeakValueDictionary[str, _ChunkSource] = weakref.WeakValueDictionary()
+"""Block sources of the streamed datasets alive in this process, by the token their variables carry."""
 BLOCK_CASES = 4096
 """Fewest cases a block of :func:`streamed_dataset` holds by default (consecutive chunks are read together
 up to it), so that the file's chunks (one per block) stay large enough to compress and read well."""
@@ -99,6 +105,7 @@ def streamed_dataset(
     # its own from that task, so the chunks are read once and let go once all their slices are written
     read = f"isolab-chunk-{uuid.uuid4().hex}"
     read_layer: dict[Any, Any] = {(read, j): (source.values, j) for j in range(len(groups))}
+    _SOURCES[read] = source
     data_vars: dict[str, xr.Variable] = {}
     for name, var in first.data_vars.items():
         key = f"{read}-{name}"
@@ -123,6 +130,8 @@ def streamed_dataset(
             laid = blocks if identity and aligned else blocks.rechunk({0: sizes[0]})
             if var.dtype.kind != "U":
                 encoding["chunksizes"] = (sizes[0], *var.shape[1:])
+            if identity and aligned:  # block j of the file is the source's block j: written without dask
+                encoding[BLOCKS_KEY] = read
         elif case_shape:  # a grid: whole rows of its first dimension per block
             row = int(np.prod(case_shape[1:]))
             rows = max(1, sizes[0] // row)
@@ -219,7 +228,11 @@ def write_blocks(ds: xr.Dataset, path: str | Path, encoding: Mapping[str, Mappin
         with netcdf_writing():
             netCDF4.set_chunk_cache(STREAM_CHUNK_CACHE_BYTES, cache[1], cache[2])
             ds.dump_to_store(store, writer=writer, encoding=dict(encoding))
+        source = _block_source(ds)
         sources, targets = writer.sources, writer.targets
+        if source is not None:  # the source's blocks, encoded as xarray encodes them, no graph per block
+            _write_source_blocks(ds, source, store, encoding, targets)
+            sources = targets = []
         for j in range(max((s.numblocks[0] for s in sources), default=0)):
             held = [i for i, s in enumerate(sources) if j < s.numblocks[0]]
             values = dask.compute(
@@ -235,6 +248,46 @@ def write_blocks(ds: xr.Dataset, path: str | Path, encoding: Mapping[str, Mappin
                 store.close()
             finally:
                 netCDF4.set_chunk_cache(*cache)
+
+
+def _block_source(ds: xr.Dataset) -> _ChunkSource | None:
+    """The one block source every dask-backed variable of ``ds`` is laid out from block for block (a
+    sampled design's chunks in case order, of one size), or None."""
+    lazy = [v for v in ds.variables.values() if v.chunks is not None]
+    tokens = {v.encoding.get(BLOCKS_KEY) for v in lazy}
+    if len(tokens) != 1 or None in tokens:
+        return None
+    return _SOURCES.get(str(tokens.pop()))
+
+
+def _write_source_blocks(
+    ds: xr.Dataset,
+    source: _ChunkSource,
+    store: Any,
+    encoding: Mapping[str, Mapping[str, Any]],
+    targets: Sequence[Any],
+) -> None:
+    """Write every dask-backed variable of ``ds`` from ``source``, block after block: each block's values
+    (read outside the netCDF lock: they may wait for chunks) encoded by ``store`` as it encodes a whole
+    variable, then written to its ``targets`` under the lock."""
+    import xarray as xr
+
+    by_name = {str(t.variable_name): t for t in targets}
+    lazy = [str(k) for k, v in ds.variables.items() if v.chunks is not None]
+    start = 0
+    for j, group in enumerate(source.groups):
+        block = source.values(j)
+        size = int(sum(len(source.chunks[k]) for k in group))
+        variables = {}
+        for name in lazy:
+            var = xr.Variable(ds[name].dims, block[name], attrs=dict(ds[name].attrs))
+            var.encoding = dict(encoding[name])
+            variables[name] = var
+        encoded, _ = store.encode(variables, {})
+        with netcdf_writing():
+            for name, var in encoded.items():
+                by_name[name][start : start + size, ...] = np.asarray(var.data)
+        start += size
 
 
 def _block_groups(sizes: Sequence[int], least: int) -> list[list[int]]:
