@@ -48,15 +48,14 @@ WRITER_PRIORITY = 3
 starts with the run; it leaves its worker's thread pool at once, so it holds no chunk back."""
 
 
-LANDING_CASES = 50_000
+LANDING_CASES = 30_000
 """Fewest cases left to compute for which a study's dataset is written as they land (``ISOLAB_LANDING_CASES``
-in the environment overrides it). Writing block by block takes about twice the CPU of writing the dataset
-whole (0.13 against 0.07 s at 10,000 cases; 0.4 s against 0.3-0.5 at 100,000): where every core runs a
-worker, that CPU is taken from the chunks, and a 10,000-case study took 1.71-1.84 s with it against
-1.62-1.81 s without (two workers on two cores), while at 100,000 cases the two were within noise (15.6-15.7
-against 15.6-16.0 s) and the landing writer kept the workers' memory flat (0.46 against 0.59 GB). Where
-the machine has cores beside the workers', the writing is free and the finish (0.8 s at 100,000 cases)
-leaves the critical path."""
+in the environment overrides it). Where every core runs a worker, the writer's CPU (0.09 s at 10,000 cases,
+0.25 s at 100,000, against 0.07 and 0.23-0.34 s to write the dataset whole after the run) and its use of
+the caches come out of the chunks beside it; measured alternately with and without (two workers, two cores):
+10,000 cases 1.78-1.88 s against 1.66-1.91 s (medians 1.80 and 1.75: worse), 30,000 cases 4.81-5.07 against
+4.89-5.08 s (medians 4.90 and 5.00), 100,000 cases 15.17, 15.54 s against 15.95, 16.08 s, the workers' memory
+0.45 against 0.59 GB. Where the machine has a core beside the workers', the writing is free at any size."""
 
 
 def lands(chunk_sizes: list[int]) -> bool:
