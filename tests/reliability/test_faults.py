@@ -32,12 +32,12 @@ N = 240
 MARK = "saved before the service was killed"
 
 
-def long_chunks() -> dict:
-    """240 cases of about 25 ms each (LTV, RK4 at 1 ms over 2 s): five chunks of up to 59 cases, about
-    1.5 s each, so that a fault lands while chunks run."""
+def long_chunks(duration: str = "2 s") -> dict:
+    """240 cases of LTV, RK4 at 1 ms over 2 s (``duration`` to change it): the chunk plan's two chunks of 120
+    cases at 2 s (four of 60 at 4 s), so that a fault lands while chunks run."""
     return {
         "name": "fault",
-        "scene": quick_scene(duration="2 s", dt="1 ms", fidelity="ltv", integrator="rk4"),
+        "scene": quick_scene(duration=duration, dt="1 ms", fidelity="ltv", integrator="rk4"),
         "parameters": [
             {"path": "isolators.f_vertical", "range": {"start": "2 Hz", "stop": "6 Hz"}},
             {"path": "stages.y.mass", "range": {"start": "500 kg", "stop": "1500 kg"}},
@@ -249,7 +249,7 @@ def test_a_study_the_engine_refuses_is_failed_with_the_reason(app_client, defini
 # ---------------------------------------------------------------------- the service process killed
 def test_the_service_killed_mid_study_resumes_from_its_saved_chunks(tmp_path: Path) -> None:
     data = tmp_path / "data"
-    definition = long_chunks()
+    definition = long_chunks("4 s")  # four chunks: the kill comes after the first two at most
     service = ServiceProcess(data, workers=2).start()
     try:
         with httpx.Client(base_url=service.url, timeout=30.0) as http:
