@@ -86,7 +86,8 @@ the worker's process id."""
 RESERVED_PRIORITY = 2
 """Dask priority of a run's reserved chunk (see the module docstring): above the small studies' chunks
 (minus their number), accuracy pilots (0), the finish tasks (1) and the error-estimate reruns (just below
-their run's chunks, see :func:`run_chunks`)."""
+their run's chunks, see :func:`run_chunks`); below the landing writers (3,
+:data:`isolab.studies.run.landing.WRITER_PRIORITY`), which leave the thread pool as they start."""
 LOW_LANE_PER_WORKER = 2
 """Chunks per worker a run keeps in flight at the low priority: one running, one queued to follow it."""
 _POLL_SECONDS = 0.05

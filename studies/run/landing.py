@@ -41,13 +41,9 @@ STOP_FILE = "writer.stop"
 LANDING_BLOCK_CASES = 1024
 """Fewest cases a block of the landing writer holds (consecutive chunks smaller than this are written
 together): a chunk is written as soon as it lands, and the file's chunks stay large enough to read well."""
-
-
 WRITER_PRIORITY = 3
 """Dask priority of a landing writer: above every chunk (see :mod:`isolab.studies.run.fanout`), so that it
 starts with the run; it leaves its worker's thread pool at once, so it holds no chunk back."""
-
-
 LANDING_CASES = 30_000
 """Fewest cases left to compute for which a study's dataset is written as they land (``ISOLAB_LANDING_CASES``
 in the environment overrides it). Where every core runs a worker, the writer's CPU (0.09 s at 10,000 cases,
