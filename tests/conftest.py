@@ -45,7 +45,9 @@ PREWARM_ORDER = (
     ("nonlinear", "reference"),
 )
 """Every (fidelity, integrator) pair the suite runs, the longest to compile first (so two processes finish
-together): nonlinear/rk4 about 35 s of CPU, lti/exact 31, the reference 3."""
+together): nonlinear/rk4 about 35 s of CPU; lti/exact, ltv/rk4, lti/euler 29-31 s of wall each on a quiet
+machine (process start included), nonlinear/euler and the reference 26-27 (the reference compiles its
+right-hand side and its samples' observers as kernels)."""
 
 
 def pytest_configure(config: pytest.Config) -> None:
