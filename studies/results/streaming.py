@@ -96,7 +96,7 @@ def streamed_dataset(
     groups = _block_groups([len(c) for c in chunks], block_cases)
     source = _ChunkSource(load_chunk, chunks, groups, isolator_names, point_names, criteria)
     first = source.dataset(0)
-    sizes = tuple(int(sum(len(chunks[k]) for k in g)) for g in groups)
+    sizes = source.sizes
     # the file's chunks (HDF5) along the cases are the blocks, so that each block written fills whole
     # file chunks: none is ever held half-written (see write_netcdf)
     aligned = all(size == sizes[0] for size in sizes[:-1]) and sizes[-1] <= sizes[0]
@@ -168,6 +168,7 @@ class _ChunkSource:
         criteria: Any,
     ):
         self.load_chunk, self.chunks, self.groups, self.criteria = load_chunk, chunks, groups, criteria
+        self.sizes = tuple(int(sum(len(chunks[k]) for k in g)) for g in groups)  # cases of each block
         self.isolator_names, self.point_names = list(isolator_names), list(point_names)
         self.built = 0  # chunk datasets built so far (each reads its chunk)
         self._last: tuple[int, xr.Dataset] | None = None
@@ -215,7 +216,6 @@ def write_blocks(ds: xr.Dataset, path: str | Path, encoding: Mapping[str, Mappin
     is laid out, a block is written and the file is closed: never while a block is computed, which may wait
     for its chunks to be saved (:mod:`isolab.studies.run.landing`). Compressed blocks fill whole file
     chunks (their ``chunksizes``), so the netCDF library's chunk cache is kept small meanwhile."""
-    import dask
     import netCDF4
     from xarray.backends import NetCDF4DataStore
     from xarray.backends.common import ArrayWriter
@@ -229,25 +229,33 @@ def write_blocks(ds: xr.Dataset, path: str | Path, encoding: Mapping[str, Mappin
             netCDF4.set_chunk_cache(STREAM_CHUNK_CACHE_BYTES, cache[1], cache[2])
             ds.dump_to_store(store, writer=writer, encoding=dict(encoding))
         source = _block_source(ds)
-        sources, targets = writer.sources, writer.targets
         if source is not None:  # the source's blocks, encoded as xarray encodes them, no graph per block
-            _write_source_blocks(ds, source, store, encoding, targets)
-            sources = targets = []
-        for j in range(max((s.numblocks[0] for s in sources), default=0)):
-            held = [i for i, s in enumerate(sources) if j < s.numblocks[0]]
-            values = dask.compute(
-                *[sources[i].blocks[j] for i in held], scheduler="synchronous", optimize_graph=False
-            )
-            with netcdf_writing():
-                for i, value in zip(held, values, strict=True):
-                    start = int(sum(sources[i].chunks[0][:j]))
-                    targets[i][start : start + int(sources[i].chunks[0][j]), ...] = value
+            _write_source_blocks(ds, source, store, encoding, writer.targets)
+        else:
+            _write_dask_blocks(writer.sources, writer.targets)
     finally:
         with netcdf_writing():
             try:
                 store.close()
             finally:
                 netCDF4.set_chunk_cache(*cache)
+
+
+def _write_dask_blocks(sources: Sequence[Any], targets: Sequence[Any]) -> None:
+    """Write each dask array of ``sources`` to its target, block after block along the first dimension
+    (block ``j`` of every array before block ``j + 1`` of any), each block computed in this thread outside
+    the netCDF lock and written under it."""
+    import dask
+
+    for j in range(max((s.numblocks[0] for s in sources), default=0)):
+        held = [i for i, s in enumerate(sources) if j < s.numblocks[0]]
+        values = dask.compute(
+            *[sources[i].blocks[j] for i in held], scheduler="synchronous", optimize_graph=False
+        )
+        with netcdf_writing():
+            for i, value in zip(held, values, strict=True):
+                start = int(sum(sources[i].chunks[0][:j]))
+                targets[i][start : start + int(sources[i].chunks[0][j]), ...] = value
 
 
 def _block_source(ds: xr.Dataset) -> _ChunkSource | None:
@@ -275,9 +283,8 @@ def _write_source_blocks(
     by_name = {str(t.variable_name): t for t in targets}
     lazy = [str(k) for k, v in ds.variables.items() if v.chunks is not None]
     start = 0
-    for j, group in enumerate(source.groups):
+    for j, size in enumerate(source.sizes):
         block = source.values(j)
-        size = int(sum(len(source.chunks[k]) for k in group))
         variables = {}
         for name in lazy:
             var = xr.Variable(ds[name].dims, block[name], attrs=dict(ds[name].attrs))

@@ -105,13 +105,11 @@ def write_as_chunks_land(store_root: str, study_id: str, run_json: str, attrs_js
     docstring); the number of cases that did not end OK, or None when this worker does not see the store
     or the writer was stopped."""
     store = Store(store_root, catalog=False)
-    if not store.has_chunk_plan(study_id):
+    chunks = store.load_chunk_plan(study_id)
+    if chunks is None:  # this worker does not see the store
         return None
     wanted = _leave_thread_pool()
     run = study_from_json(run_json)
-    chunks = store.load_chunk_plan(study_id)
-    if chunks is None:
-        return None
     iso_names, point_names = study_labels(run)
     failed: dict[int, int] = {}
 
