@@ -537,7 +537,7 @@ def build_batch(
         floor_t = np.arange(samples.shape[-1]) * rec.dt
         floor_disp = samples.reshape(c, 3, -1)
     # the floor spectrum: one-third-octave band velocity per axis, and per mount (studies.questions.floor)
-    floor_spectra = spectrum_fields(cases.per_scene, iso_pos, cg)
+    floor_spectra = spectrum_fields(cases, iso_pos, cg)
 
     # simulation
     def sim(s: Scene) -> Simulation:

@@ -34,7 +34,7 @@ within each band (:mod:`isolab.engine.frequency`). The spectra it gives at a poi
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -214,25 +214,35 @@ def scene_mount_band_velocity(scene: Any, n_mounts: int) -> np.ndarray:
     return np.repeat(scene_band_velocity(scene)[None], n_mounts, axis=0)
 
 
-def spectrum_fields(
-    per_scene: Callable[[Callable[[Any], object]], list], iso_pos: np.ndarray, cg: np.ndarray
-) -> dict:
+class SceneValues(Protocol):
+    """How the batch builder reads an input of each case's scene (``studies.inputs.scenes``): the scenes
+    are one shared by every case, or one per case."""
+
+    def per_scene(self, read: Callable[[Any], object]) -> list:
+        """``read`` of each scene."""
+        ...
+
+    def array(self, read: Callable[[Any], object]) -> np.ndarray:
+        """(C, ...) a fresh float array of ``read`` of each case's scene, read once per scene."""
+        ...
+
+
+def spectrum_fields(cases: SceneValues, iso_pos: np.ndarray, cg: np.ndarray) -> dict:
     """The floor-spectrum fields of an ``engine.scene.SceneBatch`` (``floor_band_velocity`` and, where a
     scene asks for them, ``floor_mount_band_velocity``, ``floor_delay`` and ``floor_coherence``).
 
-    ``per_scene(read)`` applies ``read`` to the batch's scenes: one shared by every case, or one per case;
-    ``iso_pos`` (C, n, 3) and ``cg`` (C, 3), m. A travelling wave delays the floor under mount ``j`` by
+    ``cases`` reads the batch's scenes (:class:`SceneValues`); ``iso_pos`` (C, n, 3) and ``cg`` (C, 3), m.
+    A travelling wave delays the floor under mount ``j`` by
     ``(r_j - c.g.) . e / speed`` (s).
     """
     c, n = iso_pos.shape[:2]
 
     def per_case(read: Callable[[Any], object], *shape: int) -> np.ndarray:
         """(C, *shape) a fresh array of ``read`` of each case's scene, read once per scene."""
-        values = np.array(per_scene(read), dtype=np.float64)
-        return (np.repeat(values, c, axis=0) if values.shape[0] == 1 else values).reshape(c, *shape)
+        return cases.array(read).reshape(c, *shape)
 
     out: dict[str, Any] = {"floor_band_velocity": per_case(scene_band_velocity, 3, -1)}
-    floors = per_scene(lambda s: getattr(s, "floor", None))
+    floors = cases.per_scene(lambda s: getattr(s, "floor", None))
     if all(f is None for f in floors):
         return out
     coherence = {getattr(f, "coherence", "correlated") if f is not None else "correlated" for f in floors}
