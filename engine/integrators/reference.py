@@ -166,4 +166,4 @@ def run(
             k_next += sel.size
             x = sol.y[:, -1].copy()
             if level == NONLINEAR:
-                x[3:7] /= np.linalg.norm(x[3:7])
+                normalise_quaternion(x)
