@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import operator
+import os
 import sys
 import threading
 import time
@@ -218,6 +219,27 @@ def test_cancel_stops_outstanding_chunks(client: Client) -> None:
     assert elapsed < 1.5
     time.sleep(0.5)
     assert sum(len(v) for v in client.processing().values()) == 0  # nothing left running
+
+
+def reused_allocation_faults() -> int:
+    """Page faults of allocating, filling and freeing a 4 MB array 20 times in this process (as the
+    engine does a batch's arrays), after a first round that lets the allocator settle."""
+    import resource
+
+    np.ones(1 << 19).sum()
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    for _ in range(20):
+        np.ones(1 << 19).sum()
+    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
+
+
+def test_a_worker_reuses_freed_memory_instead_of_fresh_pages(client: Client) -> None:
+    # Dask starts workers with MALLOC_TRIM_THRESHOLD_, which pins glibc's mmap threshold: every batch's
+    # arrays then came from fresh pages (1,024 faults per 4 MB array) and the engine ran 3-5 % slower in
+    # a worker than alone. The cluster's workers keep glibc's own settings: the array's pages are reused.
+    assert set(client.run(os.environ.get, "MALLOC_TRIM_THRESHOLD_").values()) == {None}
+    faults = client.run(reused_allocation_faults)
+    assert max(faults.values()) < 20 * 1024 / 10, faults
 
 
 # ------------------------------------------------------------------------------------ fair share
