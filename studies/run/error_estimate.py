@@ -17,6 +17,7 @@ s).
 
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import SimpleNamespace
@@ -30,6 +31,7 @@ from isolab.engine.scene import SceneBatch
 from isolab.engine.simulate import SUB_STEPPED
 from isolab.studies.inputs.study import Study, study_from_json
 from isolab.studies.results.dataset import result_arrays
+from isolab.studies.results.timings import record_timing
 
 REFERENCE_PAIR = ("nonlinear", "reference")
 """The fidelity and integrator every error is measured against (the reference level)."""
@@ -230,6 +232,7 @@ def sample_arrays(
     (``"ours"``, the numbers its chunk gives: a case's result does not depend on the batch it runs in)
     and at the reference level sampled at the step that run used (``"reference"``): ``pair``, or the
     case's own :func:`reference_pair` when None."""
+    t0 = time.perf_counter()
     study = study_from_json(definition_json)
     sim = study.simulation
     batch = study.batch(np.array([int(case)]))
@@ -238,6 +241,7 @@ def sample_arrays(
     dt = float(ours["dt"][0]) if np.isfinite(ours["dt"][0]) else step
     pair = reference_pair(batch) if pair is None else pair
     reference = result_arrays(simulate(batch, *pair, dt=dt, auto_step=sim.auto_step))
+    record_timing("rerun", case=int(case), seconds=time.perf_counter() - t0)
     return {"ours": ours, "reference": reference}
 
 

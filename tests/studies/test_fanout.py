@@ -9,6 +9,7 @@ import os
 import sys
 import threading
 import time
+from concurrent.futures import Future
 from pathlib import Path
 
 import cloudpickle
@@ -675,6 +676,34 @@ def test_a_study_is_finished_by_a_worker(client: Client, tmp_path: Path, monkeyp
     assert json.loads(ds.attrs["error_estimate_cases"]) and "DOP853" in ds.attrs["error_estimate_method"]
 
 
+def test_reruns_leave_a_worker_for_the_finish_until_released() -> None:
+    # the error estimate's reruns go out with the run's last chunks, one worker fewer than the cluster's at
+    # once: the worker that ends the last chunk is free for the task that finishes the study
+    sent: list[tuple[int, Future]] = []
+
+    def submit(case: int) -> Future:
+        sent.append((case, Future()))
+        return sent[-1][1]
+
+    reruns = runner.Reruns(submit, [3, 5, 8, 13], ahead=1).start()
+    assert [c for c, _ in sent] == [3]
+    sent[0][1].set_result(None)  # one ends: the next goes
+    assert [c for c, _ in sent] == [3, 5] and not reruns.done()
+    reruns.release()  # the finish is out: the rest go at once
+    assert [c for c, _ in sent] == [3, 5, 8, 13] and not reruns.done()
+    for _, future in sent[1:]:
+        future.set_result(None)
+    assert reruns.done()
+
+    sent.clear()
+    stopped = runner.Reruns(submit, [1, 2, 4], ahead=2).start()
+    assert [c for c, _ in sent] == [1, 2]
+    assert stopped.close() == [f for _, f in sent]  # what to cancel
+    sent[0][1].set_result(None)
+    stopped.release()
+    assert [c for c, _ in sent] == [1, 2] and not stopped.done()  # closed: none sent after
+
+
 def test_reruns_done_before_the_finish_are_written_by_the_worker_at_once(
     client: Client, tmp_path: Path, monkeypatch
 ) -> None:
@@ -683,9 +712,10 @@ def test_reruns_done_before_the_finish_are_written_by_the_worker_at_once(
     sent = runner._submit_samples
 
     def sent_and_done(*args, **kwargs):
-        cases, futures, pair = sent(*args, **kwargs)
-        wait(futures)
-        return cases, futures, pair
+        cases, reruns, pair = sent(*args, **kwargs)
+        reruns.release()
+        wait(reruns.futures)
+        return cases, reruns, pair
 
     monkeypatch.setattr(runner, "_submit_samples", sent_and_done)
     monkeypatch.setattr(Store, "publish_dataset", lambda *a, **k: pytest.fail("the estimate added after"))
