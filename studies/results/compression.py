@@ -19,21 +19,38 @@ import numpy as np
 
 DEFLATE = {"zlib": True, "complevel": 1, "shuffle": True}
 """The netCDF encoding of a compressed variable."""
-PROBE_VALUES = 8192
-"""Values of a variable (its first, in storage order) that :func:`shrinks` compresses to judge it."""
+PROBE_VALUES = 4096
+"""Values of a variable that :func:`shrinks` compresses to judge it: :data:`PROBE_RUNS` runs of
+consecutive values (in storage order) spread evenly over it, the first at its start. On the datasets of
+10,000 and 100,000 cases of the end-to-end benchmark and of an optimisation, 4,096 values judge every
+variable as the 8,192 first values did, in 7 ms of CPU for 34 variables instead of 16 (fewer values
+compress less well: 2,048 judged a variable that shrinks to 0.47 of its bytes as not shrinking)."""
+PROBE_RUNS = 4
 SHRINK_BELOW = 0.5
 """A variable is compressed when its probe compresses to less than this fraction of its bytes."""
 
 
 def shrinks(values: np.ndarray) -> bool:
     """Whether a variable's ``values`` shrink below :data:`SHRINK_BELOW` of their bytes under
-    :data:`DEFLATE`, judged on their first :data:`PROBE_VALUES` values, byte-shuffled as the netCDF
-    filter does."""
-    probe = np.ascontiguousarray(np.asarray(values).reshape(-1)[:PROBE_VALUES])
+    :data:`DEFLATE`, judged on :data:`PROBE_VALUES` of them (:func:`probe_values`), byte-shuffled as the
+    netCDF filter does."""
+    probe = probe_values(np.asarray(values))
     if probe.size == 0:
         return False
     raw = probe.view(np.uint8).reshape(probe.size, probe.itemsize).T.tobytes()  # the shuffle filter
     return len(zlib.compress(raw, DEFLATE["complevel"])) < SHRINK_BELOW * len(raw)
+
+
+def probe_values(values: np.ndarray) -> np.ndarray:
+    """The values of ``values`` (flattened in storage order) that :func:`shrinks` judges: all of them up to
+    :data:`PROBE_VALUES`, else :data:`PROBE_RUNS` runs of consecutive values spread evenly from the start
+    (a variable whose first cases repeat but whose others do not is judged on both)."""
+    flat = values.reshape(-1)
+    if flat.size <= PROBE_VALUES:
+        return np.ascontiguousarray(flat)
+    run = PROBE_VALUES // PROBE_RUNS
+    starts = np.linspace(0, flat.size - run, PROBE_RUNS).astype(np.int64)
+    return np.concatenate([flat[s : s + run] for s in starts])
 
 
 def deflate_encoding(values: np.ndarray | None) -> dict[str, Any]:

@@ -106,8 +106,10 @@ def _fsync_dir(path: Path) -> None:
 
 
 @contextlib.contextmanager
-def atomic_path(target: Path) -> Iterator[Path]:
-    """Yield a hidden temporary path next to ``target``; on success fsync it and rename it over ``target``.
+def atomic_path(target: Path, durable: bool = True) -> Iterator[Path]:
+    """Yield a hidden temporary path next to ``target``; on success fsync it (unless not ``durable``: a
+    file that is written again when lost, whose later fsync makes it durable) and rename it over
+    ``target``.
 
     If the body raises, the temporary file is removed and ``target`` is left as it was.
     """
@@ -118,8 +120,9 @@ def atomic_path(target: Path) -> Iterator[Path]:
     tmp = Path(tmp_name)
     try:
         yield tmp
-        with open(tmp, "rb+") as f:
-            os.fsync(f.fileno())
+        if durable:
+            with open(tmp, "rb+") as f:
+                os.fsync(f.fileno())
         os.replace(tmp, target)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
@@ -253,8 +256,9 @@ def netcdf_encoding(ds: xr.Dataset) -> dict[str, dict[str, Any]]:
     return enc
 
 
-def write_netcdf(ds: xr.Dataset, path: str | Path) -> Path:
-    """Write ``ds`` to ``path`` atomically (see :func:`atomic_path`), with :func:`netcdf_encoding`.
+def write_netcdf(ds: xr.Dataset, path: str | Path, durable: bool = True) -> Path:
+    """Write ``ds`` to ``path`` atomically (see :func:`atomic_path`, ``durable``), with
+    :func:`netcdf_encoding`.
 
     A dataset with variables backed by dask arrays (:func:`isolab.studies.results.streaming.streamed_dataset`)
     is written block after block, each computed here, in this thread
@@ -265,7 +269,7 @@ def write_netcdf(ds: xr.Dataset, path: str | Path) -> Path:
     path = Path(path)
     encoding = netcdf_encoding(ds)
     streamed = any(v.chunks is not None for v in ds.variables.values())
-    with atomic_path(path) as tmp:
+    with atomic_path(path, durable) as tmp:
         try:
             if streamed:
                 write_blocks(ds, tmp, encoding)
@@ -512,9 +516,13 @@ class Store:
 
     def write_dataset(self, study_id: str, ds: xr.Dataset, staged: bool = False) -> Path:
         """Write a study's dataset atomically to :meth:`path`, or with ``staged`` to :meth:`staged_path`
-        (for :meth:`publish_dataset` to complete)."""
+        (for :meth:`publish_dataset` to complete; not fsynced: publishing fsyncs the whole file, and a
+        run that stops before writes it again)."""
         t0, c0 = time.perf_counter(), time.thread_time()
-        path = write_netcdf(ds, self.staged_path(study_id) if staged else self.path(study_id))
+        if staged:
+            path = write_netcdf(ds, self.staged_path(study_id), durable=False)
+        else:
+            path = write_netcdf(ds, self.path(study_id))
         seconds, cpu_s = time.perf_counter() - t0, time.thread_time() - c0
         record_timing(
             "write_dataset", study_id=study_id, seconds=seconds, cpu_s=cpu_s, bytes=path.stat().st_size

@@ -9,7 +9,13 @@ import netCDF4
 import numpy as np
 import xarray as xr
 
-from isolab.studies.results.compression import DEFLATE, deflate_encoding, shrinks
+from isolab.studies.results.compression import (
+    DEFLATE,
+    PROBE_VALUES,
+    deflate_encoding,
+    probe_values,
+    shrinks,
+)
 from isolab.studies.results.store import netcdf_encoding, write_netcdf
 
 
@@ -34,6 +40,20 @@ def test_constant_and_missing_values_shrink_random_peaks_do_not() -> None:
     assert not shrinks(np.array([], dtype=float))
     # a streamed variable (values not at hand) is always compressed
     assert deflate_encoding(None) == DEFLATE and deflate_encoding(ds.peak_displacement.values) == {}
+
+
+def test_a_variable_is_judged_on_values_spread_over_it() -> None:
+    # the probe takes runs of values from the start to the end: a variable whose first cases repeat (a
+    # design sorted by a parameter, a first chunk of failed cases) but whose others do not is not compressed
+    rng = np.random.default_rng(3)
+    n = 100_000
+    first_repeat = np.concatenate([np.zeros(PROBE_VALUES), rng.normal(size=n - PROBE_VALUES)])
+    assert not shrinks(first_repeat)
+    probe = probe_values(first_repeat)
+    assert probe.size == PROBE_VALUES and probe[0] == 0.0 and probe[-1] == first_repeat[-1]
+    assert shrinks(np.concatenate([np.full(n - 10, 0.25), rng.normal(size=10)]))
+    small = rng.normal(size=PROBE_VALUES - 1)
+    assert np.array_equal(probe_values(small), small)  # a small variable: all of it
 
 
 def test_a_dataset_compresses_what_shrinks_and_reads_back_identical(tmp_path: Path) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import textwrap
@@ -218,11 +219,20 @@ def test_a_streamed_grid_study_equals_the_one_built_in_memory(tmp_path: Path) ->
 
 @pytest.mark.parametrize("how", ["in memory", "streamed"])
 def test_a_dataset_staged_then_given_its_error_estimate_equals_the_one_written_whole(
-    tmp_path: Path, how: str
+    tmp_path: Path, how: str, monkeypatch
 ) -> None:
     """The runner writes the dataset while the error estimate's cases run, then adds the estimate to the
     file and moves it into place: the same values, attributes, units and encodings as the file written
-    with the estimate inside, and nothing under the study's name until it is complete."""
+    with the estimate inside, and nothing under the study's name until it is complete. The file is
+    flushed to the disk once, when published (a staged file lost is written again by the next run)."""
+    synced: list[str] = []
+    fsync = os.fsync
+
+    def recorded(fd: int) -> None:
+        synced.append(os.readlink(f"/proc/self/fd/{fd}"))
+        fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", recorded)
     n = 5_000
     design = sampled_design(n)
     chunks = [np.arange(s, min(s + 2000, n)) for s in range(0, n, 2000)]
@@ -231,10 +241,13 @@ def test_a_dataset_staged_then_given_its_error_estimate_equals_the_one_written_w
     bulk = (in_memory if how == "in memory" else streamed)(parts, chunks, design, estimate=False)
     store = Store(tmp_path / "store")
     sid = "ab" * 16
+    synced.clear()
     store.write_dataset(sid, bulk, staged=True)
     assert store.staged_path(sid).is_file() and not store.path(sid).exists()
+    assert not [p for p in synced if ".nc" in Path(p).name]
     store.publish_dataset(sid, add_error_estimate(xr.Dataset(), **ESTIMATE))
     assert store.path(sid).is_file() and not store.staged_path(sid).exists()
+    assert [p for p in synced if ".nc" in Path(p).name] == [str(store.staged_path(sid))]
     with xr.open_dataset(store.path(sid)) as f:
         published = f.load()
     # one block of three chunks when streamed; built in memory, the same variables compressed
