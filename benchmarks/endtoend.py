@@ -15,9 +15,11 @@ service answers as soon as the study ends). Per study it prints:
   compute window (engine, in-task overhead, scheduling gaps, tail);
 * the peak resident memory (RSS) of the service process and of each worker (psutil, every 0.2 s), checked
   against 2 GB, and that the stored dataset holds no time histories;
-* the single-core kernel throughput on the same scene and settings, measured just before the study in
-  child processes with BLAS limited to one thread (as the Dask workers run; the median of
-  ``--kernel-repeats`` processes, 3 by default), batched like the workers
+* the single-core kernel throughput on the same scene and settings, measured just before and just after
+  the study in child processes with BLAS limited to one thread (as the Dask workers run; the median of
+  ``--kernel-repeats`` processes on each side, 3 by default: this machine's speed drifts by up to 6 %
+  from one study to the next, and a reference taken on one side only moved the ratio with it), batched
+  like the workers
   (``ENGINE_BATCH_CASES``), and the ratio of end-to-end throughput to twice that (target >= 85 % at 10,000 cases, >= 90 % at 100,000);
 * the CPU other jobs took on the machine meanwhile (the machine may be shared).
 """
@@ -136,12 +138,18 @@ def measure_kernel(definition: dict, n_cases: int) -> dict[str, float]:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def median_kernel(definition: dict, n_cases: int, repeats: int) -> dict[str, float]:
+def kernel_runs(definition: dict, n_cases: int, repeats: int) -> list[dict[str, float]]:
     """:func:`measure_kernel` ``repeats`` times, each in a fresh process (where its arrays land differs from
-    one process to the next): the run of median wall time per case, with the fastest and slowest beside
-    it (``wall_min``, ``wall_max``, s per case) and the number of ``repeats``."""
-    runs = sorted((measure_kernel(definition, n_cases) for _ in range(max(1, int(repeats)))), key=_per_case)
-    middle = dict(runs[len(runs) // 2])
+    one process to the next)."""
+    return [measure_kernel(definition, n_cases) for _ in range(max(1, int(repeats)))]
+
+
+def median_run(runs: list[dict[str, float]]) -> dict[str, float]:
+    """The run of median wall time per case among ``runs`` (of :func:`measure_kernel`), with the fastest and
+    slowest beside it (``wall_min``, ``wall_max``, s per case) and their number (``repeats``). Of an even
+    number, the lower middle: the faster reference, the lower ratio."""
+    runs = sorted(runs, key=_per_case)
+    middle = dict(runs[(len(runs) - 1) // 2])
     middle.update(wall_min=_per_case(runs[0]), wall_max=_per_case(runs[-1]), repeats=len(runs))
     return middle
 
@@ -462,7 +470,7 @@ def print_run(run: StudyRun, n_workers: int, duration: float) -> None:
     print(f"wall {run.wall:8.2f} s   {run.cases_per_s:8.1f} cases/s end to end")
     print(
         f"single-core kernel ({k['cases']} cases, batched, one thread, median of {k.get('repeats', 1)} "
-        f"processes): {k['wall_per_case'] * 1e3:.3f} ms/case wall ({1 / k['wall_per_case']:.1f} cases/s; "
+        f"processes before and after): {k['wall_per_case'] * 1e3:.3f} ms/case wall ({1 / k['wall_per_case']:.1f} cases/s; "
         f"{k.get('wall_min', k['wall_per_case']) * 1e3:.3f}-{k.get('wall_max', k['wall_per_case']) * 1e3:.3f}), "
         f"{k['cpu_per_case'] * 1e3:.3f} ms/case CPU"
     )
@@ -548,7 +556,10 @@ def main(argv: list[str]) -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--kernel-cases", type=int, default=2000, help="cases of the single-core kernel run")
     ap.add_argument(
-        "--kernel-repeats", type=int, default=3, help="single-core kernel runs before each study (median)"
+        "--kernel-repeats",
+        type=int,
+        default=3,
+        help="single-core kernel runs before and again after each study (median of all)",
     )
     ap.add_argument("--warmup-cases", type=int, default=200)
     ap.add_argument("--keep", action="store_true", help="keep the temporary data directory and journal")
@@ -582,11 +593,14 @@ def main(argv: list[str]) -> None:
         for integrator, n in plan:
             definition = study_definition(n, integrator, a.duration)
             kdef = study_definition(min(n, 10_000), integrator, a.duration)
-            kernels[integrator] = median_kernel(kdef, min(a.kernel_cases, n), a.kernel_repeats)
+            before = kernel_runs(kdef, min(a.kernel_cases, n), a.kernel_repeats)
             sampler.phase()
             busy0, mine0 = machine_busy_seconds(), time.process_time()
             sid, row, t_post, t_seen = run_study(svc, definition)
             busy1, mine1 = machine_busy_seconds(), time.process_time()
+            kernels[integrator] = median_run(
+                before + kernel_runs(kdef, min(a.kernel_cases, n), a.kernel_repeats)
+            )
             run = StudyRun(definition["name"], integrator, n, a.workers, kernel=kernels[integrator])
             run.memory = sampler.phase()
             ours = sum(s.cpu_end - (s.cpu_start or 0.0) for s in run.memory.values()) + (mine1 - mine0)
