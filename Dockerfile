@@ -23,6 +23,11 @@ RUN python -c "import tomllib; print('\n'.join(tomllib.load(open('pyproject.toml
     && rm /tmp/requirements.txt
 COPY . /app
 RUN pip install --no-deps . && rm -rf /app/build
+# The Dask scheduler and workers of docker-compose.yml run with the housekeeping and memory settings of the
+# service's own cluster (isolab.studies.run.fanout.CLUSTER_HOUSEKEEPING), read from /etc/dask.
+RUN mkdir -p /etc/dask \
+    && python -c "import yaml; from isolab.studies.run.fanout import cluster_config_file; print(yaml.safe_dump(cluster_config_file()))" \
+        > /etc/dask/isolab.yaml
 
 USER isolab
 WORKDIR /home/isolab

@@ -329,3 +329,29 @@ def test_dockerfile_installs_exactly_the_dependencies_of_pyproject(tmp_path: Pat
     )
     wanted = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["dependencies"]
     assert (tmp_path / "requirements.txt").read_text().split() == wanted
+
+
+def test_the_image_gives_its_dask_processes_the_service_clusters_settings(tmp_path: Path) -> None:
+    # `dask scheduler` and `dask worker` in the image read /etc/dask: the profiler off, the slower ticks, and
+    # glibc's own allocator settings (Dask's MALLOC_TRIM_THRESHOLD_ slowed the engine by 3-5 %)
+    import dask.config
+
+    from isolab.studies.run.fanout import CLUSTER_HOUSEKEEPING
+
+    run = next(
+        args
+        for op, args in instructions((REPO / "Dockerfile").read_text())
+        if op == "RUN" and "/etc/dask/isolab.yaml" in args
+    )
+    command = run.replace("/etc/dask", str(tmp_path / "etc-dask")).replace(
+        "python ", shlex.quote(sys.executable) + " ", 1
+    )
+    subprocess.run(["sh", "-c", command], check=True, timeout=60)
+    read = dask.config.collect(paths=[str(tmp_path / "etc-dask")], env={})
+    for key, value in CLUSTER_HOUSEKEEPING.items():
+        assert dask.config.get(key, config=read) == value, key
+    with dask.config.set(read):
+        from distributed.nanny import _get_env_variables
+
+        spawned = _get_env_variables("distributed.nanny.pre-spawn-environ")
+    assert "MALLOC_TRIM_THRESHOLD_" not in spawned and spawned["OMP_NUM_THREADS"] == "1"

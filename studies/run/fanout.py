@@ -118,6 +118,21 @@ ran 3-5 % slower in a worker than in a plain process. A worker holds one chunk's
 memory glibc keeps for reuse is bounded by a chunk's."""
 
 
+def cluster_config_file() -> dict[str, Any]:
+    """:data:`CLUSTER_HOUSEKEEPING` as a Dask configuration file holds it (nested; a ``null`` removes a
+    setting): the image writes it to ``/etc/dask/isolab.yaml``, where the ``dask scheduler`` and ``dask
+    worker`` processes of ``docker-compose.yml`` read it, and a cluster started by hand reads it from a
+    folder named by ``DASK_CONFIG`` (docs/operations.md)."""
+    nested: dict[str, Any] = {}
+    for dotted, value in CLUSTER_HOUSEKEEPING.items():
+        *parents, last = dotted.split(".")
+        level = nested
+        for name in parents:
+            level = level.setdefault(name, {})
+        level[last] = value
+    return nested
+
+
 def local_cluster_arguments(
     workers: int, dashboard_address: str | None = None, **settings: object
 ) -> tuple[dict[str, object], dict[str, Any]]:
