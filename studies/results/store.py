@@ -519,10 +519,9 @@ class Store:
         (for :meth:`publish_dataset` to complete; not fsynced: publishing fsyncs the whole file, and a
         run that stops before writes it again)."""
         t0, c0 = time.perf_counter(), time.thread_time()
-        if staged:
-            path = write_netcdf(ds, self.staged_path(study_id), durable=False)
-        else:
-            path = write_netcdf(ds, self.path(study_id))
+        path = write_netcdf(
+            ds, self.staged_path(study_id) if staged else self.path(study_id), durable=not staged
+        )
         seconds, cpu_s = time.perf_counter() - t0, time.thread_time() - c0
         record_timing(
             "write_dataset", study_id=study_id, seconds=seconds, cpu_s=cpu_s, bytes=path.stat().st_size
