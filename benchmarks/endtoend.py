@@ -52,6 +52,16 @@ RATIO_TARGETS = {10_000: 0.85, 100_000: 0.90}
 """End-to-end throughput over twice the single-core kernel's, by study size (the nearest size's applies)."""
 
 
+def study_size(text: str) -> int:
+    """A study size given on the command line: a whole number of cases, at least 1."""
+    n = int(text)
+    if n < 1:
+        raise argparse.ArgumentTypeError(
+            f"{text}: a study has at least 1 case (leave the sizes out for none)"
+        )
+    return n
+
+
 def ratio_target(n_cases: int) -> float:
     """The target ratio for a study of ``n_cases``: that of the nearest listed size."""
     return RATIO_TARGETS[min(RATIO_TARGETS, key=lambda n: abs(np.log(n / max(n_cases, 1))))]
@@ -550,8 +560,16 @@ def print_run(run: StudyRun, n_workers: int, duration: float) -> None:
 
 def main(argv: list[str]) -> None:
     ap = argparse.ArgumentParser(prog="python -m benchmarks endtoend")
-    ap.add_argument("--cases", type=int, nargs="+", default=[10_000, 100_000], help="lti/exact study sizes")
-    ap.add_argument("--rk4-cases", type=int, nargs="*", default=[10_000], help="lti/rk4 study sizes")
+    ap.add_argument(
+        "--cases", type=study_size, nargs="+", default=[10_000, 100_000], help="lti/exact study sizes"
+    )
+    ap.add_argument(
+        "--rk4-cases",
+        type=study_size,
+        nargs="*",
+        default=[10_000],
+        help="lti/rk4 study sizes (none: no rk4 study)",
+    )
     ap.add_argument("--duration", type=float, default=3.0, help="simulated time per case, s")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--kernel-cases", type=int, default=2000, help="cases of the single-core kernel run")

@@ -2,10 +2,11 @@
 
 Run: ``python -m benchmarks reruns [--repeat 5]``. Takes the 10,000-case LHS study of
 ``python -m benchmarks endtoend`` (``lti``/``exact``, 3 s at 1 ms), reruns its error sample
-(``studies.run.error_estimate.error_sample``: 4 cases) as the estimate does (``sample_arrays``: each case
-with the study's own model and at the reference level, nonlinear with the adaptive reference integrator),
-and prints the CPU time of the 4 reruns, and of the reference runs alone, median and best of ``--repeat``
-passes after one warm-up pass, with the load average beside them.
+(``studies.run.error_estimate.error_sample``: 4 cases) as the estimate does on the service's two workers
+(``sample_arrays`` of the 4 cases in one task: with the study's own model and at the reference level,
+nonlinear with the adaptive reference integrator, one batch each) and as it did before, one task a case,
+and prints the CPU time of each, and of the reference runs alone, median and best of ``--repeat`` passes
+after one warm-up pass, with the load average beside them.
 """
 
 from __future__ import annotations
@@ -35,7 +36,10 @@ def main(args: list[str]) -> None:
     cases = error_sample(study)
     batches = [study.batch(np.array([c])) for c in cases]
 
-    def reruns() -> None:
+    def together() -> None:
+        sample_arrays(definition, cases, REFERENCE_PAIR)
+
+    def one_by_one() -> None:
         for c in cases:
             sample_arrays(definition, c, REFERENCE_PAIR)
 
@@ -45,8 +49,9 @@ def main(args: list[str]) -> None:
 
     print(f"error sample {cases}, load average {os.getloadavg()[0]:.2f} at the start")
     for name, run in (
-        ("sample_arrays, 4 cases (ours + reference)", reruns),
-        ("reference runs alone", references),
+        ("sample_arrays, 4 cases in one call (ours + reference)", together),
+        ("sample_arrays, one call a case", one_by_one),
+        ("reference runs alone, one a case", references),
     ):
         run()
         seconds = []

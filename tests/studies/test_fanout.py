@@ -676,32 +676,30 @@ def test_a_study_is_finished_by_a_worker(client: Client, tmp_path: Path, monkeyp
     assert json.loads(ds.attrs["error_estimate_cases"]) and "DOP853" in ds.attrs["error_estimate_method"]
 
 
-def test_reruns_leave_a_worker_for_the_finish_until_released() -> None:
-    # the error estimate's reruns go out with the run's last chunks, one worker fewer than the cluster's at
-    # once: the worker that ends the last chunk is free for the task that finishes the study
-    sent: list[tuple[int, Future]] = []
+def test_reruns_go_in_order_over_every_worker_but_the_one_that_finishes(monkeypatch) -> None:
+    # the error estimate's sampled cases rerun as one task per worker but one, in order: on two workers all
+    # in one task, beside the task that finishes the study; on more, spread over the idle workers
+    study = load_study(small_study(integrator="exact", duration="1 s"))
+    cases = runner.error_sample(study)
+    assert len(cases) >= 2
 
-    def submit(case: int) -> Future:
-        sent.append((case, Future()))
-        return sent[-1][1]
+    class Sent:
+        def __init__(self, workers: int):
+            self.workers, self.groups = workers, []
 
-    reruns = runner.Reruns(submit, [3, 5, 8, 13], ahead=1).start()
-    assert [c for c, _ in sent] == [3]
-    sent[0][1].set_result(None)  # one ends: the next goes
-    assert [c for c, _ in sent] == [3, 5] and not reruns.done()
-    reruns.release()  # the finish is out: the rest go at once
-    assert [c for c, _ in sent] == [3, 5, 8, 13] and not reruns.done()
-    for _, future in sent[1:]:
-        future.set_result(None)
-    assert reruns.done()
+        def submit(self, function, definition, group, pair, **kwargs):
+            assert function is runner.sample_arrays and kwargs["priority"] == -3
+            self.groups.append(group)
+            return Future()
 
-    sent.clear()
-    stopped = runner.Reruns(submit, [1, 2, 4], ahead=2).start()
-    assert [c for c, _ in sent] == [1, 2]
-    assert stopped.close() == [f for _, f in sent]  # what to cancel
-    sent[0][1].set_result(None)
-    stopped.release()
-    assert [c for c, _ in sent] == [1, 2] and not stopped.done()  # closed: none sent after
+    monkeypatch.setattr(runner, "worker_threads", lambda c: c.workers)
+    for workers, tasks in ((1, 1), (2, 1), (3, 2), (len(cases) + 1, len(cases)), (64, len(cases))):
+        client = Sent(workers)
+        got, futures, pair = runner._submit_samples(client, study, "{}", "isolab-x", -3)
+        assert got == cases and sum(client.groups, []) == cases
+        assert len(futures) == len(client.groups) == tasks
+        assert max(map(len, client.groups)) - min(map(len, client.groups)) <= 1  # an even split
+        assert pair == runner.REFERENCE_PAIR
 
 
 def test_reruns_done_before_the_finish_are_written_by_the_worker_at_once(
@@ -713,8 +711,7 @@ def test_reruns_done_before_the_finish_are_written_by_the_worker_at_once(
 
     def sent_and_done(*args, **kwargs):
         cases, reruns, pair = sent(*args, **kwargs)
-        reruns.release()
-        wait(reruns.futures)
+        wait(reruns)
         return cases, reruns, pair
 
     monkeypatch.setattr(runner, "_submit_samples", sent_and_done)
