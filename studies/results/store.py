@@ -637,6 +637,20 @@ class Store:
             shutil.rmtree(d)
             record_timing("clear_chunks", study_id=study_id, seconds=time.perf_counter() - t0)
 
+    def sweep_chunks(self) -> builtins.list[str]:
+        """Remove the per-chunk results of every study that is done (a run removes them right after it
+        marks its study done, so a service stopped in between leaves them behind); the ids swept."""
+        swept = []
+        for folder in sorted(self.studies_dir.glob("*.chunks")):
+            study_id = folder.name.removesuffix(".chunks")
+            if not STUDY_ID.fullmatch(study_id):
+                continue
+            with contextlib.suppress(StudyNotFound):  # a folder the catalog does not know: left alone
+                if self.get(study_id).status == "done":
+                    self.clear_chunks(study_id)
+                    swept.append(study_id)
+        return swept
+
 
 def _chunk_index(k: Any) -> int:
     if isinstance(k, bool) or not isinstance(k, int | np.integer) or int(k) < 0:

@@ -122,8 +122,12 @@ def test_job_queue_order_cancel_and_stop(tmp_path: Path) -> None:
         store.create({"name": f"s{i}"}, name=f"s{i}", n_cases=1, created=f"2030-01-01T00:00:0{i}")
         for i in range(3)
     ]
+    finished = store.create({"name": "f"}, name="f", n_cases=1)  # done, its chunks left by a stop
+    store.save_chunk(finished, 0, {"status": np.zeros(1, np.int8)})
+    store.update(finished, status="done")
     jobs = JobQueue(tmp_path, client=None, concurrency=1, runner=runner, loader=dict)
     assert jobs.start() == ids  # oldest first
+    assert not store.chunk_dir(finished).exists()  # swept at the start
     deadline = time.monotonic() + 10
     while started != ids[:1]:
         assert time.monotonic() < deadline

@@ -392,6 +392,20 @@ def test_bad_ids_never_reach_a_path(store: Store, bad) -> None:
 
 
 # --------------------------------------------------------------------------------------- chunks
+def test_a_done_studys_leftover_chunks_are_swept_and_no_others(store: Store) -> None:
+    # a run removes a study's chunks right after marking it done: a stop in between leaves them for the sweep
+    done, running, failed = new_id(store, "done"), new_id(store, "running"), new_id(store, "failed")
+    for sid, status in ((done, "done"), (running, "running"), (failed, "failed")):
+        store.save_chunk(sid, 0, {"status": np.zeros(3, np.int8)})
+        store.update(sid, status=status)
+    stranger = store.studies_dir / ("a" * 32 + ".chunks")  # not in the catalog: not the store's to remove
+    stranger.mkdir()
+    assert store.sweep_chunks() == [done]
+    assert not store.chunk_dir(done).exists() and stranger.is_dir()
+    assert store.done_chunks(running) == {0} and store.done_chunks(failed) == {0}  # they resume from these
+    assert store.sweep_chunks() == []
+
+
 def test_chunks_persist_and_reload(store: Store) -> None:
     sid = new_id(store)
     assert store.done_chunks(sid) == set() and store.load_chunks(sid) == {}
