@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 
 import httpx
 
-from isolab.service.settings import DEFAULT_URL, URL_ENV
+from isolab.service.settings import DEFAULT_URL, STATUS_WAIT_S, URL_ENV
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -36,8 +36,6 @@ if TYPE_CHECKING:
 KEEPALIVE_S = 2.0
 """Seconds an idle connection is kept for reuse (uvicorn closes idle connections after 5 s)."""
 FINISHED = ("done", "failed", "cancelled")
-STATUS_WAIT_S = 30.0
-"""Longest the service holds a status request for its study to end (``GET /studies/{id}?wait=``), s."""
 
 
 class ClientError(RuntimeError):

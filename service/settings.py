@@ -30,6 +30,9 @@ DEFAULT_URL = "http://127.0.0.1:8000"
 """Where ``isolab serve`` listens by default; ``ISOLAB_URL`` (or the commands' ``--url``) names another."""
 URL_ENV = "ISOLAB_URL"
 """The environment variable the command line and the Python client read the service's address from."""
+STATUS_WAIT_S = 30.0
+"""Longest the service holds a status request for its study to end (``GET /studies/{id}?wait=``), s: the
+route's bound and the client's step."""
 
 MIB = 1024 * 1024
 

@@ -46,7 +46,7 @@ from isolab.service.api.schemas import (
     StudySummary,
 )
 from isolab.service.plots import report
-from isolab.service.settings import Settings
+from isolab.service.settings import STATUS_WAIT_S, Settings
 from isolab.studies.answers.history import case_history, case_study
 from isolab.studies.answers.study_answer import StudyAnswer, stored_study_answer
 from isolab.studies.authoring.authoring import design_summary, stored_error_estimate
@@ -237,7 +237,7 @@ def list_studies(
     )
 
 
-MAX_WAIT_S = 30.0
+MAX_WAIT_S = STATUS_WAIT_S
 """Longest a status request may wait for its study to end (``GET /studies/{id}?wait=``), s."""
 
 
