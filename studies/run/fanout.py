@@ -133,14 +133,21 @@ def cluster_config_file() -> dict[str, Any]:
     return nested
 
 
+def checked_workers(workers: int) -> int:
+    """``workers``, the number of worker processes of a cluster to start, as an int. Raises ValueError,
+    naming the field, when it is below 1."""
+    if int(workers) < 1:
+        raise ValueError(f"workers: {workers} must be at least 1")
+    return int(workers)
+
+
 def local_cluster_arguments(
     workers: int, dashboard_address: str | None = None, **settings: object
 ) -> tuple[dict[str, object], dict[str, Any]]:
     """The Dask settings and the ``distributed.LocalCluster`` arguments of a cluster of ``workers``
     processes with one thread each, every part of it on :data:`LOOPBACK`, with :data:`CLUSTER_HOUSEKEEPING`
     (see :func:`local_cluster`)."""
-    if int(workers) < 1:
-        raise ValueError(f"workers: {workers} must be at least 1")
+    workers = checked_workers(workers)
     config: dict[str, object] = {**CLUSTER_HOUSEKEEPING, **settings}
     if dashboard_address is not None:
         config["distributed.worker.profile.enabled"] = True

@@ -69,6 +69,7 @@ from isolab.studies.run.error_estimate import (
 )
 from isolab.studies.run.fanout import (
     TASK_RETRIES,
+    checked_workers,
     choose_chunk_size,
     local_cluster,
     local_cluster_arguments,
@@ -579,12 +580,11 @@ def run_local(
 
     from isolab.studies.inputs.study import load_study
 
-    if int(workers) < 1:
-        raise ValueError(f"workers: {workers} must be at least 1")
+    workers = checked_workers(workers)  # before the study is read
     study = source if isinstance(source, Study) else load_study(source)
     with tempfile.TemporaryDirectory(prefix="isolab-") as tmp:
         own = store if store is not None else Store(Path(tmp))
-        with local_cluster(int(workers)) as cluster, Client(cluster) as client:
+        with local_cluster(workers) as cluster, Client(cluster) as client:
             study_id = run_study(study, own, client, progress=progress)
         copy_atomic(own.path(study_id), out_path)
         return own.open_dataset(study_id)

@@ -737,3 +737,10 @@ def test_a_streamed_study_equals_one_assembled_in_memory(tmp_path: Path, monkeyp
         ds.attrs.pop("timing", None)
     xr.testing.assert_identical(streamed.drop_attrs(deep=False), whole.drop_attrs(deep=False))
     assert set(streamed.attrs) == set(whole.attrs)
+
+
+def test_a_local_run_refuses_no_workers_before_reading_the_study(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="workers: 0 must be at least 1"):
+        run_local(tmp_path / "no-such-study.yaml", tmp_path / "out.nc", workers=0)
+    with pytest.raises(ValueError, match="workers: -2 must be at least 1"):
+        fanout.local_cluster_arguments(-2)
