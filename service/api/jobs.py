@@ -112,7 +112,7 @@ class JobQueue:
         if self._threads:
             raise RuntimeError("the job queue is already started")
         resumed = self._unfinished_ids()
-        if resumed or (self._root / CATALOG_FILE).exists():
+        if self._store is not None or (self._root / CATALOG_FILE).exists():
             self.store.sweep_chunks()  # what a stop between a study's end and its clean-up left
         self.resumed = list(resumed)
         with self._lock:
