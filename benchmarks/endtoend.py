@@ -13,8 +13,8 @@ service answers as soon as the study ends). Per study it prints:
 * where the wall time went along the critical path (accepting the study, dispatch, the compute window,
   transfer of the last result, chunk and dataset storage, assembly), and how the workers spent the
   compute window (engine, in-task overhead, scheduling gaps, tail);
-* the peak resident memory (RSS) of the service process and of each worker (psutil, every 0.2 s), checked
-  against 2 GB, and that the stored dataset holds no time histories;
+* the peak resident memory (RSS) of the service process and of each worker (the kernel's high-water
+  mark over the study), checked against 2 GB, and that the stored dataset holds no time histories;
 * the single-core kernel throughput on the same scene and settings, measured just before and just after
   the study in child processes with BLAS limited to one thread (as the Dask workers run; the median of
   ``--kernel-repeats`` processes on each side, 3 by default: this machine's speed drifts by up to 6 %
@@ -22,6 +22,10 @@ service answers as soon as the study ends). Per study it prints:
   like the workers
   (``ENGINE_BATCH_CASES``), and the ratio of end-to-end throughput to twice that (target >= 85 % at 10,000 cases, >= 90 % at 100,000);
 * the CPU other jobs took on the machine meanwhile (the machine may be shared).
+
+The summary ends with one verdict per kind of study: the median ratio of its runs against its target, and
+the median of the runs whose engine the host did not slow (its CPU per case in the workers within 5 % of
+the reference's; a slowed run is marked ``host``).
 """
 
 from __future__ import annotations
@@ -49,6 +53,26 @@ GB = 1e9
 MEMORY_LIMIT = 2 * GB
 RATIO_TARGETS = {10_000: 0.85, 100_000: 0.90}
 """End-to-end throughput over twice the single-core kernel's, by study size (the nearest size's applies)."""
+
+
+def verdicts(runs: list[StudyRun], n_workers: int) -> list[str]:
+    """One line per kind of study (integrator and size): the median ratio of its runs against its target,
+    and the median of those the host did not slow (:data:`HOST_SLOWER`)."""
+    lines = []
+    for integrator, n in sorted({(r.integrator, r.n_cases) for r in runs}):
+        same = [r for r in runs if (r.integrator, r.n_cases) == (integrator, n)]
+        target = ratio_target(n)
+        ratios = [r.ratio(n_workers) for r in same]
+        steady = [r.ratio(n_workers) for r in same if not r.host_slowdown > HOST_SLOWER]
+        median = float(np.median(ratios))
+        line = (
+            f"{integrator} {n} cases: median {median * 100:.1f} % over {len(same)} run(s), "
+            f"{sum(x >= target for x in ratios)} at or above {target * 100:.0f} %"
+        )
+        if steady and len(steady) < len(same):
+            line += f"; {float(np.median(steady)) * 100:.1f} % over the {len(steady)} the host did not slow"
+        lines.append(f"{line} -> {'meets' if median >= target else 'MISSES'} the target")
+    return lines
 
 
 def study_size(text: str) -> int:
@@ -273,6 +297,12 @@ def machine_busy_seconds() -> float:
 
 
 # ---------------------------------------------------------------------------------------- one study
+HOST_SLOWER = 1.05
+"""A study whose engine ran this much slower per case in the workers than in its bracketing reference
+(CPU time, the same code): the host slowed it during the study; the summary marks it and gives the median
+without it beside the median of every run."""
+
+
 @dataclass
 class StudyRun:
     """Figures of one study run through the service."""
@@ -296,6 +326,13 @@ class StudyRun:
     @property
     def cases_per_s(self) -> float:
         return self.n_cases / self.wall
+
+    @property
+    def host_slowdown(self) -> float:
+        """The engine's CPU per case in the workers over the bracketing reference's (1: as fast; NaN when
+        either is missing): above :data:`HOST_SLOWER`, the host ran the engine slower during the study."""
+        cpu, per_case = self.workers.get("engine_cpu_s"), self.kernel.get("cpu_per_case")
+        return cpu / self.n_cases / per_case if cpu and per_case else float("nan")
 
     @property
     def engine_share(self) -> float:
@@ -651,16 +688,21 @@ def main(argv: list[str]) -> None:
     )
     for r in runs:
         peak = max((s.peak_rss for s in r.memory.values()), default=0)
+        host = " host" if r.host_slowdown > HOST_SLOWER else ""
         print(
             f"{r.name:24s} {r.wall:8.2f} {r.cases_per_s:9.1f} {1 / r.kernel['wall_per_case']:9.1f} "
             f"{r.ratio(a.workers) * 100:6.1f}% {r.engine_share * 100:6.1f}% {r.other_cores:7.2f} "
             f"{r.ratio_left(a.workers) * 100:6.1f}% "
-            f"{peak / GB:8.2f} GB"
+            f"{peak / GB:8.2f} GB{host}"
         )
     print(
         "ratio: end to end / (workers x single-core kernel); engine: engine share of the workers' wall "
-        "time; others: cores other jobs used meanwhile; ratio*: end to end / (cores they left x kernel)"
+        "time; others: cores other jobs used meanwhile; ratio*: end to end / (cores they left x kernel); "
+        f"host: the engine ran more than {(HOST_SLOWER - 1) * 100:.0f} % slower per case in the workers than "
+        "in its reference"
     )
+    for line in verdicts(runs, a.workers):
+        print(line)
     if a.json:
         a.json.write_text(
             json.dumps(
