@@ -248,9 +248,7 @@ def sample_arrays(
         reference = result_arrays(simulate(batch, *pair, dt=float(steps[0]), auto_step=sim.auto_step))
     else:
         alone = [
-            result_arrays(
-                simulate(study.batch(picked[k : k + 1]), *pair, dt=float(h), auto_step=sim.auto_step)
-            )
+            result_arrays(simulate(batch.take([k]), *pair, dt=float(h), auto_step=sim.auto_step))
             for k, h in enumerate(steps.tolist())
         ]
         reference = {name: np.concatenate([a[name] for a in alone]) for name in alone[0]}

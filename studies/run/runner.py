@@ -216,7 +216,7 @@ def run_study(
             on_dispatched=submit_samples,
         )
         if report.cancelled:
-            _stop(client, store, study_id, writer, [f for s in sampled for f in s[1] or []])
+            _stop(client, store, study_id, writer, [f for s in sampled for f in s[1]])
             store.update(study_id, status="cancelled", finished=utc_now())
             return study_id
 
@@ -232,7 +232,7 @@ def run_study(
         landed = _wait(client, writer, cancel) if writer is not None else None
         ready = future = None
         if landed is None and not (cancel is not None and cancel.is_set()):
-            if samples[1] is None or all(f.done() for f in samples[1]):
+            if all(f.done() for f in samples[1]):
                 ready = _error_estimate(client, run, samples, cancel)
             future = client.submit(
                 finish_study,
@@ -251,8 +251,7 @@ def run_study(
         if landed is None and future is not None and estimate is not None:
             n_failed = _wait(client, future, cancel)
         if estimate is None or (cancel is not None and cancel.is_set()):
-            reruns = list(samples[1] or [])
-            _stop(client, store, study_id, writer, [f for f in (future,) if f is not None] + reruns)
+            _stop(client, store, study_id, writer, [f for f in (future,) if f is not None] + samples[1])
             store.update(study_id, status="cancelled", finished=utc_now())
             return study_id
         if n_failed is None:  # the worker does not see the store: finished here
@@ -445,8 +444,8 @@ def _choice(
     return choice
 
 
-Samples = tuple[list[int], "list[Any] | None", tuple[str, str]]
-"""An error estimate's sampled cases, the Dask futures of their reruns (None when the study runs at its
+Samples = tuple[list[int], list[Any], tuple[str, str]]
+"""An error estimate's sampled cases, the Dask futures of their reruns (none when the study runs at its
 reference level) and the reference level they rerun at (fidelity, integrator)."""
 
 
@@ -454,7 +453,7 @@ def _submit_samples(client: Any, study: Study, run_json: str, key_prefix: str, p
     """The error estimate's seeded sample of cases, their reruns
     (:func:`studies.run.error_estimate.sample_arrays` as Dask tasks at ``priority``: the cases split in
     order over the workers but one, one task each, so that the worker that ends the last chunk is free
-    for the task that finishes the study; None for a study that runs at its reference level itself) and
+    for the task that finishes the study; none for a study that runs at its reference level itself) and
     the reference they rerun at (:func:`studies.run.error_estimate.reference_pair` of the sampled cases:
     the nonlinear level does not model a scene's extra linear states).
 
@@ -468,7 +467,7 @@ def _submit_samples(client: Any, study: Study, run_json: str, key_prefix: str, p
     except ValueError:  # a scene the engine refuses: its chunks and reruns report why
         pair = REFERENCE_PAIR
     if (study.simulation.fidelity, study.simulation.integrator) == pair:
-        return cases, None, pair
+        return cases, [], pair
     token = uuid.uuid4().hex[:8]
 
     def submit(group: list[int]) -> Any:
@@ -495,12 +494,11 @@ def _error_estimate(
 ) -> ErrorEstimate | None:
     """The largest error per output over the sampled cases (see :func:`_submit_samples`); None when
     ``cancel`` is set while waiting for them."""
-    cases, reruns, pair = samples
+    cases, futures, pair = samples
     _, points = study_labels(study)
     outputs = [o for o in ESTIMATED_OUTPUTS if o != "peak_point_displacement" or len(points) > 0]
-    if reruns is None:
+    if not futures:
         return exact_estimate(cases, outputs, pair)
-    futures = list(reruns)
     try:
         parts = [_wait(client, f, cancel) for f in futures]
     except Exception as err:  # the study's own results stand; the estimate says why it is missing
