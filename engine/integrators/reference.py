@@ -75,7 +75,8 @@ def slope(case, t, y):
 @njit(cache=True, fastmath=False)
 def normalise_quaternion(y):
     """Scale the nonlinear state's attitude quaternion ``y[3:7]`` to unit length in place, dividing by
-    its norm summed in order as numpy's ``np.linalg.norm`` sums it (``sqrt(q . q)``: the same bits)."""
+    its norm summed in order (``sqrt(q . q)``: what ``np.linalg.norm`` gives, to within round-off where its
+    BLAS dot sums in another order)."""
     s = 0.0
     for i in range(3, 7):
         s += y[i] * y[i]

@@ -91,7 +91,9 @@ def test_two_valves_carry_the_weight_moment_of_a_travelled_stage(fidelity, integ
     shift = 1000.0 * G * 3.0 / 3.6
     q, z = model.slot_static(b, fidelity, model.static_offset(b, fidelity))
     np.testing.assert_allclose(z[0], [shift, -shift], rtol=1e-8)
-    assert np.abs(lev.final_displacement[0, 2:5]).max() < 1e-12
+    # heave (m), roll and pitch (rad) back to zero to round-off (the order of the steps' sums changes it
+    # with the CPU's vector width: 2e-13 to 2e-12 seen), against the 1e-4 rad the unlevelled base keeps
+    assert np.abs(lev.final_displacement[0, 2:5]).max() < 1e-11
     assert lev.settled[0]
 
 
