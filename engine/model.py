@@ -397,6 +397,7 @@ def linear_slot(b: SceneBatch) -> SlotBlock:
     O = np.zeros((C, 2, nz, 3 * p + 3 * n))
     B = np.zeros((C, 6, nz)) if any(blk.B is not None for blk in blocks) else None
     D = np.zeros((C, nz))
+    F = np.zeros((C, nz, 3 * n))
     at = 0
     for blk in blocks:
         z = slice(at, at + blk.A.shape[1])
@@ -410,8 +411,10 @@ def linear_slot(b: SceneBatch) -> SlotBlock:
             B[:, :, z] = blk.B
         if blk.D is not None:
             D[:, z] = blk.D
+        if blk.F is not None:
+            F[:, z] = blk.F
         at = z.stop
-    return SlotBlock(A, X, Q, S, G, O, B, D)
+    return SlotBlock(A, X, Q, S, G, O, B, D, F)
 
 
 def slot_static(
@@ -547,6 +550,7 @@ def _params(b: SceneBatch) -> Params:
         zM=f64(minv @ zG),
         sM=f64(sM),
         zO=f64(slot.O),
+        zF=f64(slot.F if slot.F is not None else np.zeros((b.n_cases, 0, 3 * n))),
         zdb=f64(slot.D if slot.D is not None else np.zeros((b.n_cases, 0))),
         pr=f64(pr, dtype=float),
     )

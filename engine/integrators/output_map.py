@@ -38,9 +38,13 @@ def still_floor(P: Params) -> np.ndarray:
     """Per case (C,), True where the floor does not move in time under it (no sine, no recorded floor
     motion): where the output map observes it. Decided per case, so a case's results do not depend on
     the batch it runs in. A batch with mounts on their own axes (``P.orient``) is observed by the full
-    observer (``engine.kernels.peaks.observe``), whose forces follow the mounts' tensors."""
+    observer (``engine.kernels.peaks.observe``), whose forces follow the mounts' tensors, and so is a case
+    whose extra linear states add to its mounts' forces (``P.zF``)."""
     famp = np.asarray(P.famp)
     still = ~np.any(famp != 0.0, axis=1)
+    # a case whose extra linear states push through its mounts (a relaxation branch, a levelling valve)
+    # reports those forces too: the full observer adds them (``Params.zF``)
+    still &= ~np.any(np.asarray(P.zF) != 0.0, axis=(1, 2))
     if P.orient:
         still[:] = False
     if np.asarray(P.ft).shape[0]:

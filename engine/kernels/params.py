@@ -125,6 +125,9 @@ class Params(NamedTuple):
     zO: np.ndarray
     """(C, 2, nz, 3 p + 3 n) what ``z`` adds to each point's displacement and each mount's deflection
     (row 0, m per unit) and to their rates (row 1, m/s per unit ``z``)."""
+    zF: np.ndarray
+    """(C, nz, 3 n) what ``z`` adds to each mount's force on the base, by axis of the floor frame (N per unit
+    ``z``): a relaxation branch's spring, a levelling valve's share (``SlotBlock.F``)."""
     zdb: np.ndarray
     """(C, nz) each extra linear state's dead band on its rate (its units per second; 0: the row is linear):
     a levelling valve's ``(k_v / tau) d`` (``engine.linear_states.block.SlotBlock.D``)."""

@@ -357,6 +357,7 @@ def observe(P, c, level, t, x, W, O, step):
                 dl += sl
                 dd += sd
                 F1 -= P.k[c, j, i] * sl + P.cd[c, j, i] * sd
+                F1 = _slot_force(P.zF, c, 3 * j + i, x, F1)  # a relaxation branch's, a valve's share
                 W.F[j, i] = F1
                 if i == 2:
                     lo = hi = P.f0[c, j] + F1
@@ -647,6 +648,17 @@ def _slot_share(zO, c, r, x, value, rate):
         value += zO[c, 0, k, r] * zk
         rate += zO[c, 1, k, r] * zk
     return value, rate
+
+
+@njit(cache=True, inline="always")
+def _slot_force(zF, c, r, x, force):
+    """``force`` (N) of mount axis ``r`` with what the extra linear states ``x[12:]`` add to it
+    (``Params.zF``; states that add nothing, a flexible base's modes, leave it as it is, bit for bit)."""
+    for k in range(zF.shape[1]):
+        w = zF[c, k, r]
+        if w != 0.0:
+            force += w * x[12 + k]
+    return force
 
 
 @njit(cache=True, inline="always")

@@ -12,7 +12,7 @@ class SlotBlock(NamedTuple):
     + X x + Q acc + S s''`` with ``x`` the base's state (12), ``acc`` its accelerations (6) and ``s''`` the
     stages' accelerations along their axes (m); the base's generalised force gains ``G z`` (and, at the LTI
     level, its accelerations ``Ms s''``); each point's displacement and each mount's deflection ``O[0] z``,
-    their rates ``O[1] z``."""
+    their rates ``O[1] z``; each mount's force ``F z`` (where the states push through the mounts)."""
 
     A: np.ndarray
     """(C, nz, nz), 1/s."""
@@ -35,6 +35,11 @@ class SlotBlock(NamedTuple):
     """(C, nz) each row's dead band on its rate (the row's units per second), or None: every row linear. A
     row with a threshold ``D > 0`` (a levelling valve's) has its rate ``r`` replaced by ``sign(r) max(|r| -
     D, 0)`` in the stepping kernels (``engine.kernels.dynamics.slot_rates``); zero keeps a row linear."""
+    F: np.ndarray | None = None
+    """(C, nz, 3 n) the force each mount exerts on the base per unit ``z``, by axis of the floor frame (N per
+    unit z): what a model's states add to the reported isolator forces and loads beyond the mount's static
+    spring and damper (a relaxation branch's spring, a levelling valve's added force), or None: they add
+    none (a flexible base's modes move the mounts' deflections instead, through ``O``)."""
 
 
 def arm_map(d: np.ndarray) -> np.ndarray:

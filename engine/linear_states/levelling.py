@@ -77,7 +77,8 @@ def levelling_block(b: SceneBatch) -> SlotBlock | None:
         F_v' = -(k_v / tau) DB(h_v, d),    DB(u, d) = sign(u) max(|u| - d, 0)
 
     with ``d`` the valve's dead band (m; zero: linear). ``F_v`` is shared equally by the valve's mounts and
-    acts upward on the base at each mount's point (force and moment through ``G``). The dead band is the
+    acts upward on the base at each mount's point (force and moment through ``G``; each mount's share is
+    part of its reported force and load). The dead band is the
     threshold ``D`` of the row's rate, ``(k_v / tau) d`` (N/s), applied by the stepping kernels
     (``engine.kernels.dynamics.slot_rates``)."""
     groups = valve_groups(b)
@@ -93,6 +94,7 @@ def levelling_block(b: SceneBatch) -> SlotBlock | None:
     X = np.zeros((C, V, 12))
     G = np.zeros((C, 6, V))
     D = np.zeros((C, V))
+    F = np.zeros((C, V, n, 3))  # each mount's share of its valve's force, upward: part of its reported force
     for v, mounts in enumerate(groups):
         first = int(mounts[0])
         gain = kz[:, mounts].sum(axis=1) / tau[:, first]  # k_v / tau, N/(m s)
@@ -100,7 +102,16 @@ def levelling_block(b: SceneBatch) -> SlotBlock | None:
         X[:, v, :6] = -gain[:, None] * rows
         G[:, :, v] = rows
         D[:, v] = gain * band[:, first]
+        F[:, v, mounts, 2] = 1.0 / mounts.size
     zero = np.zeros
     return SlotBlock(
-        zero((C, V, V)), X, zero((C, V, 6)), zero((C, V, m)), G, zero((C, 2, V, 3 * p + 3 * n)), None, D
+        zero((C, V, V)),
+        X,
+        zero((C, V, 6)),
+        zero((C, V, m)),
+        G,
+        zero((C, 2, V, 3 * p + 3 * n)),
+        None,
+        D,
+        F.reshape(C, V, 3 * n),
     )

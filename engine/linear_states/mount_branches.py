@@ -14,8 +14,8 @@ def mount_relaxation_block(b: SceneBatch) -> SlotBlock | None:
     """The mounts' relaxation branches as a block of extra linear states, one per branch and axis, or None
     when no mount has one. State ``w`` (m): a branch's series spring deflection, ``w' = delta' - w / tau``
     with ``delta = e . (u + theta x d)`` the mount's deflection along its own axis ``e`` (arm ``d`` from the
-    c.g.); its force ``-k_b w e`` acts on the base at the mount. Nothing is added to the points' or mounts'
-    displacements (the branch moves inside the mount)."""
+    c.g.); its force ``-k_b w e`` acts on the base at the mount and is part of the mount's reported force.
+    Nothing is added to the points' or mounts' displacements (the branch moves inside the mount)."""
     j, a, k = branch_states(b)
     nz = j.size
     if nz == 0:
@@ -32,4 +32,14 @@ def mount_relaxation_block(b: SceneBatch) -> SlotBlock | None:
     X = np.zeros((C, nz, 12))
     X[:, :, 6:] = row
     G = -np.swapaxes(row * kb[..., None], 1, 2)  # (C, 6, nz)
-    return SlotBlock(A, X, np.zeros((C, nz, 6)), np.zeros((C, nz, m)), G, np.zeros((C, 2, nz, 3 * p + 3 * n)))
+    F = np.zeros((C, nz, n, 3))  # the branch's force -k_b w e, part of its mount's
+    F[:, np.arange(nz), j, :] = -kb[..., None] * e
+    return SlotBlock(
+        A,
+        X,
+        np.zeros((C, nz, 6)),
+        np.zeros((C, nz, m)),
+        G,
+        np.zeros((C, 2, nz, 3 * p + 3 * n)),
+        F=F.reshape(C, nz, 3 * n),
+    )

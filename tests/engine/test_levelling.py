@@ -70,6 +70,11 @@ def test_a_step_load_is_levelled_away_and_carried_by_the_valve(integrator):
     D = np.array([10_500.0, 4 * CZ, k, k / tau])
     x = sum(-F * np.exp(p * t) / np.polyval(np.polyder(D), p) for p in np.roots(D)).real
     np.testing.assert_allclose(zl, x, rtol=0, atol=1e-6 * F / k)
+    # at rest the mounts' reported forces carry the 500 N, on springs alone or through the valve: the
+    # mounts' own springs are back at their set height, and each reports its share of the valve's force
+    for r in (plain, lev):
+        assert r.history["isolator_force"][0, -1, :, 2].sum() == pytest.approx(F, rel=1e-4)
+        assert np.all(r.max_isolator_load[0] >= r.static_isolator_load[0] + F / 4 * (1 - 1e-4))
 
 
 @pytest.mark.parametrize(("fidelity", "integrator"), [("lti", "exact"), ("lti", "rk4"), ("ltv", "rk4")])
@@ -91,6 +96,13 @@ def test_two_valves_carry_the_weight_moment_of_a_travelled_stage(fidelity, integ
     shift = 1000.0 * G * 3.0 / 3.6
     q, z = model.slot_static(b, fidelity, model.static_offset(b, fidelity))
     np.testing.assert_allclose(z[0], [shift, -shift], rtol=1e-8)
+    # the loads at rest are the statics' whoever carries them: each front mount half the valve's shift
+    # more, each back mount half less, as on the plain springs
+    for r in (plain, lev):
+        half = np.array([1.0, 1.0, -1.0, -1.0]) * shift / 2
+        np.testing.assert_allclose(r.history["isolator_force"][0, -1, :, 2], half, rtol=1e-3)
+        assert np.all(r.max_isolator_load[0, :2] >= r.static_isolator_load[0, :2] + shift / 2 * (1 - 1e-3))
+        assert np.all(r.min_isolator_load[0, 2:] <= r.static_isolator_load[0, 2:] - shift / 2 * (1 - 1e-3))
     # heave (m), roll and pitch (rad) back to zero to round-off (the order of the steps' sums changes it
     # with the CPU's vector width: 2e-13 to 2e-12 seen), against the 1e-4 rad the unlevelled base keeps
     assert np.abs(lev.final_displacement[0, 2:5]).max() < 1e-11

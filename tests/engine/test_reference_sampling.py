@@ -5,9 +5,8 @@ another order on another CPU)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -37,7 +36,9 @@ def test_the_quaternion_is_normalised_as_numpy_does_it() -> None:
             reference.normalise_quaternion(got)
             assert np.array_equal(got, want)
             assert abs(np.dot(got[3:7], got[3:7]) - 1.0) <= 4 * np.finfo(float).eps
-            np.testing.assert_allclose(got[3:7], y[3:7] / np.linalg.norm(y[3:7]), rtol=4 * np.finfo(float).eps)
+            np.testing.assert_allclose(
+                got[3:7], y[3:7] / np.linalg.norm(y[3:7]), rtol=4 * np.finfo(float).eps
+            )
 
 
 def _python_loop(made: dict[int, tuple]) -> Callable[..., int]:
