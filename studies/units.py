@@ -70,6 +70,8 @@ MAX_POWERS = 4
 _POWER = re.compile(r"\*\*|\^")
 _EXPONENT = re.compile(r"\s*[-+]?\s*(\d+(?:\.\d*)?|\.\d+)(?:[eE][-+]?\d+)?")
 _BASE_END = re.compile(r"[A-Za-z0-9_.%µ]\s*$")
+_WORD_AND_DIGIT = re.compile(r"[A-Za-z_]+[0-9]")
+"""A word and one digit (``rk4``, the integrator): no number in it."""
 
 
 @functools.cache
@@ -239,9 +241,11 @@ def parsed_unit_problem(unit: str) -> str | None:
 
 
 def _magnitude_problem(text: str) -> str | None:
-    """The units parser's reading of a screened text: None unless its number overflows a float (a text
-    without a digit, a word such as ``air``, holds no number: read without building the parser)."""
-    if not any(ch.isdigit() for ch in text):
+    """The units parser's reading of a screened text: None unless its number overflows a float. Read
+    without building the parser (about half a second in a fresh process): a text without a digit, a word
+    such as ``air``, and a word and one digit, such as ``rk4`` (:data:`_WORD_AND_DIGIT`), hold no number
+    (the parser reads the second as a unit it does not know, ``km2`` too; validation names the field)."""
+    if not any(ch.isdigit() for ch in text) or _WORD_AND_DIGIT.fullmatch(text):
         return None
     try:
         q = unit_registry().Quantity(text)

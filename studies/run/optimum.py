@@ -14,10 +14,9 @@ tolerance cloud (:func:`studies.run.robust.add_robustness`); their feasibility i
 from __future__ import annotations
 
 import json
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import xarray as xr
 
 from isolab.studies.quantities import output_values
 from isolab.studies.questions.criteria import add_criteria
@@ -25,6 +24,9 @@ from isolab.studies.questions.designs import Design
 from isolab.studies.questions.goals import PENALTY, Goals
 from isolab.studies.results.dataset import from_chunks, to_dataset
 from isolab.studies.run.robust import CloudPlan, add_robustness, describe_robustness
+
+if TYPE_CHECKING:  # xarray loads with the first optimum marked (the command line's `run` starts without it)
+    import xarray as xr
 
 
 def non_dominated(F: np.ndarray) -> np.ndarray:
@@ -50,6 +52,8 @@ def mark_optimum(
     """``ds`` (a sampled dataset of the evaluated cases, in order) with ``generation``, ``feasible``,
     ``pareto``, ``best`` and ``constraint_violation`` per case, and the ``optimisation`` summary attribute
     (algorithm, generations, best case and its parameter values and objectives)."""
+    import xarray as xr
+
     n = len(F)
     feasible = (np.asarray(G) <= 0.0).all(axis=1)
     pareto = np.zeros(n, dtype=bool)
@@ -155,6 +159,8 @@ def mark_plateau(
     """``out`` with ``plateau`` per case (feasible, first objective within ``goals.plateau`` of the best's)
     and ``at_range_limit`` per parameter (-1 the best sits at the low end of its range, +1 at the high end,
     0 inside); ``summary`` gains the plateau's size and each variable's range over it, and the limits."""
+    import xarray as xr
+
     n = len(F)
     plateau = np.zeros(n, dtype=bool)
     names = [f.name for f in goals.factors]

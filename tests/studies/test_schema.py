@@ -5,6 +5,8 @@ from __future__ import annotations
 import copy
 import json
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -97,6 +99,9 @@ def test_two_g_is_standard_gravity():
         ("kg " + "m " * 200, "mass", "longer than 256"),
         ("1e300*1e300 kg", "mass", "finite"),
         ("999999999999**12*999999999999**12*999999999999**12 kg", "mass", "64-bit float"),
+        # a word and a digit holds no number (the screen does not build the parser for it): no unit either
+        ("Qpc9", "length", "cannot read"),
+        ("km2", "length", "cannot read"),
     ],
 )
 def test_units_reject_with_field_and_reason(value, dimension, reason):
@@ -104,6 +109,19 @@ def test_units_reject_with_field_and_reason(value, dimension, reason):
         to_si(value, dimension, "stages[0].mass")
     assert str(info.value).startswith("stages[0].mass: ")
     assert reason in str(info.value)
+
+
+def test_a_scene_file_is_checked_without_building_the_units_parser() -> None:
+    """The example scene (its integrator ``rk4`` a word and a digit, its quantities in common units) is
+    screened and checked in a fresh process without importing pint (half a second of every command)."""
+    code = (
+        "import sys; from isolab.studies.inputs.file_checks import check_scene_file; "
+        f"check_scene_file({str(EXAMPLES / 'article-scriber.yaml')!r}); print('pint' in sys.modules)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True
+    )
+    assert out.stdout.strip() == "False", out.stderr
 
 
 def test_schema_fields_accept_units_and_numbers_alike():
