@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import re
+from pathlib import Path
 
 # One BLAS and OpenMP thread per test process (set before numpy loads; the services and subprocesses the
 # tests start inherit it). The suite runs in 2 processes on 2 cores: with the libraries' default of one
@@ -82,3 +84,18 @@ def pytest_configure(config: pytest.Config) -> None:
         + (f" (failed, left to the tests: {', '.join(failed)})" if failed else ""),
         flush=True,
     )
+
+
+SLOW_MODULE = re.compile(r"^pytestmark = (pytest\.mark\.slow\b|\[\s*pytest\.mark\.slow\b)", re.MULTILINE)
+"""A test module whose every test is slow: its module-level ``pytestmark`` is (or starts with) the mark."""
+
+
+def pytest_ignore_collect(collection_path: Path, config: pytest.Config) -> bool | None:
+    """Under ``-m "not slow"`` (``make test-fast``) a module whose every test is slow (:data:`SLOW_MODULE`)
+    is not imported: each test process imported and collected 18 of them only to deselect every test (4-5 s,
+    the fuzz tests' ~130 cases built from the app's schema among them)."""
+    if (config.option.markexpr or "").strip() != "not slow":
+        return None
+    if collection_path.suffix != ".py" or not collection_path.name.startswith("test_"):
+        return None
+    return True if SLOW_MODULE.search(collection_path.read_text(encoding="utf-8")) else None
