@@ -7,6 +7,7 @@ functions), so a circle hidden in a function-level import is caught as well as a
 from __future__ import annotations
 
 import ast
+import functools
 import os
 import subprocess
 import sys
@@ -39,6 +40,7 @@ def project_modules() -> dict[str, Path]:
     return out
 
 
+@functools.cache
 def submodule(name: str) -> bool:
     """True when the dotted name is a module or package of the source tree."""
     parts = name.split(".")
@@ -49,7 +51,16 @@ def submodule(name: str) -> bool:
 
 
 def imported_names(path: Path, module: str) -> list[str]:
-    """Absolute names of every module ``path`` imports (anywhere in the file), relative imports resolved."""
+    """Absolute names of every module ``path`` imports (anywhere in the file), relative imports resolved
+    (each file read and parsed once per test process while it does not change: a dozen tests read the
+    whole tree)."""
+    stat = path.stat()
+    return list(_imports_of(path, module, (stat.st_mtime_ns, stat.st_size)))
+
+
+@functools.cache
+def _imports_of(path: Path, module: str, stamp: tuple[int, int]) -> tuple[str, ...]:
+    """:func:`imported_names` of ``path`` as it was at ``stamp`` (its modification time and size)."""
     tree = ast.parse(path.read_text(), filename=str(path))
     is_pkg = path.name == "__init__.py"
     names = []
@@ -67,7 +78,7 @@ def imported_names(path: Path, module: str) -> list[str]:
             # __init__ runs first, but that is the package's own business, not an edge of this module)
             subs = [f"{base}.{a.name}" for a in node.names]
             names += subs if submodule(subs[0]) and all(submodule(s) for s in subs) else [base]
-    return names
+    return tuple(names)
 
 
 def import_graph() -> dict[str, set[str]]:
