@@ -112,7 +112,7 @@ class JobQueue:
         if self._threads:
             raise RuntimeError("the job queue is already started")
         resumed = self._unfinished_ids()
-        if self._store is not None or (self._root / CATALOG_FILE).exists():
+        if self._has_catalog():
             self.store.sweep_chunks()  # what a stop between a study's end and its clean-up left
         self.resumed = list(resumed)
         with self._lock:
@@ -143,8 +143,12 @@ class JobQueue:
                 log.warning("study thread %s did not stop within %.0f s", thread.name, timeout)
         self._threads = []
 
+    def _has_catalog(self) -> bool:
+        """The store is open or its catalog exists (a data directory without one stays untouched)."""
+        return self._store is not None or (self._root / CATALOG_FILE).exists()
+
     def _unfinished_ids(self) -> list[str]:
-        if self._store is None and not (self._root / CATALOG_FILE).exists():
+        if not self._has_catalog():
             return []  # no catalog yet: nothing to resume
         rows: list[StudyRecord] = []
         for status in UNFINISHED:
