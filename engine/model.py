@@ -579,7 +579,7 @@ def work(b: SceneBatch) -> Work:
         # definite, pieces; case -1: none yet), and the packed case
         # (``engine.kernels.cached_terms.time_terms``)
         key=np.concatenate([[-1.0, -1.0, np.nan, 0.0], np.zeros(m)]),
-        tc=np.zeros((21, 3)),
+        tc=np.zeros((20, 3)),
         cc=np.concatenate([[-1.0], np.zeros(24)]),
         cs=np.zeros((m, 8 + 5 * b.prof_t.shape[-1])),
         cm=np.zeros((n, CM_WIDTH + (9 if b.has_orientation else 0))),

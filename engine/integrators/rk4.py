@@ -21,6 +21,7 @@ from isolab.engine.kernels.cached_terms import (
     set_key,
     stages_and_floor,
     stages_unchanged,
+    terms_at_rest,
 )
 from isolab.engine.kernels.dynamics import derivative, ltv_acc, nonlinear_acc, rates, slot_rates
 from isolab.engine.kernels.params import LTI, LTV, NONLINEAR, borrowed
@@ -141,24 +142,21 @@ def step_nonlinear(c, t, h, V, g, pbase):
     structs a kernel takes; on views made once per case a step counts none. The driver inlines the step: a
     called step counts its arguments' references at every call, which costs what the views save."""
     x, S, idx, key, tc, cc, cs, cm, sw, swt, R, F = V
-    xs, k1, k2, k3, k4 = S[0], S[1], S[2], S[3], S[4]
     nx = x.shape[0]
     for i in range(nx):
-        xs[i] = x[i]
-    ok = _nonlinear_slope(c, t, True, xs, k1, idx, key, tc, cc, cs, cm, sw, swt, R, F, g, pbase)
-    tm = t + 0.5 * h
-    for i in range(nx):
-        xs[i] = x[i] + 0.5 * h * k1[i]
-    ok &= _nonlinear_slope(c, tm, True, xs, k2, idx, key, tc, cc, cs, cm, sw, swt, R, F, g, pbase)
-    for i in range(nx):
-        xs[i] = x[i] + 0.5 * h * k2[i]
-    ok &= _nonlinear_slope(c, tm, False, xs, k3, idx, key, tc, cc, cs, cm, sw, swt, R, F, g, pbase)
-    for i in range(nx):
-        xs[i] = x[i] + h * k3[i]
-    ok &= _nonlinear_slope(c, t + h, True, xs, k4, idx, key, tc, cc, cs, cm, sw, swt, R, F, g, pbase)
+        S[0, i] = x[i]
+    ok = True
+    for s in range(4):  # one slope in the loop's body: the slope's code compiled once, not four times
+        ts = t if s == 0 else (t + h if s == 3 else t + 0.5 * h)
+        k = S[1 + s]
+        ok &= _nonlinear_slope(c, ts, s != 2, S[0], k, idx, key, tc, cc, cs, cm, sw, swt, R, F, g, pbase)
+        if s < 3:
+            a = h if s == 2 else 0.5 * h
+            for i in range(nx):
+                S[0, i] = x[i] + a * k[i]
     if not ok:
         return False
-    _combine(NONLINEAR, h, x, k1, k2, k3, k4)
+    _combine(NONLINEAR, h, x, S[1], S[2], S[3], S[4])
     return True
 
 
@@ -168,18 +166,23 @@ def _nonlinear_slope(c, ts, check, xs, k, idx, key, tc, cc, cs, cm, sw, swt, R, 
     made those of ``ts`` first where ``check`` (the middle slopes share them). Returns whether the mass
     matrix is positive definite.
 
-    Where the stages' state at ``ts`` is bit for bit the one the terms in ``tc`` were evaluated from (the
-    stages stand still), the terms are kept (``engine.kernels.cached_terms.stages_unchanged``): the floor's
-    rows are made those of ``ts``, and :func:`moving_terms` would give the same values again."""
+    Where every stage stands still on the pieces the terms were evaluated on, and no floor sine moves, the
+    terms are kept without evaluating the stages (``engine.kernels.cached_terms.terms_at_rest``); where the
+    stages' state at ``ts`` is bit for bit the one the terms in ``tc`` were evaluated from, they are kept
+    too (``engine.kernels.cached_terms.stages_unchanged``): the floor's rows are made those of ``ts``, and
+    :func:`moving_terms` would give the same values again."""
     if check and not key_holds(c, NONLINEAR, ts, idx, key):
-        stages_and_floor(ts, idx, cc, cs, swt, tc)
-        if stages_unchanged(c, NONLINEAR, key, swt, sw):
-            set_key(c, NONLINEAR, ts, key[3] != 0.0, idx, key)
+        if terms_at_rest(c, NONLINEAR, idx, key, cc, cs):
+            key[2] = ts  # every stage stands still on the same pieces: the terms are those of ts
         else:
-            for i in range(sw.shape[0]):
-                for q in range(sw.shape[1]):
-                    sw[i, q] = swt[i, q]
-            set_key(c, NONLINEAR, ts, moving_terms(NONLINEAR, g, cc, cs, cm, sw, tc), idx, key)
+            stages_and_floor(ts, idx, cc, cs, swt, tc)
+            if stages_unchanged(c, NONLINEAR, key, swt, sw):
+                set_key(c, NONLINEAR, ts, key[3] != 0.0, idx, key)
+            else:
+                for i in range(sw.shape[0]):
+                    for q in range(sw.shape[1]):
+                        sw[i, q] = swt[i, q]
+                set_key(c, NONLINEAR, ts, moving_terms(NONLINEAR, g, cc, cs, cm, sw, tc), idx, key)
     nonlinear_acc(xs, tc, cc, cm, R, F, k[7:], g, pbase)  # the accelerations straight into the slope
     q0, q1, q2, q3 = xs[3], xs[4], xs[5], xs[6]
     w0, w1, w2 = xs[10], xs[11], xs[12]

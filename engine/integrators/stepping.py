@@ -38,7 +38,13 @@ from isolab.engine.kernels.params import (
     line_aligned_zeros,
     whole_lines,
 )
-from isolab.engine.kernels.peaks import Peaks, observe, observe_nonlinear
+from isolab.engine.kernels.peaks import (
+    Peaks,
+    observe,
+    observe_nonlinear,
+    observe_nonlinear_on,
+    observer_views,
+)
 from isolab.engine.kernels.structs import kernel_struct
 from isolab.engine.results import FAILED, OK, UNSTABLE
 
@@ -121,6 +127,8 @@ def pair_driver(method: int, level: int) -> Any:
         b = borrowed
         xv, Lv, evv, Bv, Qv, GZv = b(x), b(L), b(ev), b(Bmap), b(Qmap), b(GZ)
         F0v, tgtv, rtgtv, restv, ptolv = b(F0), b(tgt), b(rtgt), b(rest), b(ptol)
+        # the nonlinear level's RK4 inlines its observer on views made here once (as the lean step's)
+        OV = observer_views(P, W, O, x)
         for c in range(C):
             if status[c] != OK:
                 continue
@@ -210,6 +218,8 @@ def pair_driver(method: int, level: int) -> Any:
                     break
                 if linear:
                     seen = output_map.observe(c, t1, xv, k + 1, F0v, tgtv, rtgtv, restv, ptolv, Bv, Qv, GZv)
+                elif method == RK4 and level == NONLINEAR:
+                    seen = observe_nonlinear_on(P, O, c, t1, k + 1, OV)  # inlined
                 elif level == NONLINEAR:
                     seen = observe_nonlinear(P, c, t1, x, W, O, k + 1)
                 else:

@@ -44,17 +44,16 @@ CM_WIDTH = 11
 CM_Q = 11
 """Where a mount's own axes (``Params.qm``, 9 values, row-major) start in ``W.cm``, when some mount has
 them."""
-# Rows of ``W.tc`` (21, 3): the stages' sums at the time of ``W.key``.
-TC_SR, TC_SV, TC_SA, TC_TA, TC_WM, TC_SFA, TC_DFA, TC_XF, TC_VF, TC_LD, TC_BT, TC_BR = range(12)
+# Rows of ``W.tc`` (20, 3): the stages' sums at the time of ``W.key``.
+TC_SR, TC_SV, TC_SA, TC_TA, TC_WM, TC_SFA, TC_DFA, TC_XF, TC_VF, TC_BT, TC_BR = range(11)
 """``sum m rho`` (kg m), ``sum m v_rel`` (kg m/s), ``sum m a_rel`` (N), ``sum m rho x a_rel`` (N m), the
 stages' weight moment about home ``sum m (rho - rho_h) x g`` (N m, linear levels), the feedforward forces
-``sum f_j`` (N) and moments ``sum d_j x f_j`` (N m), the floor displacement (m) and velocity (m/s), the
-reciprocal diagonal of the Schur factor ``TC_LS`` (1/sqrt(kg m^2)), the known part of the generalised force
-(N, N m; the LTI level: of the accelerations, m/s^2, rad/s^2)."""
-TC_GW, TC_JT, TC_LS = 12, 15, 18
+``sum f_j`` (N) and moments ``sum d_j x f_j`` (N m), the floor displacement (m) and velocity (m/s), the known
+part of the generalised force (N, N m; the LTI level: of the accelerations, m/s^2, rad/s^2)."""
+TC_GW, TC_JT, TC_SI = 11, 14, 17
 """First rows of the (3, 3) blocks of ``W.tc``: ``sum m ((rho . v_rel) 1 - v_rel rho^T)`` (kg m^2/s), the
-rotary mass of base and stages ``J`` (kg m^2) and the Cholesky factor (lower) of the mass matrix's Schur
-complement ``J - [SR]x^T [SR]x / m_tot`` (sqrt(kg) m)."""
+rotary mass of base and stages ``J`` (kg m^2) and the inverse of the mass matrix's Schur complement
+``S = J - [SR]x^T [SR]x / m_tot`` (1/(kg m^2))."""
 
 
 @njit(cache=True, fastmath=False)
@@ -177,7 +176,7 @@ def moving_terms(level, g, cc, cs, cm, sw, tc):
     tc[TC_SA, 0], tc[TC_SA, 1], tc[TC_SA, 2] = sa0, sa1, sa2
     tc[TC_TA, 0], tc[TC_TA, 1], tc[TC_TA, 2] = ta0, ta1, ta2
     tc[TC_WM, 0], tc[TC_WM, 1], tc[TC_WM, 2] = wm0, wm1, 0.0
-    for r in range(TC_LD, TC_GW):
+    for r in range(TC_BT, TC_GW):
         for q in range(3):
             tc[r, q] = 0.0
     tc[TC_GW, 0], tc[TC_GW, 1], tc[TC_GW, 2] = gw00, gw01, gw02
@@ -187,32 +186,32 @@ def moving_terms(level, g, cc, cs, cm, sw, tc):
     tc[TC_JT + 1, 0], tc[TC_JT + 1, 1], tc[TC_JT + 1, 2] = j10, j11, j12
     tc[TC_JT + 2, 0], tc[TC_JT + 2, 1], tc[TC_JT + 2, 2] = j20, j21, j22
     # Schur complement of the translation block: S = J - X^T X / m_tot with X = -[SR]x,
-    # X^T X = |SR|^2 1 - SR SR^T
+    # X^T X = |SR|^2 1 - SR SR^T; positive definite when its leading minors are (Sylvester), and its inverse
+    # from its cofactors: one division, where a Cholesky factor took three square roots and three divisions
+    # one after the other, and every solve with it two triangular sweeps
     if not cc[CC_MT] > 0.0:
         return False
     imt = cc[CC_IMT]
     s0, s1, s2 = tc[TC_SR, 0], tc[TC_SR, 1], tc[TC_SR, 2]
-    tc[TC_LS, 0] = tc[TC_JT, 0] - (s1 * s1 + s2 * s2) * imt
-    tc[TC_LS + 1, 1] = tc[TC_JT + 1, 1] - (s0 * s0 + s2 * s2) * imt
-    tc[TC_LS + 2, 2] = tc[TC_JT + 2, 2] - (s0 * s0 + s1 * s1) * imt
-    tc[TC_LS + 1, 0] = tc[TC_JT + 1, 0] + s1 * s0 * imt
-    tc[TC_LS + 2, 0] = tc[TC_JT + 2, 0] + s2 * s0 * imt
-    tc[TC_LS + 2, 1] = tc[TC_JT + 2, 1] + s2 * s1 * imt
-    for j in range(3):
-        s = tc[TC_LS + j, j]
-        for k in range(j):
-            s -= tc[TC_LS + j, k] * tc[TC_LS + j, k]
-        if not s > 0.0:
-            return False
-        ljj = np.sqrt(s)
-        rl = 1.0 / ljj
-        tc[TC_LS + j, j] = ljj
-        tc[TC_LD, j] = rl
-        for i in range(j + 1, 3):
-            s = tc[TC_LS + i, j]
-            for k in range(j):
-                s -= tc[TC_LS + i, k] * tc[TC_LS + j, k]
-            tc[TC_LS + i, j] = s * rl
+    a00 = j00 - (s1 * s1 + s2 * s2) * imt
+    a11 = j11 - (s0 * s0 + s2 * s2) * imt
+    a22 = j22 - (s0 * s0 + s1 * s1) * imt
+    a01 = j10 + s1 * s0 * imt
+    a02 = j20 + s2 * s0 * imt
+    a12 = j21 + s2 * s1 * imt
+    i00 = a11 * a22 - a12 * a12
+    i01 = a02 * a12 - a01 * a22
+    i02 = a01 * a12 - a02 * a11
+    i11 = a00 * a22 - a02 * a02
+    i12 = a01 * a02 - a00 * a12
+    i22 = a00 * a11 - a01 * a01
+    det = a00 * i00 + a01 * i01 + a02 * i02
+    if not (a00 > 0.0 and i22 > 0.0 and det > 0.0):
+        return False
+    r = 1.0 / det
+    tc[TC_SI, 0], tc[TC_SI, 1], tc[TC_SI, 2] = i00 * r, i01 * r, i02 * r
+    tc[TC_SI + 1, 0], tc[TC_SI + 1, 1], tc[TC_SI + 1, 2] = i01 * r, i11 * r, i12 * r
+    tc[TC_SI + 2, 0], tc[TC_SI + 2, 1], tc[TC_SI + 2, 2] = i02 * r, i12 * r, i22 * r
     if level == LTV:
         # the known part of the generalised force: floor through the mounts, stages, feedforward
         x0, x1, x2 = tc[TC_XF, 0], tc[TC_XF, 1], tc[TC_XF, 2]
@@ -346,6 +345,33 @@ def stages_unchanged(c, level, key, swt, sw):
         for q in range(sw.shape[1]):
             a, b = swt[i, q], sw[i, q]
             if a != b or (a == 0.0 and np.copysign(1.0, a) != np.copysign(1.0, b)):
+                return False
+    return True
+
+
+@njit(cache=True, inline="always")
+def terms_at_rest(c, level, idx, key, cc, cs):
+    """Whether the time-only terms keyed in ``key`` (``W.key``) hold at any time on the pieces ``idx`` of
+    case ``c`` at ``level`` (packed in ``cc``, ``cs``; no recorded floor or feedforward): the same case,
+    level and pieces, every stage on a piece where it stands still (no velocity, acceleration or jerk) and
+    no floor sine. The stages' state there is its piece's start, bit for bit, at any time: so are the
+    terms."""
+    if key[0] != c or key[1] != level:
+        return False
+    for dd in range(3):
+        if cc[CC_FA + dd] != 0.0:
+            return False
+    K = (cs.shape[1] - CS_P) // 5
+    for i in range(idx.shape[0]):
+        k = idx[i]
+        if key[4 + i] != k:
+            return False
+        if k >= 0:
+            if (
+                cs[i, CS_P + 2 * K + k] != 0.0
+                or cs[i, CS_P + 3 * K + k] != 0.0
+                or cs[i, CS_P + 4 * K + k] != 0.0
+            ):
                 return False
     return True
 

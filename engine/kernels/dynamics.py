@@ -35,10 +35,9 @@ from isolab.engine.kernels.cached_terms import (
     TC_DFA,
     TC_GW,
     TC_JT,
-    TC_LD,
-    TC_LS,
     TC_SA,
     TC_SFA,
+    TC_SI,
     TC_SR,
     TC_SV,
     TC_TA,
@@ -47,19 +46,15 @@ from isolab.engine.kernels.cached_terms import (
     time_terms,
 )
 from isolab.engine.kernels.params import LTI, LTV, NONLINEAR
-from isolab.engine.kernels.rotations import cross, quat_matrix
+from isolab.engine.kernels.rotations import cross, direction_matrix
 
 
 @njit(cache=True, fastmath=False)
 def _solve_schur(tc, q0, q1, q2):
-    """``S^-1 q`` with the Cholesky factor of the Schur complement ``S`` and its reciprocal diagonal in
-    ``tc``."""
-    y0 = q0 * tc[TC_LD, 0]
-    y1 = (q1 - tc[TC_LS + 1, 0] * y0) * tc[TC_LD, 1]
-    y2 = (q2 - tc[TC_LS + 2, 0] * y0 - tc[TC_LS + 2, 1] * y1) * tc[TC_LD, 2]
-    z2 = y2 * tc[TC_LD, 2]
-    z1 = (y1 - tc[TC_LS + 2, 1] * z2) * tc[TC_LD, 1]
-    z0 = (y0 - tc[TC_LS + 1, 0] * z1 - tc[TC_LS + 2, 0] * z2) * tc[TC_LD, 0]
+    """``S^-1 q`` with the inverse of the Schur complement ``S`` in ``tc`` (rows ``TC_SI``)."""
+    z0 = tc[TC_SI, 0] * q0 + tc[TC_SI, 1] * q1 + tc[TC_SI, 2] * q2
+    z1 = tc[TC_SI + 1, 0] * q0 + tc[TC_SI + 1, 1] * q1 + tc[TC_SI + 1, 2] * q2
+    z2 = tc[TC_SI + 2, 0] * q0 + tc[TC_SI + 2, 1] * q1 + tc[TC_SI + 2, 2] * q2
     return z0, z1, z2
 
 
@@ -151,8 +146,9 @@ def accel_nonlinear(P, c, x, W):
 def nonlinear_acc(x, tc, cc, cm, R, F, acc, g, pbase):
     """:func:`accel_nonlinear` on the workspace's arrays (``R`` (3, 3), ``F`` (n, 3) scratch; the packed
     case ``cc``, ``cm``)."""
-    qw, qx, qy, qz = x[3], x[4], x[5], x[6]
-    quat_matrix(qw, qx, qy, qz, R)
+    # the rotation of the quaternion's direction: an RK4 stage state's quaternion is off unit length by
+    # about (h |w| / 2)^2, and R orthogonal keeps every transpose below an inverse
+    direction_matrix(x[3], x[4], x[5], x[6], R)
     u0, u1, u2 = x[0], x[1], x[2]
     v0, v1, v2 = x[7], x[8], x[9]
     w0, w1, w2 = x[10], x[11], x[12]
@@ -250,30 +246,14 @@ def nonlinear_acc(x, tc, cc, cm, R, F, acc, g, pbase):
     r0 += tc[TC_DFA, 0] - y0 - tc[TC_TA, 0] - 2.0 * g0 + h0
     r1 += tc[TC_DFA, 1] - y1 - tc[TC_TA, 1] - 2.0 * g1 + h1
     r2 += tc[TC_DFA, 2] - y2 - tc[TC_TA, 2] - 2.0 * g2 + h2
-    # M = [[m_tot 1, R X], [X^T R^T, J]], X = -[SR]x: with b = R^T f_t the rotation solves
-    # (J - X^T (R^T R) X / m_tot) alpha = f_r - X^T b / m_tot. R^T R = 1 + E, E of the order of the
-    # quaternion's drift from unit length times the rotation squared: one correction of the solution with
-    # the factor of J - X^T X / m_tot takes E in.
+    # M = [[m_tot 1, R X], [X^T R^T, J]], X = -[SR]x: with b = R^T f_t and R^T R = 1 the rotation solves
+    # (J - X^T X / m_tot) alpha = f_r - X^T b / m_tot, the Schur complement of the time-only terms
     imt = cc[CC_IMT]
     b0 = R[0, 0] * f0 + R[1, 0] * f1 + R[2, 0] * f2
     b1 = R[0, 1] * f0 + R[1, 1] * f1 + R[2, 1] * f2
     b2 = R[0, 2] * f0 + R[1, 2] * f1 + R[2, 2] * f2
     c0, c1, c2 = cross(s0, s1, s2, b0, b1, b2)
     a0, a1, a2 = _solve_schur(tc, r0 - c0 * imt, r1 - c1 * imt, r2 - c2 * imt)
-    # E u with u = SR x alpha = -X alpha: the right-hand side gains X^T E X alpha / m_tot, i.e.
-    # -SR x (E u) / m_tot
-    u0, u1, u2 = cross(s0, s1, s2, a0, a1, a2)
-    v0 = R[0, 0] * u0 + R[0, 1] * u1 + R[0, 2] * u2
-    v1 = R[1, 0] * u0 + R[1, 1] * u1 + R[1, 2] * u2
-    v2 = R[2, 0] * u0 + R[2, 1] * u1 + R[2, 2] * u2
-    e0 = R[0, 0] * v0 + R[1, 0] * v1 + R[2, 0] * v2 - u0
-    e1 = R[0, 1] * v0 + R[1, 1] * v1 + R[2, 1] * v2 - u1
-    e2 = R[0, 2] * v0 + R[1, 2] * v1 + R[2, 2] * v2 - u2
-    d0, d1, d2 = cross(s0, s1, s2, e0, e1, e2)
-    n0, n1, n2 = _solve_schur(tc, -d0 * imt, -d1 * imt, -d2 * imt)
-    a0 += n0
-    a1 += n1
-    a2 += n2
     # translation (floor frame): m_tot a = f_t - R X alpha = f_t + R (SR x alpha)
     u0, u1, u2 = cross(s0, s1, s2, a0, a1, a2)
     acc[0] = (f0 + R[0, 0] * u0 + R[0, 1] * u1 + R[0, 2] * u2) * imt

@@ -416,12 +416,41 @@ def observe(P, c, level, t, x, W, O, step):
 @njit(cache=True, fastmath={"contract"})
 def observe_nonlinear(P, c, t, x, W, O, step):
     """:func:`observe` at the nonlinear level, the same arithmetic on arrays bound once as views whose
-    references numba does not count (``engine.kernels.params.borrowed``), each mount's force computed in
-    the mount loop (``engine.kernels.mounts.mount_force``), each multiply fused with the add that takes it
-    (``fastmath={"contract"}``, as in the nonlinear level's RK4 driver)."""
+    references numba does not count (``engine.kernels.params.borrowed``; :func:`observer_views`), each
+    mount's force computed in the mount loop (``engine.kernels.mounts.mount_force``), each multiply fused
+    with the add that takes it (``fastmath={"contract"}``, as in the nonlinear level's RK4 driver, which
+    inlines :func:`observe_nonlinear_on` on views it makes once per case)."""
+    return observe_nonlinear_on(P, O, c, t, step, observer_views(P, W, O, x))
+
+
+@njit(cache=True, inline="always")
+def observer_views(P, W, O, x):
+    """The arrays :func:`observe_nonlinear_on` reads of the state ``x``, the batch ``P``, the workspace ``W``
+    and the peaks ``O``, as views without owner: a view made once serves every output time of a case (each
+    made anew costs its loads, and each array read from a struct an atomic add and subtract)."""
     b = borrowed
-    x, R, xf, vf, F = b(x), b(W.R), b(W.xf), b(W.vf), b(W.F)
-    famp, fomega, fphase = b(P.famp), b(P.fomega), b(P.fphase)
+    return (
+        (b(x), b(W.R), b(W.xf), b(W.vf), b(W.F)),
+        (b(P.famp), b(P.fomega), b(P.fphase), P.ft.shape[0] > 0, P.orient),
+        (b(P.pts), b(P.pr), b(P.d), b(P.sky), b(P.f0), b(P.k), b(P.cd), b(P.qm)),
+        (b(O.u), b(O.th), b(O.poi), b(O.force), b(O.defl), b(O.min_load), b(O.max_load)),
+        (b(O.last_u), b(O.last_th), b(O.last_poi), b(O.last_defl), b(O.last_floor), b(O.last_force)),
+        (b(O.rest), b(O.rest_n), b(O.rest_k), b(O.rest_tprev), b(O.rest_target), b(O.p_viol), b(O.p_settle)),
+        (b(O.point_tol), b(O.point_offset), b(O.rest_point_offset), b(O.target), b(O.sumsq), b(O.nobs)),
+        (b(O.last_viol), b(O.last_t), b(O.slot), b(O.diverged), b(O.t_last), b(O.tol), b(O.h_interp)),
+    )
+
+
+@njit(cache=True, inline="always")
+def observe_nonlinear_on(P, O, c, t, step, V):
+    """:func:`observe_nonlinear` on the views ``V`` (:func:`observer_views`); ``P`` and ``O`` read only for a
+    recorded floor and a recorded case's histories."""
+    (x, R, xf, vf, F), (famp, fomega, fphase, recorded, orient), (pts, pr, D, sky, f0, kk, cd, qm) = V[:3]
+    peak_u, peak_th, poi, force, defl, min_load, max_load = V[3]
+    last_u, last_th, last_poi, last_defl, last_floor, last_force = V[4]
+    rest, rest_n, rest_k, rest_tprev, rest_target, p_viol, p_settle = V[5]
+    point_tol, point_offset, rest_point_offset, target, sumsq, nobs = V[6]
+    last_viol, last_t, slots, diverged, t_last, tol, h_interp = V[7]
     for dd in range(3):  # ``floor_motion``
         amp = famp[c, dd]
         if amp == 0.0:
@@ -432,23 +461,9 @@ def observe_nonlinear(P, c, t, x, W, O, step):
             arg = w * t + fphase[c, dd]
             xf[dd] = amp * np.sin(arg)
             vf[dd] = amp * w * np.cos(arg)
-    if P.ft.shape[0] > 0:
+    if recorded:
         recorded_floor(P, c, t, xf, vf)
-    pts, pr, D, sky, f0 = b(P.pts), b(P.pr), b(P.d), b(P.sky), b(P.f0)
-    kk, cd, qm, orient = b(P.k), b(P.cd), b(P.qm), P.orient
-    peak_u, peak_th, poi, force, defl = b(O.u), b(O.th), b(O.poi), b(O.force), b(O.defl)
-    min_load, max_load, last_u, last_th = b(O.min_load), b(O.max_load), b(O.last_u), b(O.last_th)
-    last_poi, last_defl, last_floor, last_force = (
-        b(O.last_poi),
-        b(O.last_defl),
-        b(O.last_floor),
-        b(O.last_force),
-    )
-    rest, rest_n, rest_k, rest_tprev = b(O.rest), b(O.rest_n), b(O.rest_k), b(O.rest_tprev)
-    rest_target, p_viol, p_settle, point_tol = b(O.rest_target), b(O.p_viol), b(O.p_settle), b(O.point_tol)
-    point_offset, rest_point_offset = b(O.point_offset), b(O.rest_point_offset)
-    target, sumsq, nobs, last_viol, last_t = b(O.target), b(O.sumsq), b(O.nobs), b(O.last_viol), b(O.last_t)
-    slot = O.slot[c]
+    slot = slots[c]
     qw, qx, qy, qz = x[3], x[4], x[5], x[6]
     quat_matrix(qw, qx, qy, qz, R)  # R, then the rotation vector th (axis times angle, rad)
     s2 = qx * qx + qy * qy + qz * qz
@@ -469,9 +484,9 @@ def observe_nonlinear(P, c, t, x, W, O, step):
     u0, u1, u2 = x[0], x[1], x[2]
     for i in range(3):
         if not (abs(x[i]) < DIVERGED_DISPLACEMENT and abs(th[i]) < DIVERGED_ROTATION):
-            O.diverged[c] = t
+            diverged[c] = t
             return False
-    settle = t >= O.t_last[c] - 1e-12
+    settle = t >= t_last[c] - 1e-12
     k = rest_k[c]
     nk = rest_n[c]
     while k < nk and t > rest[c, k, 1] + 1e-12:
@@ -490,7 +505,7 @@ def observe_nonlinear(P, c, t, x, W, O, step):
     if at_rest:
         rest_tprev[c] = t
     h = t - last_t[c]
-    between = step > 0 and h > 0.0 and h <= O.h_interp[c]
+    between = step > 0 and h > 0.0 and h <= h_interp[c]
     inv_h = 1.0 / h if between else 0.0
     wb0, wb1, wb2 = x[10], x[11], x[12]
     wf0 = R[0, 0] * wb0 + R[0, 1] * wb1 + R[0, 2] * wb2
@@ -564,7 +579,7 @@ def observe_nonlinear(P, c, t, x, W, O, step):
             O.h_poi[slot, step, p, 0] = pv0
             O.h_poi[slot, step, p, 1] = pv1
             O.h_poi[slot, step, p, 2] = pv2
-    if settle and err > O.tol[c]:
+    if settle and err > tol[c]:
         last_viol[c] = t
     for j in range(D.shape[1]):
         d0, d1, d2 = D[c, j, 0], D[c, j, 1], D[c, j, 2]

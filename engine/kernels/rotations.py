@@ -33,6 +33,29 @@ def quat_matrix(w, x, y, z, R):
     R[2, 2] = 1 - 2 * (x * x + y * y)
 
 
+@njit(cache=True, inline="always")
+def direction_matrix(w, x, y, z, R):
+    """Rotation matrix (body to floor) of the direction ``q / |q|`` of a quaternion near unit length into
+    ``R`` (3, 3): :func:`quat_matrix` with ``2 / |q|^2`` for its 2, so that ``R`` is orthogonal to round-off
+    whatever ``|q|``. Within 1e-8 of unit length (an integrator's stage state, the step's end normalised)
+    ``1 / |q|^2 = 1 / (1 + e)`` is taken as ``1 - e``, whose error ``e^2`` is below round-off: no division
+    on the way to the accelerations."""
+    e = w * w + x * x + y * y + z * z - 1.0
+    if abs(e) < 1e-8:
+        s = 2.0 * (1.0 - e)
+    else:
+        s = 2.0 / (1.0 + e)
+    R[0, 0] = 1.0 - s * (y * y + z * z)
+    R[0, 1] = s * (x * y - w * z)
+    R[0, 2] = s * (x * z + w * y)
+    R[1, 0] = s * (x * y + w * z)
+    R[1, 1] = 1.0 - s * (x * x + z * z)
+    R[1, 2] = s * (y * z - w * x)
+    R[2, 0] = s * (x * z - w * y)
+    R[2, 1] = s * (y * z + w * x)
+    R[2, 2] = 1.0 - s * (x * x + y * y)
+
+
 @njit(cache=True, fastmath=False)
 def quat_step(q, w0, w1, w2, h):
     """Advance ``q`` in place by a constant body rate ``w`` (rad/s) over ``h`` s (exact increment)."""
