@@ -584,11 +584,17 @@ def observe_nonlinear_on(P, O, c, t, step, V):
     for j in range(D.shape[1]):
         d0, d1, d2 = D[c, j, 0], D[c, j, 1], D[c, j, 2]
         r0, r1, r2 = mount_offset(NONLINEAR, x, R, d0, d1, d2)
-        # the mount's force (as ``isolator_forces``, in this loop)
-        F[j, 0], F[j, 1], F[j, 2] = mount_force(
-            NONLINEAR, x, R, xf, vf, c, j, kk, cd, sky, orient, qm, d0, d1, d2, r0, r1, r2
-        )
         q0, q1, q2 = _arm_rate(NONLINEAR, wf0, wf1, wf2, r0, r1, r2, d0, d1, d2)
+        # the mount's force (as ``isolator_forces``, in this loop, on the mount point's velocity just taken)
+        if orient:
+            F[j, 0], F[j, 1], F[j, 2] = mount_force(
+                NONLINEAR, x, R, xf, vf, c, j, kk, cd, sky, orient, qm, d0, d1, d2, r0, r1, r2
+            )
+        else:
+            rel = 1.0 - sky[c, j]
+            F[j, 0] = -kk[c, j, 0] * (u0 + r0 - xf[0]) - cd[c, j, 0] * (v0 + q0 - rel * vf[0])
+            F[j, 1] = -kk[c, j, 1] * (u1 + r1 - xf[1]) - cd[c, j, 1] * (v1 + q1 - rel * vf[1])
+            F[j, 2] = -kk[c, j, 2] * (u2 + r2 - xf[2]) - cd[c, j, 2] * (v2 + q2 - rel * vf[2])
         skj = sky[c, j]
         f0j = f0[c, j]
         load = f0j + F[j, 2]
@@ -607,22 +613,21 @@ def observe_nonlinear_on(P, O, c, t, step, V):
             a = max(abs(F1), force[c, j, i])
             b = max(abs(dl), defl[c, j, i])
             if between and not orient:
-                # as :func:`observe`: the deflection's and the floor's cubics through the force law
+                # as :func:`observe`: the deflection's and the floor's cubics through the force law, the
+                # force's cubic written by its end values (``observe``'s shift to meet them, in one step):
+                # its constant the force at the previous output time, its linear term what makes it the
+                # force now, so only the two highest terms come from the law
                 p0, m0 = last_defl[c, j, i, 0], last_defl[c, j, i, 1]
                 c0, c1, c2, c3 = hermite(p0, m0, dl, dd, h)
                 b = max(b, cubic_beyond(c0, c1, c2, c3, b))
-                f1 = f2 = f3 = 0.0
+                f3 = 0.0
                 if skj != 0.0:
-                    _, f1, f2, f3 = hermite(last_floor[c, i, 0], last_floor[c, i, 1], xf[i], vf[i], h)
+                    _, _, _, f3 = hermite(last_floor[c, i, 0], last_floor[c, i, 1], xf[i], vf[i], h)
                 kj, cj = kk[c, j, i], cd[c, j, i] * inv_h
-                g0 = -kj * c0 - cj * (c1 + skj * f1)
-                g1 = -kj * c1 - cj * (2.0 * (c2 + skj * f2))
                 g2 = -kj * c2 - cj * (3.0 * (c3 + skj * f3))
                 g3 = -kj * c3
-                e0 = last_force[c, j, i] - g0
-                e1 = F1 - (g0 + g1 + g2 + g3)
-                g0 += e0
-                g1 += e1 - e0
+                g0 = last_force[c, j, i]
+                g1 = F1 - g0 - g2 - g3
                 a = max(a, cubic_beyond(g0, g1, g2, g3, a))
                 if i == 2:
                     b1 = g0 + g1 * ONE_THIRD
