@@ -48,20 +48,24 @@ docs: $(STAMP)
 	$(PY) -m isolab.studies.authoring.file_reference > docs/study-files.md.part
 	mv docs/study-files.md.part docs/study-files.md
 
-# The whole suite in 2 test processes (pytest-xdist; a test file stays in one process, so its module
-# fixtures, services among them, start once). Both use the one kernel cache of the machine (above).
-# Both keep Python's bytecode caches (__pycache__, ignored by git) even where the environment turns
-# them off: without them every run compiles and rewrites the assertions of ~470 modules again in
+# The whole suite in 3 test processes on 2 cores (pytest-xdist; a test file stays in one process, so its
+# module fixtures, services among them, start once): many tests wait on a service, a subprocess or a
+# browser, and a third process fills those waits (warm: 3 min 58 s against 4 min 24 s with 2; 4 min 48 s
+# with 4, where the contention costs more than the waits). All use the one kernel cache of the machine
+# (above), and keep Python's bytecode caches (__pycache__, ignored by git) even where the environment
+# turns them off: without them every run compiles and rewrites the assertions of ~470 modules again in
 # each test process (about 5 s of CPU each).
-TEST_PROCESSES ?= 2
+TEST_PROCESSES ?= 3
 test: $(TEST_STAMP)
 	PYTHONDONTWRITEBYTECODE= $(PY) -m pytest -q -n $(TEST_PROCESSES) --dist loadfile
 
 # Everything not marked slow (services in subprocesses, fault injection, the wheel build, memory measured
-# in processes of their own): under a minute on 2 cores. tests/conftest.py gives each test process one BLAS
-# thread (with the libraries' default, a thread per core in each process, some tests ran 20x slower).
+# in processes of their own): under a minute on 2 cores, in 2 processes (CPU-bound: 3 gain nothing).
+# tests/conftest.py gives each test process one BLAS thread (with the libraries' default, a thread per
+# core in each process, some tests ran 20x slower).
+FAST_PROCESSES ?= 2
 test-fast: $(TEST_STAMP)
-	PYTHONDONTWRITEBYTECODE= $(PY) -m pytest -q -n $(TEST_PROCESSES) --dist loadfile -m "not slow"
+	PYTHONDONTWRITEBYTECODE= $(PY) -m pytest -q -n $(FAST_PROCESSES) --dist loadfile -m "not slow"
 
 # The performance figures (docs/performance.md): the engine on one core against a numpy loop and solve_ivp,
 # then 10,000- and 100,000-case studies through a real `isolab serve` (about 15 minutes on an idle machine).

@@ -46,10 +46,10 @@ PREWARM_ORDER = (
     ("nonlinear", "euler"),
     ("nonlinear", "reference"),
 )
-"""Every (fidelity, integrator) pair the suite runs, the longest to compile first (so two processes finish
-together): nonlinear/rk4 about 35 s of CPU; lti/exact, ltv/rk4, lti/euler 29-31 s of wall each on a quiet
-machine (process start included), nonlinear/euler and the reference 26-27 (the reference compiles its
-right-hand side and its samples' observers as kernels)."""
+"""Every (fidelity, integrator) pair the suite runs, the longest to compile first (so the processes finish
+together): nonlinear/rk4 about 70 s of CPU, lti/exact and nonlinear/euler about 40 s, ltv/rk4 34 s (each
+on an empty cache alone, 2026-11-27, numba's compile events); the others about 30 s (the reference
+compiles its right-hand side and its samples' observers as kernels)."""
 
 
 def pytest_configure(config: pytest.Config) -> None:
