@@ -417,9 +417,10 @@ def observe(P, c, level, t, x, W, O, step):
 def observe_nonlinear(P, c, t, x, W, O, step):
     """:func:`observe` at the nonlinear level, the same arithmetic on arrays bound once as views whose
     references numba does not count (``engine.kernels.params.borrowed``; :func:`observer_views`), each
-    mount's force computed in the mount loop (``engine.kernels.mounts.mount_force``), each multiply fused
-    with the add that takes it (``fastmath={"contract"}``, as in the nonlinear level's RK4 driver, which
-    inlines :func:`observe_nonlinear_on` on views it makes once per case)."""
+    mount's force computed in the mount loop (the force law on the mount point's velocity the loop takes;
+    ``engine.kernels.mounts.mount_force`` for a mount on its own axes), each multiply fused with the add
+    that takes it (``fastmath={"contract"}``, as in the nonlinear level's RK4 driver, which inlines
+    :func:`observe_nonlinear_on` on views it makes once per case)."""
     return observe_nonlinear_on(P, O, c, t, step, observer_views(P, W, O, x))
 
 
