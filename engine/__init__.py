@@ -10,6 +10,7 @@ import sys
 from collections.abc import Mapping
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
+from typing import Any
 
 ENGINE_FOLDER = Path(__file__).resolve().parent
 """Where the engine's sources are (their hash names the kernel cache folder)."""
@@ -64,7 +65,22 @@ def kernel_cache_folder() -> Path:
 
 from isolab.engine.results import STATUS_NAMES, SimulationResult  # noqa: E402  (after the cache folder)
 from isolab.engine.scene import GRAVITY, SceneBatch, SceneError, concat  # noqa: E402
-from isolab.engine.simulate import check_choice, simulate  # noqa: E402
+
+_LAZY = {"simulate": "isolab.engine.simulation", "check_choice": "isolab.engine.simulation"}
+"""Names loaded on first use, by the module that holds them: ``engine.simulation`` brings numba and the
+kernels' definitions (about 0.4 s), which a process that reads scenes, results or the store never needs
+(``isolab serve`` among them)."""
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 try:
     __version__ = version("isolab")

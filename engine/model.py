@@ -2,22 +2,27 @@
 
 All functions are vectorised over the case dimension. Generalised coordinates ``q = [u, theta]``: c.g.
 displacement (m) and small rotation about X, Y, Z (rad). Matrices are (C, 6, 6) in SI.
+
+The matrices are numpy alone; the kernels' parameter and work arrays (:func:`params`, :func:`work`) load
+``engine.kernels`` (numba) on first use, so that a process that validates scenes or reads results (the
+service) never imports it.
 """
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-from isolab.engine.kernels.cached_terms import CM_WIDTH
-from isolab.engine.kernels.feedforward import feedforward_transients
-from isolab.engine.kernels.params import Params, Work
-from isolab.engine.kernels.structs import kernel_struct
 from isolab.engine.linear_states.block import SlotBlock
 from isolab.engine.linear_states.flexible_base import flexible_base_block
 from isolab.engine.linear_states.levelling import levelling_block
 from isolab.engine.linear_states.mount_branches import mount_relaxation_block
 from isolab.engine.linear_states.servo import servo_block
 from isolab.engine.scene import SceneBatch
+
+if TYPE_CHECKING:
+    from isolab.engine.kernels.params import Params, Work
 
 
 def skew(v: np.ndarray) -> np.ndarray:
@@ -458,6 +463,9 @@ def slot_state_matrix(P: Params) -> np.ndarray:
 
 def params(b: SceneBatch) -> Params:
     """The kernels' parameter arrays for a batch (see ``engine.kernels.params.Params``)."""
+    from isolab.engine.kernels.feedforward import feedforward_transients
+    from isolab.engine.kernels.structs import kernel_struct
+
     P = _params(b)
     if P.ffon:
         KP, KW = kernel_struct(P), kernel_struct(work(b))
@@ -479,6 +487,8 @@ def _feedforward_breakpoints(b: SceneBatch) -> np.ndarray:
 
 
 def _params(b: SceneBatch) -> Params:
+    from isolab.engine.kernels.params import Params
+
     d, rho_h, pts = relative_geometry(b)
     M = mass_matrix(b)
     K = stiffness_matrix(b)
@@ -559,6 +569,9 @@ def _params(b: SceneBatch) -> Params:
 def work(b: SceneBatch) -> Work:
     """Scratch arrays for one case at a time. They keep terms of the ``Params`` they serve (packed per
     case, per time; ``engine.kernels.cached_terms.time_terms``): one ``Work`` serves one ``Params``."""
+    from isolab.engine.kernels.cached_terms import CM_WIDTH
+    from isolab.engine.kernels.params import Work
+
     m, n = b.n_stages, b.n_isolators
     return Work(
         rho=np.zeros((m, 3)),

@@ -4,8 +4,19 @@ Imports :mod:`isolab.engine`; nothing here imports the web service. The service 
 through this package: the names below are the engine's, re-exported for it.
 """
 
-from isolab.engine import STATUS_NAMES, SceneError, __version__, simulate
+from typing import Any
+
+from isolab.engine import STATUS_NAMES, SceneError, __version__
 from isolab.engine.results import AXES, DOF_NAMES, OUTPUTS, ROTATIONS, OutputSpec
+
+
+def __getattr__(name: str) -> Any:
+    if name == "simulate":  # the engine's kernels load on first use (``isolab.engine``)
+        from isolab.engine import simulate
+
+        return simulate
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "AXES",

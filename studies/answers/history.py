@@ -20,7 +20,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from isolab.engine import STATUS_NAMES, simulate
+import isolab.engine
+from isolab.engine import STATUS_NAMES
 from isolab.engine.modal import MOTION_NAMES
 from isolab.engine.profiles import Pieces, evaluate
 from isolab.engine.results import AXES, DOF_NAMES, OUTPUTS, ROTATIONS, SimulationResult
@@ -118,7 +119,7 @@ def case_history(study: Study, case: int, every: int = 1) -> CaseHistory:
                 f"(every >= {math.ceil(samples / MAX_RETURNED_SAMPLES)})",
             )
     fidelity, integrator, dt = sim.engine_choice()  # the study's own, or what its runner chose
-    result = simulate(
+    result = isolab.engine.simulate(  # the kernels load with the first case asked for
         batch, fidelity=fidelity, integrator=integrator, dt=dt, auto_step=sim.auto_step, record=[0]
     )
     return recorded_history(study, case, batch, result)

@@ -37,10 +37,9 @@ from typing import Any, cast
 import numpy as np
 
 from isolab.engine import modal, model, simulate, stability
-from isolab.engine.integrators import INTEGRATORS
 from isolab.engine.results import OK, STATUS_NAMES, SimulationResult
 from isolab.engine.scene import SceneBatch
-from isolab.engine.simulate import SERVO_LEVELS, SLOT_INTEGRATORS, SLOT_LEVELS
+from isolab.engine.simulation import SERVO_LEVELS, SLOT_INTEGRATORS, SLOT_LEVELS
 from isolab.studies.inputs.schema import (
     ACCURACY_LEVELS,
     DEFAULT_DT,
@@ -199,6 +198,8 @@ def choose_for_batch(
     stability limit is stable, not accurate, and the study's other cases may need it cut further. When
     none meets the tolerance the reference itself is returned.
     """
+    from isolab.engine.integrators import INTEGRATORS  # the kernels, on use (not with the service)
+
     steps = tuple(sorted(float(s) for s in steps))
     fmt: bool | None = None if per_output else relative  # how errors read: of the tolerance, %, um
     # per output: errors are fractions of the tolerance; without per-output tolerances the request has one

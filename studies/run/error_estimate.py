@@ -28,7 +28,7 @@ import numpy as np
 from isolab.engine import model, simulate, stability
 from isolab.engine.results import OK, OUTPUTS, STATUS_NAMES
 from isolab.engine.scene import SceneBatch
-from isolab.engine.simulate import SUB_STEPPED
+from isolab.engine.simulation import SUB_STEPPED
 from isolab.studies.inputs.study import Study, study_from_json
 from isolab.studies.results.dataset import result_arrays
 from isolab.studies.results.timings import record_timing

@@ -1,6 +1,7 @@
 """`isolab serve` and `isolab calibrate` start without the heavy libraries: they load where a request or a
-fit needs them (Dask when the service starts its cluster; xarray, matplotlib, scipy's fitting, filtering and
-statistics on first use). The figures are in `python -m benchmarks startup`."""
+fit needs them (Dask when the service starts its cluster; the engine's kernels with numba at the first
+simulation or validation of a study; xarray, matplotlib, scipy's fitting, filtering and statistics on first
+use). The figures are in `python -m benchmarks startup`."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import pytest
 from benchmarks.startup import command_imports
 
 HEAVY = (
+    "numba",
     "distributed",
     "xarray",
     "pandas",

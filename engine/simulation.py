@@ -1,4 +1,7 @@
-"""Simulate a batch of cases: pick the level and integrator, guard stability, collect the outputs."""
+"""Simulate a batch of cases: pick the level and integrator, guard stability, collect the outputs.
+
+The integrators and the kernels (numba) load with the first call that needs them, not with this module.
+"""
 
 from __future__ import annotations
 
@@ -7,9 +10,6 @@ from dataclasses import replace
 import numpy as np
 
 from isolab.engine import frequency, modal, model, mount_laws, stability
-from isolab.engine.integrators import INTEGRATORS
-from isolab.engine.kernels import peaks
-from isolab.engine.kernels.params import FIDELITIES
 from isolab.engine.linear_states.levelling import check_levelling
 from isolab.engine.results import FAILED, OK, TIPPING, UNSTABLE, SimulationResult
 from isolab.engine.scene import SceneBatch, SceneError
@@ -21,6 +21,9 @@ MAX_STEPS = 20_000_000
 
 def check_choice(fidelity: str, integrator: str) -> None:
     """Refuse an unknown level or integrator, or a pair that does not exist, naming the field."""
+    from isolab.engine.integrators import INTEGRATORS
+    from isolab.engine.kernels.params import FIDELITIES
+
     if fidelity not in FIDELITIES:
         raise SceneError("fidelity", f"must be one of {sorted(FIDELITIES)}, got {fidelity!r}")
     if integrator not in INTEGRATORS:
@@ -71,6 +74,8 @@ def sampled_peak_message(step: np.ndarray, h_interp: np.ndarray) -> list[str]:
 
 def _divergence_cause(integrator: str, step: float) -> str:
     """Why a case that passed the stability guard still ran away (the message after "diverged at t")."""
+    from isolab.engine.kernels import peaks
+
     where = (
         f"the base moved more than {peaks.DIVERGED_DISPLACEMENT:g} m or turned more than "
         f"{peaks.DIVERGED_ROTATION:g} rad"
@@ -213,6 +218,10 @@ def simulate(
         displacement, settling times and transmissibility (the static preloads and the modes stay filled: see
         ``SimulationResult``).
     """
+    from isolab.engine.integrators import INTEGRATORS
+    from isolab.engine.kernels import peaks
+    from isolab.engine.kernels.params import FIDELITIES
+
     check_choice(fidelity, integrator)
     if not (np.isfinite(dt) and dt > 0):
         raise SceneError("dt", f"must be a positive, finite step in s, got {dt!r}")
