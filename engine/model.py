@@ -560,8 +560,8 @@ def _params(b: SceneBatch) -> Params:
         zM=f64(minv @ zG),
         sM=f64(sM),
         zO=f64(slot.O),
-        zF=f64(slot.F if slot.F is not None else np.zeros((b.n_cases, 0, 3 * n))),
-        zdb=f64(slot.D if slot.D is not None else np.zeros((b.n_cases, 0))),
+        zF=f64(slot.F),
+        zdb=f64(slot.D),
         pr=f64(pr, dtype=float),
     )
 

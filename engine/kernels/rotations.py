@@ -22,15 +22,7 @@ def cross(a0, a1, a2, b0, b1, b2):
 def quat_matrix(w, x, y, z, R):
     """Rotation matrix (body to floor) of the unit quaternion ``(w, x, y, z)`` into ``R`` (3, 3); its four
     numbers are given, so a state's are read without slicing it."""
-    R[0, 0] = 1 - 2 * (y * y + z * z)
-    R[0, 1] = 2 * (x * y - w * z)
-    R[0, 2] = 2 * (x * z + w * y)
-    R[1, 0] = 2 * (x * y + w * z)
-    R[1, 1] = 1 - 2 * (x * x + z * z)
-    R[1, 2] = 2 * (y * z - w * x)
-    R[2, 0] = 2 * (x * z - w * y)
-    R[2, 1] = 2 * (y * z + w * x)
-    R[2, 2] = 1 - 2 * (x * x + y * y)
+    _scaled_matrix(w, x, y, z, 2.0, R)
 
 
 @njit(cache=True, inline="always")
@@ -45,6 +37,13 @@ def direction_matrix(w, x, y, z, R):
         s = 2.0 * (1.0 - e)
     else:
         s = 2.0 / (1.0 + e)
+    _scaled_matrix(w, x, y, z, s, R)
+
+
+@njit(cache=True, inline="always")
+def _scaled_matrix(w, x, y, z, s, R):
+    """``R`` (3, 3) of the quaternion ``(w, x, y, z)`` with ``s`` for the factor of its products (2 for a
+    unit quaternion, ``2 / |q|^2`` for any)."""
     R[0, 0] = 1.0 - s * (y * y + z * z)
     R[0, 1] = s * (x * y - w * z)
     R[0, 2] = s * (x * z + w * y)
