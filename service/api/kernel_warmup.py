@@ -155,7 +155,7 @@ class KernelWarmup:
                     for pair in pairs
                 ]
             )
-        workers = list(client.scheduler_info().get("workers", {}))
+        workers = list(client.nthreads())  # asked of the scheduler (see fanout.worker_threads)
         self._wait(
             [
                 client.submit(

@@ -189,10 +189,14 @@ def reserved_slots(n_workers: int) -> int:
 
 
 def worker_threads(client) -> int:
-    """Worker threads of ``client``'s cluster (1 when the scheduler cannot be asked)."""
+    """Worker threads of ``client``'s cluster (1 when the scheduler cannot be asked).
+
+    Asked of the scheduler itself (``Client.nthreads``): ``Client.scheduler_info`` answers from the
+    client's cached identity, which its periodic refresh (every 2 s) rewrites *without* the workers, so
+    a call that lost that race read no workers, planned a study for one and, on two workers, halved its
+    chunks (a 2,400-case study ran as one chunk and was not written as its chunks landed)."""
     try:
-        workers = client.scheduler_info().get("workers", {})
-        return max(1, sum(int(w.get("nthreads", 1)) for w in workers.values()))
+        return max(1, sum(int(n) for n in client.nthreads().values()))
     except Exception:  # no live scheduler: size for one worker
         return 1
 

@@ -123,12 +123,14 @@ def run_killing(app, http, tmp_path: Path, kind: str, definition: dict) -> tuple
     starts it (:class:`KillOnFinish`); the study's id and its final status, which must be done."""
     dask = app.state.dask
     marker = tmp_path / "killed"
+    dask.wait_for_workers(2, timeout=60)  # a worker killed by the test before is back
     dask.register_plugin(KillOnFinish(str(marker), kind))
     try:
         sid = http.post("/studies", json=definition).json()["id"]
         info = wait_finished(http, sid, timeout=120)
     finally:
         dask.unregister_worker_plugin(KillOnFinish.name)
+    assert marker.exists(), f"no {kind} task of study {sid} started: {info}"
     assert marker.read_text().startswith(f"isolab-{sid}-{kind}-")  # the kill happened, in that task
     assert info["status"] == "done", info
     return sid, info

@@ -28,7 +28,7 @@ def warmup_on(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 class StubClient:
-    """A Dask client's ``submit`` and ``scheduler_info`` on a thread pool: the plan answers ``cached``,
+    """A Dask client's ``submit`` and ``nthreads`` on a thread pool: the plan answers ``cached``,
     and each compile or load task waits for ``release`` and records what it warmed and where."""
 
     def __init__(self, cached: bool, fail: bool = False):
@@ -38,8 +38,8 @@ class StubClient:
         self.calls: list[tuple[str, list[tuple[str, str]], Any]] = []
         self.pool = ThreadPoolExecutor(4)
 
-    def scheduler_info(self) -> dict[str, Any]:
-        return {"workers": {"tcp://a": {}, "tcp://b": {}}}
+    def nthreads(self) -> dict[str, int]:
+        return {"tcp://a": 1, "tcp://b": 1}
 
     def submit(self, func: Any, *args: Any, workers: list[str] | None = None, **kw: Any) -> Future:
         if func is kernel_warmup.warmup_plan:

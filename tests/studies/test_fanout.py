@@ -127,6 +127,16 @@ def test_chunk_size_inputs_are_checked() -> None:
         choose_chunk_size(0, 2, 1.0)
 
 
+def test_the_worker_count_is_asked_of_the_scheduler_not_the_client_cache(client: Client, monkeypatch) -> None:
+    # the client's periodic refresh caches the scheduler's identity without its workers; a
+    # `scheduler_info()` that lost the race to it read none (a study planned for one worker)
+    client.sync(client._update_scheduler_info, n_workers=0)
+    assert client._scheduler_identity["workers"] == {}
+    monkeypatch.setattr(client, "scheduler_info", lambda *a, **k: client._scheduler_identity)
+    assert fanout.worker_threads(client) == 2
+    assert choose_chunk_size(2400, fanout.worker_threads(client), 1e-4) == 1200  # two chunks, not one
+
+
 # -------------------------------------------------------------------------------------- fan-out
 def test_every_chunk_arrives_once_with_its_cases(client: Client) -> None:
     chunks = plan_chunks(23, 5)
