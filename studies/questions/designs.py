@@ -197,10 +197,22 @@ def latin_hypercube(factors: list[Factor], n: int, seed: int = 0) -> Design:
     n = _check_n(n)
     if not factors:
         return _sampled(factors, np.zeros((n, 0)))
-    from scipy.stats import qmc  # on first use: reading a scene needs no scipy
+    return _sampled(factors, latin_hypercube_unit(len(factors), n, seed))
 
-    u = qmc.LatinHypercube(d=len(factors), rng=np.random.default_rng(seed)).random(n)
-    return _sampled(factors, u)
+
+def latin_hypercube_unit(d: int, n: int, seed: int) -> np.ndarray:
+    """``n`` points of a ``d``-dimensional Latin hypercube in [0, 1)^d, shape (n, d): the points of
+    ``scipy.stats.qmc.LatinHypercube(d, rng=numpy.random.default_rng(seed)).random(n)`` (scrambled,
+    strength 1, no optimisation; equal to them bit for bit, tested), drawn the same way: the engine's
+    generator spawns a child, which draws each point's place in its stratum, then shuffles each
+    dimension's strata. Written here because every Dask worker that runs a chunk rebuilds its study's
+    design, and importing ``scipy.stats`` for it cost each worker process 0.9 s of CPU (0.7 s wall)."""
+    (rng,) = np.random.default_rng(seed).spawn(1)
+    place = rng.uniform(size=(n, d))
+    strata = np.tile(np.arange(1, n + 1), (d, 1))
+    for i in range(d):
+        rng.shuffle(strata[i, :])
+    return (strata.T - place) / n
 
 
 def sobol(factors: list[Factor], n: int, seed: int = 0) -> Design:
