@@ -120,7 +120,6 @@ def pair_driver(method: int, level: int) -> Any:
         lean_nl = False
         g, pbase = P.g, P.pbase
         swt = np.zeros_like(W.sw)  # the lean step's stages' state at the time of a slope
-        first = np.int64(0)  # the first output step, typed as the later ``k + 1``: one compiled observe
         # the arrays the exact method's lean step and the output map read at every step, as views whose
         # references numba does not count (``engine.kernels.params.borrowed``): made once here, so that no
         # step counts one (an atomic add and subtract per array and step, dearer than the step itself)
@@ -153,18 +152,16 @@ def pair_driver(method: int, level: int) -> Any:
             if method == RK4 and level == NONLINEAR:  # the lean step's arrays, once per case
                 V = rk4.nonlinear_views(P, c, W, x, S, idx, swt)
                 lean_nl = rk4.lean_nonlinear(P, c)
-            if linear:
-                output_map.observe(c, 0.0, xv, 0, F0v, tgtv, rtgtv, restv, ptolv, Bv, Qv, GZv)
-            elif level == NONLINEAR:
-                observe_nonlinear(P, c, 0.0, x, W, O, first)
-            else:
-                observe(P, c, level, 0.0, x, W, O, first)
             ET = b(full[c if method == EXACT else 0])
-            for k in range(n_steps[c]):
+            # k = -1 steps nothing and observes the start: one call site of each observer, whose body
+            # (inlined: the output map's and, at the nonlinear level's RK4, the nonlinear one's) numba
+            # then compiles once per driver instead of twice
+            for k in range(-1, n_steps[c]):
                 t0 = k * h
                 t1 = (k + 1) * h
                 ta = t0
-                while True:
+                ok = True
+                while k >= 0:
                     fresh = piece_end <= ta + tol  # a stage enters a new piece (always at the case's start)
                     if fresh:
                         advance_pieces(P, c, ta, idx, tol)
