@@ -39,17 +39,17 @@ for _name in dir(anyio):
 PREWARM_ORDER = (
     ("nonlinear", "rk4"),
     ("lti", "exact"),
+    ("nonlinear", "euler"),
     ("ltv", "rk4"),
+    ("nonlinear", "reference"),
     ("lti", "rk4"),
     ("ltv", "euler"),
     ("lti", "euler"),
-    ("nonlinear", "euler"),
-    ("nonlinear", "reference"),
 )
 """Every (fidelity, integrator) pair the suite runs, the longest to compile first (so the processes finish
-together): nonlinear/rk4 about 70 s of CPU, lti/exact and nonlinear/euler about 40 s, ltv/rk4 34 s (each
-on an empty cache alone, 2026-11-27, numba's compile events); the others about 30 s (the reference
-compiles its right-hand side and its samples' observers as kernels)."""
+together): nonlinear/rk4 about 62 s of CPU, lti/exact about 40 s, nonlinear/euler 36 s, ltv/rk4 28 s,
+the reference about 30 s (it compiles its right-hand side and its samples' observers as kernels), lti/rk4
+20 s, the two linear Euler pairs 10-12 s (on an empty cache, two or three compiling at once, 2026-11-27)."""
 
 
 def pytest_configure(config: pytest.Config) -> None:

@@ -36,17 +36,23 @@ def base_url(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
         yield svc.url
 
 
-@pytest.fixture
-def page(base_url: str) -> Iterator:
+@pytest.fixture(scope="module")
+def chromium() -> Iterator:
+    """One browser for the module (each launch took ~1 s of CPU); each test has a context of its own."""
     with browser() as b:
-        context = b.new_context(viewport=VIEWPORT, accept_downloads=True)
-        tab = context.new_page()
-        # the service's 422 on a bad field is an answer the page shows at the field, not a failure
-        tab.errors = ConsoleErrors(tab, ignore=("status of 422",))
-        tab.requested = []
-        tab.on("request", lambda r: tab.requested.append(r.url))
-        yield tab
-        context.close()
+        yield b
+
+
+@pytest.fixture
+def page(chromium, base_url: str) -> Iterator:
+    context = chromium.new_context(viewport=VIEWPORT, accept_downloads=True)
+    tab = context.new_page()
+    # the service's 422 on a bad field is an answer the page shows at the field, not a failure
+    tab.errors = ConsoleErrors(tab, ignore=("status of 422",))
+    tab.requested = []
+    tab.on("request", lambda r: tab.requested.append(r.url))
+    yield tab
+    context.close()
 
 
 def base_z(page) -> list[float]:
