@@ -30,6 +30,18 @@ def mount_offset(level, x, R, d0, d1, d2):
 
 
 @njit(cache=True, inline="always")
+def diagonal_force(k, cd, c, j, e0, e1, e2, s0, s1, s2):
+    """Force (N, floor frame) of isolator ``j`` of case ``c`` on the floor's axes: ``-k e - c s`` along each,
+    stiffness ``k[c, j]`` (N/m) and damping ``cd[c, j]`` (N s/m), deflection ``e`` (m) and its rate ``s``
+    (m/s) in the floor frame."""
+    return (
+        -k[c, j, 0] * e0 - cd[c, j, 0] * s0,
+        -k[c, j, 1] * e1 - cd[c, j, 1] * s1,
+        -k[c, j, 2] * e2 - cd[c, j, 2] * s2,
+    )
+
+
+@njit(cache=True, inline="always")
 def oriented_force(Q, k0, k1, k2, c0, c1, c2, e0, e1, e2, s0, s1, s2):
     """Force (N, floor frame) of a mount whose own axes are the columns of ``Q`` (3, 3): stiffness ``k``
     (N/m) and damping ``c`` (N s/m) along those axes, deflection ``e`` (m) and its rate ``s`` (m/s) in
@@ -66,6 +78,8 @@ def mount_force(level, x, R, xf, vf, c, j, k, cd, sky, orient, qm, d0, d1, d2, r
     else:
         q0, q1, q2 = cross(w0, w1, w2, d0, d1, d2)
     rel = 1.0 - sky[c, j]
+    e0, e1, e2 = u0 + r0 - xf[0], u1 + r1 - xf[1], u2 + r2 - xf[2]
+    s0, s1, s2 = v0 + q0 - rel * vf[0], v1 + q1 - rel * vf[1], v2 + q2 - rel * vf[2]
     if orient:
         return oriented_force(
             qm[c, j],
@@ -75,18 +89,14 @@ def mount_force(level, x, R, xf, vf, c, j, k, cd, sky, orient, qm, d0, d1, d2, r
             cd[c, j, 0],
             cd[c, j, 1],
             cd[c, j, 2],
-            u0 + r0 - xf[0],
-            u1 + r1 - xf[1],
-            u2 + r2 - xf[2],
-            v0 + q0 - rel * vf[0],
-            v1 + q1 - rel * vf[1],
-            v2 + q2 - rel * vf[2],
+            e0,
+            e1,
+            e2,
+            s0,
+            s1,
+            s2,
         )
-    return (
-        -k[c, j, 0] * (u0 + r0 - xf[0]) - cd[c, j, 0] * (v0 + q0 - rel * vf[0]),
-        -k[c, j, 1] * (u1 + r1 - xf[1]) - cd[c, j, 1] * (v1 + q1 - rel * vf[1]),
-        -k[c, j, 2] * (u2 + r2 - xf[2]) - cd[c, j, 2] * (v2 + q2 - rel * vf[2]),
-    )
+    return diagonal_force(k, cd, c, j, e0, e1, e2, s0, s1, s2)
 
 
 @njit(cache=True, fastmath=False)

@@ -33,7 +33,7 @@ from isolab.engine.kernels.between_steps import (
     peak_point,
 )
 from isolab.engine.kernels.excitation import floor_motion, recorded_floor
-from isolab.engine.kernels.mounts import isolator_forces, mount_force, mount_offset
+from isolab.engine.kernels.mounts import diagonal_force, isolator_forces, mount_force, mount_offset
 from isolab.engine.kernels.params import NONLINEAR, borrowed
 from isolab.engine.kernels.rotations import cross, quat_matrix
 
@@ -417,10 +417,10 @@ def observe(P, c, level, t, x, W, O, step):
 def observe_nonlinear(P, c, t, x, W, O, step):
     """:func:`observe` at the nonlinear level, the same arithmetic on arrays bound once as views whose
     references numba does not count (``engine.kernels.params.borrowed``; :func:`observer_views`), each
-    mount's force computed in the mount loop (the force law on the mount point's velocity the loop takes;
-    ``engine.kernels.mounts.mount_force`` for a mount on its own axes), each multiply fused with the add
-    that takes it (``fastmath={"contract"}``, as in the nonlinear level's RK4 driver, which inlines
-    :func:`observe_nonlinear_on` on views it makes once per case)."""
+    mount's force computed in the mount loop (``engine.kernels.mounts.diagonal_force`` on the mount point's
+    velocity the loop takes; ``engine.kernels.mounts.mount_force`` for a mount on its own axes), each
+    multiply fused with the add that takes it (``fastmath={"contract"}``, as in the nonlinear level's RK4
+    driver, which inlines :func:`observe_nonlinear_on` on views it makes once per case)."""
     return observe_nonlinear_on(P, O, c, t, step, observer_views(P, W, O, x))
 
 
@@ -593,9 +593,18 @@ def observe_nonlinear_on(P, O, c, t, step, V):
             )
         else:
             rel = 1.0 - sky[c, j]
-            F[j, 0] = -kk[c, j, 0] * (u0 + r0 - xf[0]) - cd[c, j, 0] * (v0 + q0 - rel * vf[0])
-            F[j, 1] = -kk[c, j, 1] * (u1 + r1 - xf[1]) - cd[c, j, 1] * (v1 + q1 - rel * vf[1])
-            F[j, 2] = -kk[c, j, 2] * (u2 + r2 - xf[2]) - cd[c, j, 2] * (v2 + q2 - rel * vf[2])
+            F[j, 0], F[j, 1], F[j, 2] = diagonal_force(
+                kk,
+                cd,
+                c,
+                j,
+                u0 + r0 - xf[0],
+                u1 + r1 - xf[1],
+                u2 + r2 - xf[2],
+                v0 + q0 - rel * vf[0],
+                v1 + q1 - rel * vf[1],
+                v2 + q2 - rel * vf[2],
+            )
         skj = sky[c, j]
         f0j = f0[c, j]
         load = f0j + F[j, 2]
