@@ -99,3 +99,12 @@ def pytest_ignore_collect(collection_path: Path, config: pytest.Config) -> bool 
     if collection_path.suffix != ".py" or not collection_path.name.startswith("test_"):
         return None
     return True if SLOW_MODULE.search(collection_path.read_text(encoding="utf-8")) else None
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    """Close the clusters this test process shared between its test modules (tests/shared_cluster.py)."""
+    import sys
+
+    shared = sys.modules.get("tests.shared_cluster")
+    if shared is not None:
+        shared.close_shared_clusters()

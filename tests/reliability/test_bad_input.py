@@ -23,6 +23,7 @@ from benchmarks.live_service import quick_scene, thread_server
 from isolab.service.api.app import create_app
 from isolab.service.api.request_limits import MAX_JSON_DEPTH
 from isolab.service.settings import Settings
+from tests.shared_cluster import shared_scheduler
 
 pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
 
@@ -44,7 +45,9 @@ BASE: dict[str, Any] = {
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> dict:
     data = tmp_path_factory.mktemp("data")
-    settings = Settings(data_dir=data, workers=1, max_cases=MAX_CASES, max_body_bytes=MAX_BODY)
+    settings = Settings(
+        data_dir=data, scheduler_address=shared_scheduler(1), max_cases=MAX_CASES, max_body_bytes=MAX_BODY
+    )
     with thread_server(create_app(settings)) as url:
         yield {"url": url, "data": data}
 

@@ -27,6 +27,7 @@ from isolab.studies.authoring.authoring import MAX_DEPTH, check_text, parse_text
 from isolab.studies.inputs import schema
 from isolab.studies.inputs.definitions import DefinitionError, check_definition
 from isolab.studies.inputs.schema.fields import MAX_MOUNTS, MAX_POINTS, MAX_SEGMENTS, MAX_STAGES
+from tests.shared_cluster import shared_scheduler
 
 FAST_S = 0.1
 
@@ -91,7 +92,7 @@ def test_a_text_just_within_the_depth_is_read() -> None:
 @pytest.mark.slow
 def test_over_http_two_deep_texts_take_no_slot_and_a_small_request_is_answered_at_once(tmp_path) -> None:
     body = json.dumps({"text": DEEP_TEXTS["flow-lists"]}).encode()
-    with thread_server(create_app(Settings(data_dir=tmp_path, workers=1))) as url:
+    with thread_server(create_app(Settings(data_dir=tmp_path, scheduler_address=shared_scheduler(1)))) as url:
         with httpx.Client(base_url=url, timeout=60.0) as http:
             for _ in range(2):
                 start = time.perf_counter()
@@ -157,7 +158,7 @@ def test_over_http_100000_mounts_are_a_fast_422_and_health_stays_fast(tmp_path) 
     scene = quick_scene()
     scene["isolators"] = {"preset": "air", "list": mounts(100_000)}
     content = json.dumps(study(scene=scene), separators=(",", ":")).encode()
-    with thread_server(create_app(Settings(data_dir=tmp_path, workers=1))) as url:
+    with thread_server(create_app(Settings(data_dir=tmp_path, scheduler_address=shared_scheduler(1)))) as url:
         worst = 0.0
         for _ in range(3):
             r, took, latencies = post_and_probe(url, content)

@@ -17,6 +17,7 @@ from benchmarks.live_service import quick_scene, thread_server, wait_finished
 from isolab.service.api.app import create_app
 from isolab.service.settings import Settings
 from isolab.studies.inputs.definitions import DefinitionError, check_definition
+from tests.shared_cluster import shared_scheduler
 
 
 def study(
@@ -67,7 +68,9 @@ def unstable_scene() -> dict:
 
 @pytest.fixture(scope="module")
 def http(tmp_path_factory: pytest.TempPathFactory):
-    settings = Settings(data_dir=tmp_path_factory.mktemp("data"), workers=1, max_cases=1000)
+    settings = Settings(
+        data_dir=tmp_path_factory.mktemp("data"), scheduler_address=shared_scheduler(1), max_cases=1000
+    )
     with thread_server(create_app(settings)) as url, httpx.Client(base_url=url, timeout=60.0) as client:
         yield client
 

@@ -21,6 +21,7 @@ from isolab.service.api.app import create_app
 from isolab.service.settings import Settings
 from isolab.studies.inputs import schema
 from isolab.studies.inputs.definitions import DefinitionError, check_definition
+from tests.shared_cluster import shared_scheduler
 
 REFUSED_WITHIN_S = 1.0
 
@@ -103,7 +104,7 @@ def test_over_http_the_600000_value_study_is_a_422_within_a_second_and_health_st
     bodies = [
         json.dumps(big_study(600_000, units), separators=(",", ":")).encode() for units in (False, True)
     ]
-    with thread_server(create_app(Settings(data_dir=tmp_path, workers=1))) as url:
+    with thread_server(create_app(Settings(data_dir=tmp_path, scheduler_address=shared_scheduler(1)))) as url:
         for content in bodies:
             check_fast_422(url, content)
 

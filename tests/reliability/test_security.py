@@ -17,6 +17,7 @@ from benchmarks.live_service import quick_scene, thread_server
 from isolab.service.api.app import create_app
 from isolab.service.api.schemas import EXAMPLE_CALIBRATION, EXAMPLE_COMPARISON, EXAMPLE_STUDY_TEXT
 from isolab.service.settings import Settings
+from tests.shared_cluster import shared_scheduler
 
 pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
 
@@ -103,7 +104,9 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> dict:
     root = tmp_path_factory.mktemp("lab")
     data = root / "data"
     (root / "secret.txt").write_text(SECRET)
-    settings = Settings(data_dir=data, workers=1, api_token=TOKEN, cors_origins=(ALLOWED,))
+    settings = Settings(
+        data_dir=data, scheduler_address=shared_scheduler(1), api_token=TOKEN, cors_origins=(ALLOWED,)
+    )
     app = create_app(settings)
     with thread_server(app) as url:
         yield {"url": url, "data": data, "root": root, "app": app}

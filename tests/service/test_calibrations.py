@@ -28,6 +28,7 @@ from isolab.studies.answers.calibration.jobs import MAX_CALIBRATION_SECONDS, est
 from isolab.studies.answers.calibration.requests import prepare_request
 from isolab.studies.inputs.study import load_scene
 from isolab.studies.results.calibrations import CalibrationStore
+from tests.shared_cluster import shared_scheduler
 
 TRUE_F_HORIZONTAL = 3.6  # Hz, what the example's measurement was made with
 TRUE_OFFSET = 0.1  # s
@@ -206,7 +207,7 @@ def test_a_stored_calibration_is_run_when_the_service_starts(tmp_path: Path) -> 
     store = CalibrationStore(tmp_path)
     job = store.create(body, estimate_cost(prepare_request(body)).to_json())
     store.update(job["id"], status="running")
-    with TestClient(create_app(Settings(data_dir=tmp_path, workers=1))) as again:
+    with TestClient(create_app(Settings(data_dir=tmp_path, scheduler_address=shared_scheduler(1)))) as again:
         info = wait_done(again, job["id"])
     assert info["status"] == "done"
     assert info["result"]["parameters"] == calibrate_request(body).to_json()["parameters"]

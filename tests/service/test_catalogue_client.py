@@ -18,6 +18,7 @@ from isolab.service.api.app import create_app
 from isolab.service.client import Client, ClientError, catalogue_data, product_frame
 from isolab.service.settings import Settings
 from isolab.studies.inputs.catalogues import catalogue_from_csv, load_catalogue
+from tests.shared_cluster import shared_scheduler
 from tests.studies.test_sizing import CATALOGUE, QUARTER, SCENE
 
 pytestmark = pytest.mark.slow  # a service of its own: `make test-fast` skips it
@@ -40,7 +41,9 @@ soft_dear,air,Test,soft_dear,5,20,2,2,0.1,,,80
 
 @pytest.fixture(scope="module")
 def url(tmp_path_factory: pytest.TempPathFactory):
-    with thread_server(create_app(Settings(data_dir=tmp_path_factory.mktemp("data"), workers=1))) as url:
+    with thread_server(
+        create_app(Settings(data_dir=tmp_path_factory.mktemp("data"), scheduler_address=shared_scheduler(1)))
+    ) as url:
         yield url
 
 

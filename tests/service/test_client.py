@@ -22,6 +22,7 @@ from isolab.service.cli import app as cli_app
 from isolab.service.client import Client, ClientError, read_study_file
 from isolab.service.settings import Settings
 from isolab.studies.inputs.study import load_study
+from tests.shared_cluster import shared_scheduler
 
 pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
 
@@ -30,7 +31,9 @@ G = 9.80665
 
 @pytest.fixture(scope="module")
 def url(tmp_path_factory: pytest.TempPathFactory):
-    with thread_server(create_app(Settings(data_dir=tmp_path_factory.mktemp("data"), workers=2))) as url:
+    with thread_server(
+        create_app(Settings(data_dir=tmp_path_factory.mktemp("data"), scheduler_address=shared_scheduler(2)))
+    ) as url:
         yield url
 
 

@@ -23,7 +23,7 @@ from isolab.studies.run import accuracy
 from isolab.studies.run.accuracy import choose, choose_for_batch, pilot_cases, resolved_simulation
 from isolab.studies.run.costs import STEP_COST
 from isolab.studies.run.error_estimate import ESTIMATED_OUTPUTS, error_sample, output_errors, sizing_error
-from isolab.studies.run.fanout import local_cluster
+from tests.shared_cluster import shared_scheduler
 
 STEPS = (5e-4, 1e-3, 2e-3, 5e-3)  # a short ladder: the truth at 0.5 ms keeps the tests fast
 
@@ -304,9 +304,8 @@ def test_error_sample_is_seeded_and_covers_every_isolator_type() -> None:
 
 @pytest.fixture(scope="module")
 def client():
-    with local_cluster(2) as cluster:
-        with Client(cluster) as c:
-            yield c
+    with Client(shared_scheduler(2)) as c:
+        yield c
 
 
 def _open(store: Store, sid: str) -> xr.Dataset:

@@ -28,7 +28,7 @@ from isolab.studies.run.error_estimate import (
     STATES_REFERENCE_PAIR,
     reference_pair,
 )
-from isolab.studies.run.fanout import local_cluster
+from tests.shared_cluster import shared_scheduler
 
 EXAMPLES = Path(__file__).parents[2] / "studies" / "examples"
 ZENER = {
@@ -108,9 +108,8 @@ def test_valves_and_a_flexible_base_are_refused_naming_the_field() -> None:
 
 @pytest.fixture(scope="module")
 def client():
-    with local_cluster(1) as cluster:
-        with Client(cluster) as c:
-            yield c
+    with Client(shared_scheduler(1)) as c:
+        yield c
 
 
 def levelling_study(simulation: dict) -> dict:

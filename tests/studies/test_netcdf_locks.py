@@ -13,7 +13,7 @@ from distributed import Client
 
 from isolab.studies.results.netcdf_locks import netcdf_writing
 from isolab.studies.results.store import write_netcdf
-from isolab.studies.run.fanout import local_cluster
+from tests.shared_cluster import shared_scheduler
 
 pytestmark = pytest.mark.slow  # a cluster of its own
 
@@ -34,7 +34,7 @@ def write_in_task(path: str) -> str:
 
 
 def test_a_worker_writes_datasets_under_its_own_lock_not_the_clusters(tmp_path: Path) -> None:
-    with local_cluster(1) as cluster, Client(cluster) as client:
+    with Client(shared_scheduler(1)) as client:
         # what xarray does on its own in a task: the cluster-wide lock (so the guard has something to do)
         assert "distributed" in client.submit(write_lock_module, False, pure=False).result()
         assert "distributed" not in client.submit(write_lock_module, True, pure=False).result()

@@ -33,9 +33,9 @@ from isolab.studies.questions.goals import (
 from isolab.studies.results.cases import case_table, filter_mask, parse_filter
 from isolab.studies.results.dataset import failed_arrays, from_chunks, to_dataset
 from isolab.studies.results.store import Store
-from isolab.studies.run.fanout import local_cluster
 from isolab.studies.run.optimisation import GENERATION_FILE, Journal, non_dominated, optimise
 from isolab.studies.run.runner import run_study
+from tests.shared_cluster import shared_scheduler
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_fanout import small_study  # noqa: E402  (the fan-out tests' cut-down scriber)
@@ -314,9 +314,8 @@ def test_bad_objective_is_422_through_rest(tmp_path: Path) -> None:
 
 @pytest.fixture(scope="module")
 def client():
-    with local_cluster(2) as cluster:
-        with Client(cluster) as c:
-            yield c
+    with Client(shared_scheduler(2)) as c:
+        yield c
 
 
 @pytest.fixture(scope="module")
@@ -458,7 +457,9 @@ def test_the_air_mount_example_is_checked_as_written() -> None:
 
 @pytest.mark.slow
 def test_an_optimisation_through_rest_reports_generations_and_filters_its_front(tmp_path: Path) -> None:
-    with TestClient(create_app(Settings(data_dir=tmp_path, workers=2, max_cases=1000))) as http:
+    with TestClient(
+        create_app(Settings(data_dir=tmp_path, scheduler_address=shared_scheduler(2), max_cases=1000))
+    ) as http:
         r = http.post("/studies", json=optimize_study(budget=24, population=12))
         assert r.status_code == 202 and r.json()["n_cases"] == 24, r.text
         sid = r.json()["id"]

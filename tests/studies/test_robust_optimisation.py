@@ -22,10 +22,10 @@ from isolab.studies.questions.criteria import add_criteria
 from isolab.studies.questions.goals import PENALTY, Robust, goal_values, robust_values
 from isolab.studies.results.cases import case_table
 from isolab.studies.results.dataset import result_arrays, to_dataset
-from isolab.studies.run.fanout import local_cluster
 from isolab.studies.run.optimisation import Journal, optimise
 from isolab.studies.run.optimum import optimum_dataset
 from isolab.studies.run.robust import CloudPlan
+from tests.shared_cluster import shared_scheduler
 
 DENSITY = "machine.block.density"
 
@@ -350,21 +350,20 @@ def test_a_cancelled_robust_study_resumes_to_the_same_result_on_a_cluster(tmp_pa
     )
     d["design"].update(budget=12, population=4, robust={"samples": 4, "require": "75 %"})
     study = validate_study(d)
-    with local_cluster(2) as cluster:
-        with Client(cluster) as client:
-            whole_store = Store(tmp_path / "whole")
-            whole = whole_store.open_dataset(run_study(study, whole_store, client))
-            store = Store(tmp_path / "resumed")
-            cancel = threading.Event()
+    with Client(shared_scheduler(2)) as client:
+        whole_store = Store(tmp_path / "whole")
+        whole = whole_store.open_dataset(run_study(study, whole_store, client))
+        store = Store(tmp_path / "resumed")
+        cancel = threading.Event()
 
-            def progress(done: int, total: int) -> None:
-                assert total == 12 * 5  # every draw counts
-                if done > 25:  # in the second generation
-                    cancel.set()
+        def progress(done: int, total: int) -> None:
+            assert total == 12 * 5  # every draw counts
+            if done > 25:  # in the second generation
+                cancel.set()
 
-            sid = run_study(study, store, client, progress=progress, cancel=cancel)
-            assert store.get(sid)["status"] == "cancelled"
-            assert run_study(study, store, client, study_id=sid) == sid
+        sid = run_study(study, store, client, progress=progress, cancel=cancel)
+        assert store.get(sid)["status"] == "cancelled"
+        assert run_study(study, store, client, study_id=sid) == sid
     row = store.get(sid)
     assert row["status"] == "done" and row["n_cases"] == row["n_done"] == 60
     ds = store.open_dataset(sid)

@@ -27,7 +27,7 @@ from isolab.studies.run.error_estimate import (
     reference_pair,
     sample_arrays,
 )
-from isolab.studies.run.fanout import local_cluster
+from tests.shared_cluster import shared_scheduler
 
 EXAMPLES = Path(__file__).parents[2] / "studies" / "examples"
 
@@ -85,9 +85,8 @@ def test_a_flexible_base_is_estimated_at_ltv_rk4_and_the_estimate_says_so() -> N
 
 @pytest.fixture(scope="module")
 def client():
-    with local_cluster(1) as cluster:
-        with Client(cluster) as c:
-            yield c
+    with Client(shared_scheduler(1)) as c:
+        yield c
 
 
 def test_a_stored_flexible_base_study_carries_its_measured_error(client: Client, tmp_path: Path) -> None:
