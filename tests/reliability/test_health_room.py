@@ -3,6 +3,7 @@ chunk of the running study) is degraded, though a 64 kB file still fits."""
 
 from __future__ import annotations
 
+import os
 import shutil
 from collections import namedtuple
 from pathlib import Path
@@ -51,6 +52,24 @@ def test_without_a_saved_chunk_a_typical_chunk_is_the_estimate(tmp_path: Path, m
     assert health.probe_store(tmp_path).writable is False
     with_free(monkeypatch, health.TYPICAL_CHUNK_BYTES + 1)
     assert health.probe_store(tmp_path).writable is True
+
+
+def test_a_study_assembled_while_health_looks_is_passed_over(tmp_path: Path, monkeypatch) -> None:
+    """A study finishing removes its chunk folder between /health listing the folders and reading one:
+    the estimate goes on without it (it was a 500 of /health)."""
+    saved_chunk(tmp_path, int(1.5 * MB))
+    going = tmp_path / "studies" / f"{'b' * 32}.chunks"
+    going.mkdir()
+    (going / "0.npz").write_bytes(b"\0" * (3 * MB))
+    real = os.scandir
+
+    def scandir_as_the_study_finishes(path):
+        if not isinstance(path, int) and Path(path) == going:
+            shutil.rmtree(going)
+        return real(path)
+
+    monkeypatch.setattr(os, "scandir", scandir_as_the_study_finishes)
+    assert health.next_write_bytes(tmp_path) == int(1.5 * MB)
 
 
 def test_health_answers_degraded_with_the_reason(tmp_path: Path, monkeypatch) -> None:

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import hmac
+import os
 import shutil
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -89,8 +91,25 @@ class HealthReport(HealthStatus):
 
 def next_write_bytes(root: Path) -> int:
     """Estimate of the store's next write, bytes: the largest chunk a study has saved and not yet
-    assembled (its next chunk is about as large), else :data:`TYPICAL_CHUNK_BYTES`."""
-    sizes = [p.stat().st_size for p in (root / "studies").glob("*.chunks/*.npz") if p.is_file()]
+    assembled (its next chunk is about as large), else :data:`TYPICAL_CHUNK_BYTES`.
+
+    Studies finish while it looks: a chunk folder or file that goes meanwhile (its study was assembled)
+    is passed over, never an error of ``/health``."""
+    sizes = []
+    try:
+        with os.scandir(root / "studies") as entries:
+            folders = [entry.path for entry in entries if entry.name.endswith(".chunks")]
+    except OSError:  # no store yet
+        folders = []
+    for folder in folders:
+        try:
+            with os.scandir(folder) as files:
+                chunks = [file for file in files if file.name.endswith(".npz")]
+        except OSError:  # the study was assembled and its chunks removed
+            continue
+        for chunk in chunks:
+            with contextlib.suppress(OSError):
+                sizes.append(chunk.stat().st_size)
     return max(sizes, default=TYPICAL_CHUNK_BYTES)
 
 
