@@ -34,21 +34,22 @@ for _name in dir(anyio):
 # workers that a test starts, compiled the kernels of every pair it met first: the two test processes
 # started on the same pairs at once and compiled them twice, and services started meanwhile a third and
 # fourth time. The controller of a parallel run compiles each pair once before the test processes start,
-# one pair per child process, as many at a time as there are test processes (`ISOLAB_TEST_PREWARM=off`
-# skips it).
+# one pair per child process, as many at a time as the machine has cores: compiling is CPU-bound, and three
+# compiles on 2 cores took 146 s (279 s of CPU) where two at a time took 119 s (224 s of CPU), on an empty
+# cache one after the other (`ISOLAB_TEST_PREWARM=off` skips it).
 PREWARM_ORDER = (
     ("nonlinear", "rk4"),
     ("lti", "exact"),
     ("nonlinear", "euler"),
-    ("ltv", "rk4"),
     ("nonlinear", "reference"),
+    ("ltv", "rk4"),
     ("lti", "rk4"),
     ("ltv", "euler"),
     ("lti", "euler"),
 )
 """Every (fidelity, integrator) pair the suite runs, the longest to compile first (so the processes finish
-together): nonlinear/rk4 about 62 s of CPU, lti/exact about 40 s, nonlinear/euler 36 s, ltv/rk4 28 s,
-the reference about 30 s (it compiles its right-hand side and its samples' observers as kernels), lti/rk4
+together): nonlinear/rk4 about 62 s of CPU, lti/exact about 40 s, nonlinear/euler 36 s, the reference
+about 30 s (it compiles its right-hand side and its samples' observers as kernels), ltv/rk4 28 s, lti/rk4
 20 s, the two linear Euler pairs 10-12 s (on an empty cache, two or three compiling at once, 2026-11-27)."""
 
 
@@ -70,13 +71,14 @@ def pytest_configure(config: pytest.Config) -> None:
     if not pairs:
         return
     script = "import sys\nfrom isolab.studies.run import kernel_cache as k\nk.warm_kernels([sys.argv[1:]])"
+    at_once = max(1, min(processes, len(os.sched_getaffinity(0))))
     started = time.perf_counter()
-    print(f"\nisolab: compiling the kernels of {len(pairs)} pairs, {processes} at a time ...", flush=True)
+    print(f"\nisolab: compiling the kernels of {len(pairs)} pairs, {at_once} at a time ...", flush=True)
 
     def compile_pair(pair: tuple[str, str]) -> int:
         return subprocess.run([sys.executable, "-c", script, *pair], check=False).returncode
 
-    with ThreadPoolExecutor(max_workers=processes) as pool:
+    with ThreadPoolExecutor(max_workers=at_once) as pool:
         codes = list(pool.map(compile_pair, pairs))
     failed = [f"{f}/{i}" for (f, i), code in zip(pairs, codes, strict=True) if code]
     print(
