@@ -15,6 +15,8 @@ import httpx
 import pytest
 from ui_driver import CHROMIUM, ConsoleErrors, browser, plot_rendered, service, wait_until
 
+from tests.shared_cluster import shared_scheduler
+
 pytestmark = [
     pytest.mark.slow,
     pytest.mark.skipif(
@@ -34,7 +36,7 @@ def chromium() -> Iterator:
 
 @pytest.fixture(scope="module")
 def base(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
-    with service(tmp_path_factory.mktemp("answers")) as svc:
+    with service(tmp_path_factory.mktemp("answers"), scheduler=shared_scheduler(2)) as svc:
         yield svc.url
 
 

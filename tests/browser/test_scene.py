@@ -14,6 +14,8 @@ import pytest
 import yaml
 from ui_driver import CHROMIUM, ConsoleErrors, browser, overlapping, service, settle, wait_until
 
+from tests.shared_cluster import shared_scheduler
+
 pytestmark = [
     pytest.mark.slow,
     pytest.mark.skipif(
@@ -32,7 +34,7 @@ def field(path: list) -> str:
 
 @pytest.fixture(scope="module")
 def base_url(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
-    with service(tmp_path_factory.mktemp("scene")) as svc:
+    with service(tmp_path_factory.mktemp("scene"), scheduler=shared_scheduler(2)) as svc:
         yield svc.url
 
 

@@ -26,6 +26,8 @@ from ui_driver import (
     wait_until,
 )
 
+from tests.shared_cluster import shared_scheduler
+
 pytestmark = [
     pytest.mark.slow,  # services, clusters or processes of their own: `make test-fast` skips them
     pytest.mark.skipif(
@@ -50,7 +52,7 @@ def chromium() -> Iterator:
 
 @pytest.fixture(scope="module")
 def open_service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
-    with service(tmp_path_factory.mktemp("ui")) as svc:
+    with service(tmp_path_factory.mktemp("ui"), scheduler=shared_scheduler(2)) as svc:
         yield svc.url
 
 
@@ -217,7 +219,7 @@ def test_the_example_with_yaml_aliases_checks_and_compares(page, open_service: s
 
 
 def test_with_a_token_the_page_asks_once_and_the_api_stays_guarded(chromium, tmp_path: Path) -> None:
-    with service(tmp_path, token=TOKEN, workers=1) as svc:
+    with service(tmp_path, token=TOKEN, scheduler=shared_scheduler(1)) as svc:
         base = svc.url
         assert httpx.get(f"{base}/studies").status_code == 401
         assert httpx.get(f"{base}/ui/").status_code == 200  # the shell holds no data

@@ -52,10 +52,16 @@ def browser() -> Iterator:
 
 
 @contextmanager
-def service(tmp: Path, token: str | None = None, workers: int = 2) -> Iterator[ServiceProcess]:
-    """A real ``isolab serve`` on a free loopback port, with a study store under ``tmp``."""
+def service(
+    tmp: Path, token: str | None = None, workers: int = 2, scheduler: str | None = None
+) -> Iterator[ServiceProcess]:
+    """A real ``isolab serve`` on a free loopback port, with a study store under ``tmp``: with a cluster
+    of ``workers`` of its own, or joined to the Dask ``scheduler`` at that address (the tests give the
+    shared cluster of their process, tests/shared_cluster.py)."""
     env = {"ISOLAB_API_TOKEN": token} if token else {"ISOLAB_API_TOKEN": ""}
     env["ISOLAB_KERNEL_WARMUP"] = "on"  # the suite turns it off (tests/conftest.py); a page waits for it
+    if scheduler is not None:
+        env["DASK_SCHEDULER_ADDRESS"] = scheduler
     with ServiceProcess(tmp / "data", workers=workers, env=env) as svc:
         wait_kernels(svc, token)
         yield svc
