@@ -31,7 +31,6 @@ from isolab.studies.run.fanout import (
     FanoutReport,
     ReservedLane,
     choose_chunk_size,
-    local_cluster,
     plan_chunks,
     reserved_lane,
     reserved_slots,
@@ -39,6 +38,7 @@ from isolab.studies.run.fanout import (
     run_chunks,
 )
 from isolab.studies.run.runner import finish_study, make_client, run_local, run_study
+from tests.shared_cluster import shared_scheduler
 
 pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
 
@@ -48,9 +48,8 @@ cloudpickle.register_pickle_by_value(sys.modules[__name__])
 
 @pytest.fixture(scope="module")
 def client():
-    with local_cluster(2) as cluster:
-        with Client(cluster) as c:
-            yield c
+    with Client(shared_scheduler(2)) as c:
+        yield c
 
 
 def slow_chunk(*args) -> dict[str, np.ndarray]:

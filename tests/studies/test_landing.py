@@ -17,7 +17,7 @@ from isolab.engine.results import OK
 from isolab.studies.inputs.study import parse_study
 from isolab.studies.results.store import Store
 from isolab.studies.run import landing, runner
-from isolab.studies.run.fanout import local_cluster, plan_chunks, run_chunk
+from isolab.studies.run.fanout import plan_chunks, run_chunk
 from isolab.studies.run.landing import (
     LANDING_CASES,
     WriterStopped,
@@ -26,6 +26,7 @@ from isolab.studies.run.landing import (
     wait_for_chunk,
     write_as_chunks_land,
 )
+from tests.shared_cluster import shared_scheduler
 
 N_CASES = 2400
 """A Latin hypercube of the scriber (studies/examples/lhs-10000.yaml) cut to this many cases of 0.3 s."""
@@ -167,12 +168,11 @@ def client():
     # a study of N_CASES is written as it lands (the runner decides; the workers only write)
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv("ISOLAB_LANDING_CASES", str(N_CASES))
-        with local_cluster(2) as cluster:
-            with Client(cluster) as c:
-                yield c
+        with Client(shared_scheduler(2)) as c:
+            yield c
 
 
-@pytest.mark.slow  # a cluster of its own
+@pytest.mark.slow  # a cluster
 def test_a_run_writes_its_dataset_as_chunks_land_and_resumes_after_a_cancel(
     client: Client, tmp_path: Path, monkeypatch
 ) -> None:
