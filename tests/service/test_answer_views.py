@@ -23,7 +23,7 @@ from isolab.studies.inputs.study import Study, validate_study
 from isolab.studies.questions.floor import ISO_LEVELS, VC_LEVELS
 from tests.service.conftest import live_app
 
-pytestmark = pytest.mark.slow  # a service with a Dask worker of its own
+pytestmark = pytest.mark.slow  # a service (on the shared 1-worker cluster)
 
 SITE = {
     "bands": {

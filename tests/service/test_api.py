@@ -1,4 +1,4 @@
-"""The REST API on a real app: a 2-worker LocalCluster, a study store in a temporary directory.
+"""The REST API on a real app: the shared 2-worker cluster, a study store in a temporary directory.
 
 One app serves the whole module; one small grid study (3 isolator types x 2 Y accelerations, LTI with
 exact discretisation at 2 ms over 2 s) runs once and most tests read it.

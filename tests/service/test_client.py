@@ -1,6 +1,6 @@
 """The Python client and the ``isolab submit/status/fetch`` commands against a real uvicorn server.
 
-The server runs in a thread on 127.0.0.1 (a free port) with a 2-worker LocalCluster, one for the module.
+The server runs in a thread on 127.0.0.1 (a free port) joined to the test process's shared 2-worker cluster.
 """
 
 from __future__ import annotations

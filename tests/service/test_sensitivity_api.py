@@ -1,4 +1,4 @@
-"""``/studies/{id}/sensitivity``, its PNG, the client and the CLI on a real app (2-worker LocalCluster):
+"""``/studies/{id}/sensitivity``, its PNG, the client and the CLI on a real app (the shared cluster):
 a small saltelli study of the example scene runs once and every test reads it."""
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from isolab.service.client import Client, sensitivity_frame
 from isolab.studies.answers import sensitivity as sensitivity_module
 from tests.service.conftest import live_app
 
-pytestmark = pytest.mark.slow  # a cluster of its own
+pytestmark = pytest.mark.slow  # a service and a cluster (its test process's shared one)
 
 N_BASE = 32
 OUTPUT = "peak_point_displacement.tool.z"

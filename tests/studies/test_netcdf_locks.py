@@ -15,7 +15,7 @@ from isolab.studies.results.netcdf_locks import netcdf_writing
 from isolab.studies.results.store import write_netcdf
 from tests.shared_cluster import shared_scheduler
 
-pytestmark = pytest.mark.slow  # a cluster of its own
+pytestmark = pytest.mark.slow  # a cluster (its test process's shared one)
 
 
 def write_lock_module(guarded: bool) -> str:
