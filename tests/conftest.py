@@ -48,9 +48,10 @@ PREWARM_ORDER = (
     ("lti", "euler"),
 )
 """Every (fidelity, integrator) pair the suite runs, the longest to compile first (so the processes finish
-together): nonlinear/rk4 about 62 s of CPU, lti/exact about 40 s, nonlinear/euler 36 s, the reference
-about 30 s (it compiles its right-hand side and its samples' observers as kernels), ltv/rk4 28 s, lti/rk4
-20 s, the two linear Euler pairs 10-12 s (on an empty cache, two or three compiling at once, 2026-11-27)."""
+together). CPU of each on an empty cache, two processes compiling four pairs each one after the other
+(2026-11-27): nonlinear/rk4 56 s, lti/exact 34 s (each the first of its process, with the kernels every
+pair shares), the reference 44 s (it compiles its right-hand side and its samples' observers as
+kernels), nonlinear/euler 40 s, ltv/rk4 26 s, lti/rk4 15 s, ltv/euler 12 s, lti/euler 10.5 s."""
 
 
 def pytest_configure(config: pytest.Config) -> None:
