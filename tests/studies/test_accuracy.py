@@ -304,7 +304,7 @@ def test_error_sample_is_seeded_and_covers_every_isolator_type() -> None:
 
 @pytest.fixture(scope="module")
 def client():
-    with Client(shared_scheduler(2)) as c:
+    with Client(shared_scheduler(1)) as c:
         yield c
 
 
