@@ -118,6 +118,16 @@ ran 3-5 % slower in a worker than in a plain process. A worker holds one chunk's
 memory glibc keeps for reuse is bounded by a chunk's."""
 
 
+LOST_WORKER_TIMEOUT_S = 120
+"""Seconds such a cluster waits for a killed worker's replacement to join before it closes that worker's
+nanny for good (Dask's ``distributed.deploy.lost-worker-timeout``, 15 s by default). A replacement slower
+than that (a spawned process's start and imports on a loaded machine) was registered and then closed with
+its nanny: the service went on with one worker of two, for good (seen in the fault tests under a full test
+run; with the timeout at 0.5 s a killed worker of an idle 2-worker cluster is lost the same way). Dask reads
+the setting in the cluster's own process whenever a worker goes, not at the cluster's start, so
+:func:`local_cluster` sets it for the process."""
+
+
 def cluster_config_file() -> dict[str, Any]:
     """:data:`CLUSTER_HOUSEKEEPING` as a Dask configuration file holds it (nested; a ``null`` removes a
     setting): the image writes it to ``/etc/dask/isolab.yaml``, where the ``dask scheduler`` and ``dask
@@ -169,11 +179,16 @@ def local_cluster(workers: int, dashboard_address: str | None = None, **settings
     """A ``distributed.LocalCluster`` of ``workers`` processes with one thread each, every part of it on
     :data:`LOOPBACK`, with :data:`CLUSTER_HOUSEKEEPING`; ``dashboard_address`` (``"127.0.0.1:<port>"``)
     serves Dask's dashboard, None none. ``settings`` are more Dask settings (dotted names, as
-    ``dask.config.set`` takes them) for the cluster's scheduler and workers (their nannies hand them on)."""
+    ``dask.config.set`` takes them) for the cluster's scheduler and workers (their nannies hand them on).
+    A killed worker's replacement is waited for :data:`LOST_WORKER_TIMEOUT_S` seconds at least."""
     import dask
+    from dask.utils import parse_timedelta
     from distributed import LocalCluster
 
     config, arguments = local_cluster_arguments(workers, dashboard_address, **settings)
+    lost = "distributed.deploy.lost-worker-timeout"
+    if parse_timedelta(dask.config.get(lost)) < LOST_WORKER_TIMEOUT_S:  # a longer one set is kept
+        dask.config.set({lost: f"{LOST_WORKER_TIMEOUT_S}s"})  # for the process: read when a worker goes
     with dask.config.set(config):
         return LocalCluster(**arguments)
 

@@ -25,6 +25,7 @@ from isolab.service.api.app import create_app
 from isolab.service.settings import Settings
 from isolab.studies.inputs.study import Study
 from isolab.studies.results.store import Store, write_netcdf
+from isolab.studies.run.fanout import LOST_WORKER_TIMEOUT_S, local_cluster
 
 pytestmark = pytest.mark.slow  # services, clusters or processes of their own: `make test-fast` skips them
 
@@ -69,6 +70,27 @@ def app_client(tmp_path_factory: pytest.TempPathFactory):
     app = create_app(Settings(data_dir=data, workers=2))
     with TestClient(app) as http:
         yield app, http, data
+
+
+def test_a_killed_workers_replacement_slower_than_dasks_wait_is_kept() -> None:
+    """Dask closes a killed worker's nanny for good when the replacement has not joined within its
+    ``lost-worker-timeout`` (15 s by default; a loaded machine's spawn and imports took longer). Here the
+    process's setting is 0.5 s, shorter than any replacement takes: the cluster isolab starts waits
+    ``LOST_WORKER_TIMEOUT_S`` instead, and keeps both workers."""
+    import dask
+    from distributed import Client
+
+    with dask.config.set({"distributed.deploy.lost-worker-timeout": "0.5s"}):
+        with local_cluster(2) as cluster, Client(cluster) as client:
+            killed = next(iter(client.run(os.getpid).values()))
+            os.kill(killed, signal.SIGKILL)
+            deadline = time.monotonic() + 60
+            while len(pids := set(client.run(os.getpid, on_error="ignore").values()) - {killed}) < 2:
+                assert time.monotonic() < deadline, f"workers after the kill: {pids}"
+                time.sleep(0.2)
+            time.sleep(1.0)  # longer than the process's 0.5 s: Dask would have closed the nanny by now
+            assert len(client.nthreads()) == 2 and len(cluster.workers) == 2
+    assert LOST_WORKER_TIMEOUT_S >= 60
 
 
 def test_a_worker_killed_mid_chunk_is_replaced_and_the_study_completes(app_client) -> None:
