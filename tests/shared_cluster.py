@@ -17,19 +17,18 @@ from __future__ import annotations
 
 from typing import Any
 
-from isolab.service.api.app import WORKER_SATURATION
-from isolab.studies.run.fanout import local_cluster
+from isolab.service.api.app import service_cluster
 
 _CLUSTERS: dict[int, Any] = {}
 
 
 def shared_scheduler(workers: int) -> str:
-    """The address of this test process's cluster of ``workers`` worker processes (one thread each, the
-    service's own Dask settings), started at its first use and closed when the test process ends
-    (:func:`close_shared_clusters`)."""
+    """The address of this test process's cluster of ``workers`` worker processes, the one the service
+    starts (``service.api.app.service_cluster``), started at its first use and closed when the test
+    process ends (:func:`close_shared_clusters`)."""
     cluster = _CLUSTERS.get(workers)
     if cluster is None or cluster.status.name != "running":
-        cluster = local_cluster(workers, **{"distributed.scheduler.worker-saturation": WORKER_SATURATION})
+        cluster = service_cluster(workers)
         _CLUSTERS[workers] = cluster
     return str(cluster.scheduler_address)
 

@@ -89,6 +89,16 @@ def free_dashboard_address(port: int | None) -> str | None:
     return f"{LOOPBACK}:{port}"
 
 
+def service_cluster(workers: int, dashboard_address: str | None = None) -> LocalCluster:
+    """The LocalCluster the service starts when it joins no scheduler: ``workers`` processes of one thread,
+    on loopback (:func:`isolab.studies.run.fanout.local_cluster`). A worker holds only the chunk it runs
+    (:data:`WORKER_SATURATION`): the next one is picked when it is free, by priority, so a study submitted
+    while a large one runs waits for one chunk (see studies.run.fanout), not for two."""
+    return local_cluster(
+        workers, dashboard_address, **{"distributed.scheduler.worker-saturation": WORKER_SATURATION}
+    )
+
+
 def start_dask(settings: Settings) -> tuple[Client, LocalCluster | None]:
     """Open the Dask client the service runs on.
 
@@ -101,13 +111,7 @@ def start_dask(settings: Settings) -> tuple[Client, LocalCluster | None]:
     if settings.scheduler_address is not None:
         log.info("joining Dask scheduler at %s", settings.scheduler_address)
         return Client(settings.scheduler_address), None
-    # a worker holds only the chunk it runs: the next one is picked when it is free, by priority, so a
-    # study submitted while a large one runs waits for one chunk (see studies.run.fanout), not for two
-    cluster = local_cluster(
-        settings.workers,
-        free_dashboard_address(settings.dashboard_port),
-        **{"distributed.scheduler.worker-saturation": WORKER_SATURATION},
-    )
+    cluster = service_cluster(settings.workers, free_dashboard_address(settings.dashboard_port))
     try:
         client = Client(cluster)
         # the workers share this machine's cores with the API: the API answers first (see worker_priority)
