@@ -13,7 +13,7 @@ from collections.abc import Iterator
 
 import httpx
 import pytest
-from ui_driver import CHROMIUM, ConsoleErrors, browser, plot_rendered, service, wait_until
+from ui_driver import CHROMIUM, ConsoleErrors, plot_rendered, service, wait_until
 
 from tests.shared_cluster import shared_scheduler
 
@@ -26,12 +26,6 @@ pytestmark = [
 
 VIEWPORT = {"width": 1300, "height": 900}
 PERCENT = re.compile(r"^[+−]\d+\.\d %$")
-
-
-@pytest.fixture(scope="module")
-def chromium() -> Iterator:
-    with browser() as b:
-        yield b
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,7 @@ from collections.abc import Iterator
 
 import pytest
 import yaml
-from ui_driver import CHROMIUM, ConsoleErrors, browser, overlapping, service, settle, wait_until
+from ui_driver import CHROMIUM, ConsoleErrors, overlapping, service, settle, wait_until
 
 from tests.shared_cluster import shared_scheduler
 
@@ -36,13 +36,6 @@ def field(path: list) -> str:
 def base_url(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     with service(tmp_path_factory.mktemp("scene"), scheduler=shared_scheduler(2)) as svc:
         yield svc.url
-
-
-@pytest.fixture(scope="module")
-def chromium() -> Iterator:
-    """One browser for the module (each launch took ~1 s of CPU); each test has a context of its own."""
-    with browser() as b:
-        yield b
 
 
 @pytest.fixture

@@ -16,7 +16,6 @@ import pytest
 from ui_driver import (
     CHROMIUM,
     ConsoleErrors,
-    browser,
     overlapping,
     plot_rendered,
     service,
@@ -42,12 +41,6 @@ YTITLES = "#traces text[class^='y'][class$='title']"
 LEGENDS = "#traces g.infolayer > g[class^='legend']"
 """The legends of a figure (plotly's ``legend``, ``legend2``...)."""
 MOTIONS = re.compile(r"^(heave|pitch|roll|yaw|surge|sway)( \+ (heave|pitch|roll|yaw|surge|sway))?$")
-
-
-@pytest.fixture(scope="module")
-def chromium() -> Iterator:
-    with browser() as b:
-        yield b
 
 
 @pytest.fixture(scope="module")
