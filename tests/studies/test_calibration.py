@@ -411,3 +411,28 @@ def test_simulation_choices_the_fit_cannot_use_are_refused(simulation, words):
         calibrate(NOMINAL, coarse, THREE[:1], simulation=simulation)
     (d,) = err.value.details
     assert d["loc"] == ["body", "simulation", next(iter(simulation))] and words in d["msg"], d
+
+
+def test_the_offset_scan_filters_its_predictions_side_by_side_as_each_alone(measured):
+    """``predict_many`` (the offset scan's, filtered in blocks of columns) gives each offset's ``predict``
+    to round-off, also across the blocks it splits a long scan into, and the filtered acceleration
+    channel is really filtered (zero mean, unlike the raw interpolation)."""
+    from isolab.studies.answers.calibration import model as channel_model
+    from isolab.studies.answers.calibration.fit import prepare_calibration
+
+    prep = prepare_calibration(NOMINAL, measured, THREE)
+    m = prep.model
+    hist = m.histories(np.array([[p.start for p in prep.params]]))[0]
+    taus = np.linspace(-0.05, 0.3, 37)
+    alone = np.stack([m.predict(hist, t) for t in taus])
+    scale = np.max(np.abs(alone), axis=(0, 1))
+    assert np.max(np.abs(m.predict_many(hist, taus) - alone) / scale) < 1e-12
+    block = channel_model.FILTER_BLOCK
+    try:
+        channel_model.FILTER_BLOCK = 5 * m.t.size * alone.shape[2]  # 5 offsets a block: 8 blocks
+        assert np.max(np.abs(m.predict_many(hist, taus) - alone) / scale) < 1e-12
+    finally:
+        channel_model.FILTER_BLOCK = block
+    raw = np.stack([m.sample(hist, t) for t in taus])
+    acc = m.accel[0]
+    assert np.max(np.abs(raw[..., acc] - alone[..., acc])) > 0.01 * scale[acc]

@@ -345,7 +345,7 @@ def _fit(prep: PreparedFit) -> Calibration:
         else:
             taus = np.linspace(offset[0], offset[1], SCAN_POINTS) if not prep.offset_fixed else offset[:1]
             rms0 = np.sqrt(np.mean(y**2, axis=0)) + 1e-300
-            cost = [float(np.sum(((model.predict(hist, t) - y) / rms0) ** 2)) for t in taus]
+            cost = np.sum(((model.predict_many(hist, taus) - y) / rms0) ** 2, axis=(1, 2))
             tau = float(taus[int(np.argmin(cost))])
         return min(max(tau, lower[P]), upper[P])
 
