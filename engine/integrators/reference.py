@@ -98,7 +98,7 @@ def observe_samples(case, times, states, step):
             normalise_quaternion(y)
             ok = observe_nonlinear(case.P, case.c, times[j], y, case.W, case.O, step + j)
         else:
-            ok = observe(case.P, case.c, case.level, times[j], y, case.W, case.O, step + j)
+            ok = observe(case.P, case.c, times[j], y, case.W, case.O, step + j)
         if not ok:
             return j
     return times.shape[0]
@@ -117,7 +117,7 @@ def watch(P: Any, c: int, level: int, t: float, x: np.ndarray, W: Any, O: Any, s
     observer as the stepped methods' driver calls it (the same outputs, bit for bit)."""
     if level == NONLINEAR:
         return observe_nonlinear(P, c, t, x, W, O, step)
-    return observe(P, c, level, t, x, W, O, step)
+    return observe(P, c, t, x, W, O, step)
 
 
 def run(

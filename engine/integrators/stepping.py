@@ -220,7 +220,7 @@ def pair_driver(method: int, level: int) -> Any:
                 elif level == NONLINEAR:
                     seen = observe_nonlinear(P, c, t1, x, W, O, k + 1)
                 else:
-                    seen = observe(P, c, level, t1, x, W, O, k + 1)
+                    seen = observe(P, c, t1, x, W, O, k + 1)
                 if not seen:
                     status[c] = UNSTABLE
                     break

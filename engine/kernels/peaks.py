@@ -34,7 +34,7 @@ from isolab.engine.kernels.between_steps import (
 )
 from isolab.engine.kernels.excitation import floor_motion, recorded_floor
 from isolab.engine.kernels.mounts import diagonal_force, isolator_forces, mount_force, mount_offset
-from isolab.engine.kernels.params import NONLINEAR, borrowed
+from isolab.engine.kernels.params import LTI, NONLINEAR, borrowed
 from isolab.engine.kernels.rotations import cross, quat_matrix
 
 Peaks = namedtuple(
@@ -204,11 +204,11 @@ def finish_settling(O: Peaks, t_end: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, fastmath=False)
-def observe(P, c, level, t, x, W, O, step):
-    """Update case ``c``'s peaks with the state ``x`` (12 + nz,) of a linear level (``level``: ``LTI`` or
-    ``LTV``) at time ``t`` (s), output sample ``step``: the general observer of a case under floor motion,
-    recorded, or with mounts on their own axes (the others go through ``engine.integrators.output_map``;
-    the nonlinear level has :func:`observe_nonlinear`).
+def observe(P, c, t, x, W, O, step):
+    """Update case ``c``'s peaks with the state ``x`` (12 + nz,) of a linear level at time ``t`` (s), output
+    sample ``step``: the general observer of a case under floor motion, recorded, or with mounts on their
+    own axes (others: ``engine.integrators.output_map``; the nonlinear level: :func:`observe_nonlinear`).
+    One compiled body serves LTI, LTV (alike here) and the reference (per level, 8-10 s of CPU each).
 
     Returns False (and stores ``t`` in ``O.diverged``) when the state is not finite or has left any
     physically possible range.
@@ -331,7 +331,7 @@ def observe(P, c, level, t, x, W, O, step):
     if settle and err > O.tol[c]:
         O.last_viol[c] = t
     floor_motion(P, c, t, W.xf, W.vf)
-    isolator_forces(P, c, level, x, W.R, W.xf, W.vf, W.F)
+    isolator_forces(P, c, LTI, x, W.R, W.xf, W.vf, W.F)  # the linear levels' mount forces: alike at both
     for j in range(P.d.shape[1]):
         d0, d1, d2 = P.d[c, j, 0], P.d[c, j, 1], P.d[c, j, 2]
         # deflection of the mount from its static state: the base's mount point minus the floor under it
