@@ -104,6 +104,28 @@ def pytest_ignore_collect(collection_path: Path, config: pytest.Config) -> bool 
     return True if SLOW_MODULE.search(collection_path.read_text(encoding="utf-8")) else None
 
 
+FIRST_MODULES = ("tests/reliability/test_faults.py",)
+"""The longest module (real kills, restarts and two starts of ``isolab serve``: about 2 minutes in one test
+process, mostly waiting on its services), scheduled first."""
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Schedule the long modules first: a parallel run hands whole modules (``--dist loadfile``) to the test
+    processes in the order collected, so a long module handed out last kept one process busy alone at the
+    end. :data:`FIRST_MODULES`, then every module with a test marked slow (services in subprocesses, the
+    browser, fault injection), then the others, each group in the order collected."""
+    slow = {item.path for item in items if item.get_closest_marker("slow") is not None}
+    root = config.rootpath
+
+    def group(item: pytest.Item) -> int:
+        if item.path.relative_to(root).as_posix() in FIRST_MODULES:
+            return 0
+        return 1 if item.path in slow else 2
+
+    items.sort(key=group)  # stable: each module's tests stay together and in order
+
+
 def pytest_sessionfinish(session: pytest.Session) -> None:
     """Close the clusters this test process shared between its test modules (tests/shared_cluster.py)."""
     import sys
