@@ -208,7 +208,7 @@ def observe(P, c, t, x, W, O, step):
     """Update case ``c``'s peaks with the state ``x`` (12 + nz,) of a linear level at time ``t`` (s), output
     sample ``step``: the general observer of a case under floor motion, recorded, or with mounts on their
     own axes (others: ``engine.integrators.output_map``; the nonlinear level: :func:`observe_nonlinear`).
-    One compiled body serves LTI, LTV (alike here) and the reference (per level, 8-10 s of CPU each).
+    One compiled body serves both linear levels (alike here: no level argument) and the reference.
 
     Returns False (and stores ``t`` in ``O.diverged``) when the state is not finite or has left any
     physically possible range.

@@ -243,7 +243,7 @@ class ChannelModel:
         self, hist: tuple[np.ndarray, np.ndarray], offsets: Sequence[float] | np.ndarray
     ) -> np.ndarray:
         """(k, N, ch): :meth:`predict` at each of the ``offsets`` (k,), s, filtered side by side (each
-        column is detrended and filtered on its own, so a column equals its :meth:`predict`): one call of
+        column detrended and filtered on its own: equal to its :meth:`predict` to round-off), one call of
         the filters per :data:`FILTER_BLOCK` values instead of one per offset."""
         offsets = np.asarray(offsets, dtype=np.float64).reshape(-1)
         n, nch = self.t.size, len(self.meas.channels)
@@ -261,6 +261,7 @@ class ChannelModel:
 FILTER_BLOCK = 1 << 21
 """Most values (samples x channels x offsets) :meth:`ChannelModel.predict_many` filters in one call (16 MB
 per array of them)."""
+
 PROFILE_PROBES = 48
 """Random probes of :func:`noise_profile` (its relative error per sample, after smoothing, is a few %)."""
 PROFILE_SMOOTHING = 31
