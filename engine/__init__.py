@@ -66,7 +66,11 @@ def kernel_cache_folder() -> Path:
 from isolab.engine.results import STATUS_NAMES, SimulationResult  # noqa: E402  (after the cache folder)
 from isolab.engine.scene import GRAVITY, SceneBatch, SceneError, concat  # noqa: E402
 
-_LAZY = {"simulate": "isolab.engine.simulation", "check_choice": "isolab.engine.simulation"}
+_LAZY = {
+    "simulate": "isolab.engine.simulation",
+    "check_choice": "isolab.engine.simulation",
+    "general_observer_called": "isolab.engine.simulation",
+}
 """Names loaded on first use, by the module that holds them: ``engine.simulation`` brings numba and the
 kernels' definitions (about 0.4 s), which a process that reads scenes, results or the store never needs
 (``isolab serve`` among them)."""
@@ -98,6 +102,7 @@ __all__ = [
     "concat",
     "default_kernel_cache_folder",
     "engine_source_hash",
+    "general_observer_called",
     "kernel_cache_folder",
     "simulate",
     "__version__",

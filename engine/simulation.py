@@ -193,6 +193,18 @@ def with_following_errors(batch: SceneBatch) -> SceneBatch:
     )
 
 
+def general_observer_called(batch: SceneBatch, record: list[int] | None = None) -> bool:
+    """Whether a stepped method's run of ``batch`` at a linear level calls its general observer's driver
+    (``engine.integrators.stepping.GENERAL``): a recorded case (``record``), or a case the linear output
+    map does not observe (a moving floor, mounts on their own axes, extra states that push through the
+    mounts: ``engine.integrators.output_map.still_floor``). Otherwise the run calls, and on an empty kernel
+    cache compiles, the output map's driver alone."""
+    from isolab.engine.integrators import output_map
+
+    still = output_map.still_floor(model.params(with_following_errors(batch)))
+    return bool(record) or not bool(np.all(still))
+
+
 def simulate(
     batch: SceneBatch,
     fidelity: str = "ltv",

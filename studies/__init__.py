@@ -11,10 +11,10 @@ from isolab.engine.results import AXES, DOF_NAMES, OUTPUTS, ROTATIONS, OutputSpe
 
 
 def __getattr__(name: str) -> Any:
-    if name == "simulate":  # the engine's kernels load on first use (``isolab.engine``)
-        from isolab.engine import simulate
+    if name in ("simulate", "general_observer_called"):  # the engine's kernels load on first use
+        import isolab.engine
 
-        return simulate
+        return getattr(isolab.engine, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
@@ -27,5 +27,6 @@ __all__ = [
     "OutputSpec",
     "SceneError",
     "__version__",
+    "general_observer_called",
     "simulate",
 ]

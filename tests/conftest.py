@@ -41,19 +41,18 @@ PREWARM_ORDER = (
     ("nonlinear", "rk4"),
     ("lti", "exact"),
     ("nonlinear", "euler"),
-    ("nonlinear", "reference"),
     ("ltv", "rk4"),
     ("lti", "rk4"),
-    ("ltv", "euler"),
     ("lti", "euler"),
+    ("ltv", "euler"),
+    ("nonlinear", "reference"),
 )
 """Every (fidelity, integrator) pair the suite runs, the longest to compile first (so the processes finish
-together). CPU of each on an empty cache, two processes compiling four pairs each one after the other
-(2026-11-27): nonlinear/rk4 56 s, lti/exact 34 s (each the first of its process, with the kernels every
-pair shares), the reference 44 s (it compiles its right-hand side and its samples' observers as
-kernels), nonlinear/euler 40 s, ltv/rk4 26 s, lti/rk4 15 s, ltv/euler 12 s, lti/euler 10.5 s. Since then
-the general observer compiles once for both linear levels and the reference instead of once each (8-10 s
-of CPU each): the reference and the later linear pairs take that much less, in the same order."""
+together). CPU of each on an empty cache, one after the other in one process, the first with the kernels
+every pair shares (2026-11-28, each linear pair with its two drivers, ``engine.integrators.stepping``):
+nonlinear/rk4 50 s, lti/exact 45 s, nonlinear/euler 40 s, ltv/rk4 24 s, lti/rk4 20 s, lti/euler 18 s,
+ltv/euler 18 s, the reference 8 s (its right-hand side and samples' observers; the general observer it
+calls comes with the linear pairs)."""
 
 
 def pytest_configure(config: pytest.Config) -> None:

@@ -10,10 +10,13 @@ by a code (:data:`EULER`, :data:`RK4`, :data:`EXACT`).
 Each (method, level) pair has a driver of its own (:func:`pair_driver`, in :data:`ENTRIES`): the method's
 and the level's codes are constants of the driver's closure, so numba drops the branches of the other
 methods and levels before it types the loop, and an empty kernel cache compiles the kernels of the pair a
-run steps and no others. Each driver is cached (numba keys a closure's cache entry by its constants). A
-driver taking the step kernel as an argument, or a closure over a kernel, would be compiled anew in every
-process (neither is cacheable); codes passed as plain ints from Python would go through numba's literal
-dispatch on every call and leave every branch to be compiled.
+run steps and no others. At the linear levels a pair has two, one per observer (:data:`MAPPED`,
+:data:`GENERAL`): each case goes to the one that observes it, so a run whose every case the output map
+observes (a still floor, no recorded case: most scenes) never compiles the general observer. Each driver
+is cached (numba keys a closure's cache entry by its constants). A driver taking the step kernel as an
+argument, or a closure over a kernel, would be compiled anew in every process (neither is cacheable);
+codes passed as plain ints from Python would go through numba's literal dispatch on every call and leave
+every branch to be compiled.
 
 The adaptive ``reference`` method is not stepped here: scipy's ``solve_ivp`` owns its own loop between
 breakpoints (``engine.integrators.reference``).
@@ -50,12 +53,16 @@ from isolab.engine.results import FAILED, OK, UNSTABLE
 
 EULER, RK4, EXACT = 0, 1, 2
 """Codes of the stepped methods inside the driver."""
+MAPPED, GENERAL = 0, 1
+"""Codes of a driver's observer: the linear output map (``output_map.observe``: the linear levels, a case
+whose floor stands still and that is not recorded), or the general one (``engine.kernels.peaks.observe``;
+at the nonlinear level always its own, ``observe_nonlinear``)."""
 
 
-def pair_driver(method: int, level: int) -> Any:
+def pair_driver(method: int, level: int, observer: int = GENERAL) -> Any:
     """The cached driver loop of ``method`` (:data:`EULER`, :data:`RK4`, :data:`EXACT`) at ``level``
-    (``engine.kernels.params``): a numba kernel ``drive(P, dt, n_steps, O, W, status, full, ev, sub_b,
-    sub_a, deg, osc, outmap)``."""
+    (``engine.kernels.params``) for the cases ``observer`` (:data:`MAPPED`, :data:`GENERAL`) observes: a
+    numba kernel ``drive(P, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap)``."""
 
     # the nonlinear level's RK4 driver fuses each multiply with the add that takes it (LLVM's ``contract``:
     # one rounding instead of two, no reordering, NaN and infinity as they are) in its inlined step; every
@@ -65,7 +72,8 @@ def pair_driver(method: int, level: int) -> Any:
 
     @njit(cache=True, nogil=True, fastmath=fast)
     def drive(P, dt, n_steps, O, W, status, full, ev, sub_b, sub_a, deg, osc, outmap):
-        """Integrate every case ``c`` whose ``status[c]`` is OK over ``n_steps[c]`` steps of ``dt[c]`` s.
+        """Integrate every case ``c`` whose ``status[c]`` is OK and that this driver's observer observes
+        (:func:`mapped_cases`) over ``n_steps[c]`` steps of ``dt[c]`` s.
 
         Each step ``[k h, (k + 1) h]`` is split at the breakpoints inside it, so every sub-step sees one
         polynomial piece of every profile; the outputs are observed at the end of each step.
@@ -132,7 +140,9 @@ def pair_driver(method: int, level: int) -> Any:
             if status[c] != OK:
                 continue
             linear = level != NONLINEAR and 0 < m <= output_map.CAPACITY and still[c] and O.slot[c] < 0
-            if linear:
+            if linear != (observer == MAPPED):
+                continue  # the other driver's case
+            if observer == MAPPED:
                 output_map.start(O, c, G, KF, Bmap, Qmap)
             x[:] = 0.0
             if level == NONLINEAR:
@@ -213,7 +223,7 @@ def pair_driver(method: int, level: int) -> Any:
                 if not ok:
                     status[c] = FAILED
                     break
-                if linear:
+                if observer == MAPPED:
                     seen = output_map.observe(c, t1, xv, k + 1, F0v, tgtv, rtgtv, restv, ptolv, Bv, Qv, GZv)
                 elif method == RK4 and level == NONLINEAR:
                     seen = observe_nonlinear_on(P, O, c, t1, k + 1, OV)  # inlined
@@ -224,14 +234,17 @@ def pair_driver(method: int, level: int) -> Any:
                 if not seen:
                     status[c] = UNSTABLE
                     break
-            if linear:
+            if observer == MAPPED:
                 output_map.finish(O, c, Bmap, Qmap)
 
     return drive
 
 
 ENTRIES = {
-    (name, fidelity): pair_driver(method, FIDELITIES[fidelity])
+    (name, fidelity): tuple(
+        pair_driver(method, FIDELITIES[fidelity], observer)
+        for observer in ((GENERAL,) if fidelity == "nonlinear" else (MAPPED, GENERAL))
+    )
     for name, method, fidelities in (
         ("euler", EULER, ("lti", "ltv", "nonlinear")),
         ("rk4", RK4, ("lti", "ltv", "nonlinear")),
@@ -239,9 +252,20 @@ ENTRIES = {
     )
     for fidelity in fidelities
 }
-"""The cached driver of each stepped method and fidelity level, by ``(method, level)`` names: what a run
-calls from Python (and compiles, on an empty cache, alone), and what a check of the kernel cache on disk
-reads."""
+"""The cached drivers of each stepped method and fidelity level, by ``(method, level)`` names, indexed by
+observer code (:data:`MAPPED`, :data:`GENERAL`; the nonlinear level's one driver at 0): what a run calls
+from Python (and compiles, on an empty cache, alone), and what a check of the kernel cache on disk reads."""
+
+
+def mapped_cases(level: int, O: Peaks, still: np.ndarray, m: int) -> np.ndarray:
+    """Per case (C,), True where the output map observes the case at ``level`` (:data:`MAPPED`): a linear
+    level, a map of ``m`` outputs within ``output_map.CAPACITY``, a floor that stands still under the case
+    (``still``, ``output_map.still_floor``) and no recorded history (``O.slot``); False where the general
+    observer does (:data:`GENERAL`). The drivers decide each case alike, in their loop."""
+    if level == NONLINEAR or not 0 < m <= output_map.CAPACITY:
+        return np.zeros(len(O.slot), dtype=bool)
+    return np.asarray(still, dtype=bool) & (np.asarray(O.slot) < 0)
+
 
 _LEVEL_NAMES = {level: name for name, level in FIDELITIES.items()}
 
@@ -291,18 +315,12 @@ def run(
         outmap = (*built[:4], output_map.still_floor(P), built.GZ)
     else:
         outmap = _NO_OUTPUT_MAP
-    ENTRIES[name, _LEVEL_NAMES[level]](
-        kernel_struct(P),
-        dt,
-        n_steps,
-        kernel_struct(O),
-        kernel_struct(W),
-        status,
-        full,
-        ev,
-        sub_b,
-        sub_a,
-        int(deg),
-        bool(osc),
-        outmap,
-    )
+    due = status == OK
+    mapped = mapped_cases(level, O, outmap[4], outmap[0].shape[2])
+    # each driver integrates its observer's cases and passes over the others: a batch without cases for
+    # one never calls it (nor, on an empty cache, compiles it)
+    groups = (due,) if level == NONLINEAR else (due & mapped, due & ~mapped)
+    args = (kernel_struct(P), dt, n_steps, kernel_struct(O), kernel_struct(W), status, full, ev, sub_b, sub_a)
+    for drive, cases in zip(ENTRIES[name, _LEVEL_NAMES[level]], groups, strict=True):
+        if cases.any():
+            drive(*args, int(deg), bool(osc), outmap)

@@ -137,14 +137,17 @@ COMPILING = "compiling kernels, first run only"
 """What ``simulate`` and ``run`` print (stderr) before a run that compiles the engine's kernels."""
 
 
-def say_if_compiling(integrators: list[str | None], fidelity: str | None = None) -> None:
+def say_if_compiling(
+    integrators: list[str | None], fidelity: str | None = None, general: bool = True
+) -> None:
     """Print :data:`COMPILING` to stderr when the kernels of ``integrators`` (None: still to be chosen) at
     ``fidelity`` (None: every level) are not cached on disk yet
-    (:func:`isolab.studies.run.kernel_cache.kernels_cached`), and then removes the kernel cache folders
-    of other engine versions long unused (:func:`isolab.studies.run.kernel_cache.tidy_kernel_caches`)."""
+    (:func:`isolab.studies.run.kernel_cache.kernels_cached`; without ``general``, the drivers of a run
+    whose every case the output map observes), and then removes the kernel cache folders of other engine
+    versions long unused (:func:`isolab.studies.run.kernel_cache.tidy_kernel_caches`)."""
     from isolab.studies.run.kernel_cache import kernels_cached, tidy_kernel_caches
 
-    if not kernels_cached(integrators, fidelity=fidelity):
+    if not kernels_cached(integrators, fidelity=fidelity, general=general):
         typer.echo(COMPILING, err=True)
         tidy_kernel_caches()
 
@@ -192,7 +195,9 @@ def simulate(
             step, reason = dt or choice.dt, choice.reason
         if fid is None or integ is None or step is None:  # resolved above; a scene always has defaults
             raise ValueError("simulation: no fidelity, integrator and step to run with")
-        say_if_compiling([integ], fid)
+        from isolab.studies import general_observer_called
+
+        say_if_compiling([integ], fid, general_observer_called(batch, [0] if plot else None))
         t0 = time.perf_counter()
         result = run(batch, fid, integ, step, auto_step=sim.auto_step, record=[0] if plot else None)
         elapsed = time.perf_counter() - t0

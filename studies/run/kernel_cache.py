@@ -28,32 +28,44 @@ STEPPED = ("euler", "rk4", "exact")
 """Integrators whose cases run through one cached driver loop each (``engine.integrators.stepping``)."""
 
 
-def entry_kernels(integrator: str | None, fidelity: str | None = None) -> list[Any]:
+def entry_kernels(integrator: str | None, fidelity: str | None = None, general: bool = True) -> list[Any]:
     """The numba dispatchers a run with ``integrator`` at ``fidelity`` calls from Python: a stepped method's
-    one entry per level (every level it integrates for a None ``fidelity``); every integrator's for a None
-    ``integrator`` (a model still to be chosen)."""
+    entries per level (every level it integrates for a None ``fidelity``; at the linear levels one per
+    observer, ``engine.integrators.stepping.MAPPED`` and ``GENERAL``); every integrator's for a None
+    ``integrator`` (a model still to be chosen). Without ``general``, only the drivers a run calls when the
+    output map observes every case (``stepping.mapped_cases``)."""
     from isolab.engine.integrators.stepping import ENTRIES as _ENTRIES
+    from isolab.engine.integrators.stepping import MAPPED
     from isolab.engine.kernels.dynamics import derivative
     from isolab.engine.kernels.peaks import observe
 
+    drivers = [
+        driver
+        for (name, at), kernels in _ENTRIES.items()
+        if integrator in (None, name) and fidelity in (None, at)
+        for code, driver in enumerate(kernels)
+        if general or (code == MAPPED and len(kernels) > 1) or at == "nonlinear"
+    ]
     if integrator in STEPPED:
-        return [k for (name, at), k in _ENTRIES.items() if name == integrator and fidelity in (None, at)]
+        return drivers
     if integrator == "reference":  # scipy's solve_ivp calls the right-hand side and the observer
         return [derivative, observe]
-    return list(_ENTRIES.values()) + [derivative, observe]
+    return drivers + [derivative, observe]
 
 
 def kernels_cached(
     integrators: Sequence[str | None] = (None,),
     kernels: Sequence[Any] | None = None,
     fidelity: str | None = None,
+    general: bool = True,
 ) -> bool:
-    """True when every entry kernel of ``integrators`` at ``fidelity`` (every level for None; or the given
-    numba ``kernels``) has a compiled version on disk for this machine and its current code, so nothing is
-    compiled on first use. Reads one small index file per kernel. When numba's cache cannot be inspected,
-    answers True (nothing is said)."""
+    """True when every entry kernel of ``integrators`` at ``fidelity`` (every level for None; without
+    ``general``, those of a run whose every case the output map observes: :func:`entry_kernels`; or the
+    given numba ``kernels``) has a compiled version on disk for this machine and its current code, so
+    nothing is compiled on first use. Reads one small index file per kernel. When numba's cache cannot be
+    inspected, answers True (nothing is said)."""
     if kernels is None:
-        kernels = [k for name in integrators for k in entry_kernels(name, fidelity)]
+        kernels = [k for name in integrators for k in entry_kernels(name, fidelity, general)]
     for kernel in kernels:
         try:
             cache = kernel._cache
@@ -109,18 +121,28 @@ def warmup_definition(fidelity: str, integrator: str) -> str:
 
 
 def warm_kernels(pairs: Sequence[tuple[str, str]], datasets: bool = False) -> dict[str, float]:
-    """Run one short case of each (fidelity, integrator) pair through the chunk task, so that this process
-    has imported the studies, built its engine structures and loaded (or, on an empty cache, compiled and
+    """Run one short case of each (fidelity, integrator) pair through the chunk task, and at the stepped
+    methods' linear levels once more recorded (the general observer's driver), so that this process has
+    imported the studies, built its engine structures and loaded (or, on an empty cache, compiled and
     saved) every kernel those pairs call: a later chunk starts computing at once. With ``datasets``, also
     write a small dataset (:func:`warm_datasets`: a worker finishes studies, and its first would otherwise
     pay xarray's and netCDF4's first use). Returns seconds per pair (``"<fidelity>/<integrator>"``, and
     ``"datasets"``) and, under ``"pid"``, this process's id."""
+    import numpy as np
+
+    from isolab.engine import simulate
+    from isolab.studies.inputs.study import study_from_json
     from isolab.studies.run.fanout import run_chunk
 
     took: dict[str, float] = {"pid": float(os.getpid())}
     for fidelity, integrator in pairs:
         t0 = time.perf_counter()
-        run_chunk(warmup_definition(fidelity, integrator), [0])
+        definition = warmup_definition(fidelity, integrator)
+        run_chunk(definition, [0])  # a case the output map observes, at the linear levels
+        if integrator in STEPPED and fidelity != "nonlinear":  # and one the general observer does
+            study = study_from_json(definition)
+            _, _, dt = study.simulation.engine_choice()
+            simulate(study.batch(np.zeros(1, dtype=np.int64)), fidelity, integrator, dt, record=[0])
         took[f"{fidelity}/{integrator}"] = time.perf_counter() - t0
     if datasets:
         t0 = time.perf_counter()

@@ -186,20 +186,32 @@ def test_simulate_says_when_it_compiles(tmp_path: Path, monkeypatch: pytest.Monk
 
 
 def test_simulate_asks_for_its_own_pair(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    # one cached driver per method and level: the notice asks about the pair the scene runs at, so a cache
-    # that holds ltv/rk4 alone does not make a warm ltv/rk4 run say it compiles
+    # cached drivers per method and level: the notice asks about the pair the scene runs at, so a cache
+    # that holds ltv/rk4 alone does not make a warm ltv/rk4 run say it compiles; and about the general
+    # observer's driver only where the run calls it (a recorded case for the plot, a moving floor)
     path = write(tmp_path / "scene.yaml", scene())
     asked = []
     monkeypatch.setattr(
         "isolab.studies.run.kernel_cache.kernels_cached",
-        lambda integrators, fidelity=None: asked.append((list(integrators), fidelity)) or True,
+        lambda integrators, fidelity=None, general=True: (
+            asked.append((list(integrators), fidelity, general)) or True
+        ),
     )
     r = invoke("simulate", str(path), "--fidelity", "lti", "--integrator", "exact")
     assert r.exit_code == 0, r.output
-    assert asked == [(["exact"], "lti")]
-    assert len(entry_kernels("rk4", "ltv")) == 1 and len(entry_kernels("exact", "lti")) == 1
-    assert len(entry_kernels("rk4")) == 3 and len(entry_kernels("euler")) == 3
-    assert entry_kernels("rk4", "ltv")[0] is not entry_kernels("rk4", "lti")[0]
+    r = invoke("simulate", str(path), "--plot", str(tmp_path / "p.png"))
+    assert r.exit_code == 0, r.output
+    moving = write(
+        tmp_path / "moving.yaml",
+        scene() | {"floor": {"sine": {"amplitude": ["1 um", 0, 0], "frequency": ["20 Hz", 0, 0]}}},
+    )
+    r = invoke("simulate", str(moving))
+    assert r.exit_code == 0, r.output
+    assert asked == [(["exact"], "lti", False), (["exact"], "lti", True), (["exact"], "lti", True)]
+    mapped, general = entry_kernels("rk4", "ltv")
+    assert entry_kernels("rk4", "ltv", general=False) == [mapped] and len(entry_kernels("exact", "lti")) == 2
+    assert len(entry_kernels("rk4")) == 5 and len(entry_kernels("euler", general=False)) == 3
+    assert mapped is not general and mapped is not entry_kernels("rk4", "lti")[0]
 
 
 def test_kernels_cached_reads_the_numba_index(tmp_path: Path) -> None:
