@@ -25,7 +25,8 @@ from pathlib import Path
 from typing import Any
 
 STEPPED = ("euler", "rk4", "exact")
-"""Integrators whose cases run through one cached driver loop each (``engine.integrators.stepping``)."""
+"""Integrators whose cases run through cached driver loops (``engine.integrators.stepping``: one per level,
+and at the linear levels one per observer)."""
 
 
 def entry_kernels(integrator: str | None, fidelity: str | None = None, general: bool = True) -> list[Any]:

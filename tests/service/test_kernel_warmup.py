@@ -198,3 +198,22 @@ def test_a_dataset_warm_up_that_cannot_write_is_no_error(tmp_path, monkeypatch):
 
     monkeypatch.setattr(tempfile, "TemporaryDirectory", full)
     assert warm_datasets() is False
+
+
+def test_a_warm_up_loads_both_drivers_of_a_linear_pair() -> None:
+    # a fresh process: the warm-up's case goes through the output map's driver, its recorded rerun through
+    # the general observer's, so a worker has either at hand for its first chunk (a moving floor, say)
+    import subprocess
+
+    script = (
+        "from isolab.engine.integrators.stepping import ENTRIES\n"
+        "from isolab.studies.run.kernel_cache import warm_kernels\n"
+        "warm_kernels([('lti', 'exact'), ('nonlinear', 'euler')])\n"
+        "print([len(d.signatures) for d in ENTRIES['exact', 'lti'] + ENTRIES['euler', 'nonlinear']])\n"
+        "print([len(d.signatures) for d in ENTRIES['rk4', 'ltv']])\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=110, check=False
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split("\n")[:2] == ["[1, 1, 1]", "[0, 0]"]
