@@ -5,10 +5,13 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from typing import Annotated, NoReturn
+from typing import TYPE_CHECKING, Annotated, NoReturn
 
 import numpy as np
 import typer
+
+if TYPE_CHECKING:
+    from isolab.studies.inputs.study import Study
 
 
 def _labelled(values, labels) -> dict:
@@ -150,6 +153,17 @@ def say_if_compiling(
     if not kernels_cached(integrators, fidelity=fidelity, general=general):
         typer.echo(COMPILING, err=True)
         tidy_kernel_caches()
+
+
+def general_observer_sampled(study: Study) -> bool:
+    """Whether a run of ``study``'s cases calls the general observer's driver at a linear level (a moving
+    floor, mounts on their own axes: ``isolab.engine.general_observer_called``), judged on up to 16 of its
+    cases spread over them: what may vary per case is the floor's amplitude, which a range spans."""
+    from isolab.studies import general_observer_called
+
+    n = int(study.n_cases)
+    sample = np.unique(np.linspace(0, n - 1, min(n, 16)).round().astype(np.int64))
+    return bool(general_observer_called(study.batch(sample)))
 
 
 def fail(lines: list[str]) -> NoReturn:
@@ -375,7 +389,11 @@ def run_study_command(
     # the chosen model (or every one, when the study asks for an accuracy) and the reference that measures
     # each dataset's error
     chosen = sim.request is None
-    say_if_compiling([sim.integrator if chosen else None, "reference"], sim.fidelity if chosen else None)
+    say_if_compiling(
+        [sim.integrator if chosen else None, "reference"],
+        sim.fidelity if chosen else None,
+        general=general_observer_sampled(definition),
+    )
     t0 = time.perf_counter()
     try:
         with Progress(

@@ -304,3 +304,21 @@ def test_run_writes_the_dataset_with_the_umask_mode(
     assert "2 cases in" in r.stdout and out.stat().st_mode & 0o777 == 0o644
     # the study's integrator, and the reference that measures the dataset's error
     assert asked == [["exact", "reference"]] and r.stderr.splitlines()[0] == local_commands.COMPILING
+
+
+def test_run_asks_about_the_general_observer_where_a_sampled_case_needs_it(tmp_path: Path) -> None:
+    # the notice of `isolab run` asks about the general observer's driver only where a case the run
+    # samples needs it: a still floor under every case does not, a floor amplitude a range spans does
+    from isolab.studies import general_observer_called
+    from isolab.studies.inputs.file_checks import check_study_file
+
+    still = check_study_file(study(tmp_path))
+    assert not local_commands.general_observer_sampled(still)
+    amplitudes = {"path": "floor.sine.amplitude.z", "values": [k * 1e-8 for k in range(41)]}  # 0 first
+    (tmp_path / "scene.yaml").write_text(
+        yaml.safe_dump(scene() | {"floor": {"sine": {"amplitude": [0, 0, 0], "frequency": ["7 Hz"] * 3}}})
+    )
+    data = {"name": "shaking", "scene_file": "scene.yaml", "parameters": [amplitudes]}
+    shaking = check_study_file(write(tmp_path / "shaking.yaml", data))
+    assert shaking.n_cases == 41 and local_commands.general_observer_sampled(shaking)
+    assert not general_observer_called(shaking.batch([0]))  # its first case alone would not say so
