@@ -334,19 +334,25 @@ def studentized_intervals(
     tail = 100.0 * (1.0 - CONF_LEVEL) / 2
     out: dict[str, np.ndarray] = {"S1": np.full((d, 2), np.nan), "ST": np.full((d, 2), np.nan)}
 
-    def ratio(num: np.ndarray, aa: np.ndarray, bb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def spread(aa: np.ndarray, bb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The variance of A and B together (keepdims) and each block's share of it: the same for every
+        index, so made once for the sample and once for its resamples."""
         both = np.concatenate([aa, bb], axis=-1)
         mu, var = both.mean(axis=-1, keepdims=True), both.var(axis=-1, keepdims=True)
+        return var, 0.5 * ((aa - mu) ** 2 + (bb - mu) ** 2)
+
+    def ratio(num: np.ndarray, var: np.ndarray, share: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         with np.errstate(divide="ignore", invalid="ignore"):
             index = num.mean(axis=-1, keepdims=True) / var
-            share = 0.5 * ((aa - mu) ** 2 + (bb - mu) ** 2)
             influence = (num - index * share) / var
         return index[..., 0], influence.std(axis=-1, ddof=1) / math.sqrt(n)
 
+    var, share = spread(a, b)
+    var_star, share_star = spread(a[pick], b[pick])
     for j in range(d):
         for k, num in (("S1", b * (ab[:, j] - a)), ("ST", 0.5 * (a - ab[:, j]) ** 2)):
-            index, se = ratio(num, a, b)
-            star, se_star = ratio(num[pick], a[pick], b[pick])
+            index, se = ratio(num, var, share)
+            star, se_star = ratio(num[pick], var_star, share_star)
             with np.errstate(divide="ignore", invalid="ignore"):
                 t = (star - index) / se_star
             t = t[np.isfinite(t)]
